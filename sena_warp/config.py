@@ -1,0 +1,91 @@
+"""Every tunable of the SENA pipeline, in one frozen dataclass.
+
+Each field carries the paper's symbol (``docs/paper/sena_paper.tex``, summarised in SENA.md) and a
+one-line meaning. Pixel quantities are in input-image pixels unless the name says otherwise.
+Defaults are the starting points of SENA.md; any change is recorded with its sweep in
+``docs/evaluation.md``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Config:
+    # --- Step 0: features -------------------------------------------------------------------
+    features: str = "xfeat"  # detector: "xfeat" (ONNX backbone) or "sift"
+    xfeat_max_side: int = 1024  # working resolution: long side in px (rounded down to /32)
+    xfeat_detection_threshold: float = 0.05  # keypoint probability threshold after NMS
+    xfeat_nms_size: int = 5  # NMS window in px (full working resolution)
+    xfeat_top_k: int = 4096  # keypoints kept per image, by score = prob x reliability
+    min_cossim: float = 0.82  # mutual-NN matches need cosine similarity >= this
+    sift_ratio: float = 0.75  # Lowe ratio for the SIFT alternative
+
+    # --- Step 1: global affine A_glob ---------------------------------------------------------
+    ransac_reproj_px: float = 3.0  # RANSAC inlier threshold
+    ransac_confidence: float = 0.995  # RANSAC confidence
+    ransac_max_iters: int = 2000  # RANSAC iterations (at least)
+    min_inliers: int = 12  # fewer inliers than this: no stitch
+
+    # --- Step 2: overlap, canvas, cells c_j ---------------------------------------------------
+    max_canvas_area_ratio: float = 4.0  # refuse a canvas larger than this x (area_src + area_tgt)
+    grid_x: int = 2  # G_x: cells across the overlap's bounding box
+    grid_y: int = 2  # G_y: cells down the overlap's bounding box
+
+    # --- Step 3: local affines T_j ------------------------------------------------------------
+    alpha: float = 0.35  # alpha: sigma_j = alpha * diag(c_j), Gaussian weight of matches
+    lambda1: float = 0.05  # lambda_1: ridge pull of T_j toward A_glob (normalised coordinates)
+    lambda2: float = 1.0  # lambda_2 > lambda_1: refit strength for unstable cells
+    beta: float = 20.0  # beta: conf_j = clip(sum w / (beta * max w), k_min, k_max)
+    conf_min: float = 0.2  # k_min
+    conf_max: float = 1.5  # k_max
+    unstable_min_points: int = 6  # fewer in-cell matches: T_j is unstable
+    unstable_rmse_px: float = 5.0  # larger fit RMSE: unstable
+    unstable_min_det: float = 0.05  # tau_det: smaller |det|: unstable
+    unstable_max_cond: float = 120.0  # larger condition number: unstable
+    unstable_max_disp_px: float = 40.0  # larger mean displacement from A_glob (N_g grid): unstable
+    instability_grid: int = 5  # N_g: evaluation grid per cell for delta_mean
+    w_cond: float = 0.01  # omega_cond in the composite instability score
+    w_det: float = 0.5  # omega_det
+    tau_det: float = 0.1  # tau_det inside max(0, tau_det - |det|)
+    w_delta: float = 0.002  # omega_delta
+
+    # --- Step 4: FFD field --------------------------------------------------------------------
+    lattice_nx: int = 64  # N_x: FFD lattice nodes across the canvas
+    lattice_ny: int = 64  # N_y: FFD lattice nodes down the canvas
+    alpha_f: float = 0.35  # alpha_f: sigma_f = alpha_f * mean cell diagonal
+    d_max_px: float = 60.0  # d_max: displacement clip
+    sigma_l_nodes: float = 0.6  # sigma_l: Gaussian blur on the lattice, in nodes
+
+    # --- Step 5: seam guard (gate G) ----------------------------------------------------------
+    ramp_min_px: float = 40.0  # b = max(ramp_min_px, ramp_diag_ratio * image diagonal)
+    ramp_diag_ratio: float = 0.10
+    sigma_d_ratio: float = 24.0 / 512.0  # sigma_d: density blur, as a fraction of the image's long side
+    gamma_p: float = 1.2  # gamma_p: ramp steepness exponent
+    gamma_min: float = 0.30  # gamma_min: gate floor where matches are sparse
+    sigma_g_px: float = 1.1  # sigma_g: blur of the guarded field
+
+    # --- Step 7: adequate zone ----------------------------------------------------------------
+    zone_classes: int = 20  # disparity classes of width W / zone_classes
+    zone_jump_px: float = 2.0  # v: join a class to the cluster while |d_i - d_(i-1)| <= v
+    zone_lambda: float = 1.0  # lambda: weight of |mu_c - mu_g| in w = C / (sigma + lambda dmu + eps)
+    zone_eps: float = 1e-3  # epsilon in the cluster score
+    flat_min_std: float = 4.0  # drop points whose local grey std is below this (flat regions)
+    flat_patch_px: int = 7  # patch side for the flatness and brightness tests
+
+    # --- Step 8: keypoint chain ---------------------------------------------------------------
+    brightness_max_diff: float = 25.0  # max mean grey difference between warped-source and target patches
+
+    # --- Step 9: partition and reconstruction -------------------------------------------------
+    transition_px: int = 24  # width of the linear alpha ramp across the seam
+    seam_smooth_sigma_px: float = 1.5  # light Gaussian smoothing inside the transition only
+
+    # --- Execution ----------------------------------------------------------------------------
+    device: str = "auto"  # Warp device: "auto", "cpu" or "cuda"
+    cpu_threads: int = 0  # row-band launch threads on CPU; 0 = one per core
+
+    def replace(self, **changes) -> "Config":
+        """A copy with some fields changed (unknown names raise TypeError)."""
+        return dataclasses.replace(self, **changes)

@@ -1,0 +1,49 @@
+"""One exception family with messages a user can act on.
+
+The CLI prints ``str(error)`` on one line and exits with ``error.exit_code``; nothing else in the
+package prints tracebacks for expected failures. Exit codes are listed in the README.
+"""
+
+from __future__ import annotations
+
+
+class StitchError(Exception):
+    """Base of every user-facing failure: the message says what is wrong and what to try."""
+
+    exit_code = 1
+
+
+class InputError(StitchError):
+    """A missing, unreadable, corrupt or unsuitable input file, or a bad option value."""
+
+    exit_code = 2
+
+
+class MatchError(StitchError):
+    """Too few features, matches or inliers: the images may not overlap."""
+
+    exit_code = 3
+
+
+class GeometryError(StitchError):
+    """The estimated model is implausible (huge canvas, degenerate warp, empty overlap)."""
+
+    exit_code = 4
+
+
+class VideoError(StitchError):
+    """A video stream problem: no video stream, mismatched inputs, decoding or encoding failure."""
+
+    exit_code = 5
+
+
+class OutputError(StitchError):
+    """The output cannot be written (path equals an input, folder not writable)."""
+
+    exit_code = 6
+
+
+class NotImplementedYet(StitchError):
+    """A subcommand that is planned but not built yet."""
+
+    exit_code = 64

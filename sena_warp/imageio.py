@@ -1,0 +1,104 @@
+"""Reading images into one canonical form and writing outputs atomically.
+
+Images inside the pipeline are ``uint8`` arrays of shape ``(H, W, 3)`` in OpenCV's BGR order,
+row-major (``img[y, x]``). Inputs are never modified; outputs are written to a temporary file in the
+destination folder and renamed over the final name only once complete.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from .errors import InputError, OutputError
+
+MIN_SIDE_PX = 16
+
+
+def to_bgr8(img: np.ndarray, name: str = "image") -> np.ndarray:
+    """Convert grey, BGRA or 16-bit images to 8-bit BGR ``(H, W, 3)``."""
+    if img.dtype == np.uint16:
+        img = (img.astype(np.float32) / 257.0 + 0.5).astype(np.uint8)
+    elif img.dtype in (np.float32, np.float64):
+        img = np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    elif img.dtype != np.uint8:
+        raise InputError(f"{name}: unsupported pixel type {img.dtype}")
+    if img.ndim == 2:
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    if img.ndim == 3 and img.shape[2] == 1:
+        return cv2.cvtColor(img[:, :, 0], cv2.COLOR_GRAY2BGR)
+    if img.ndim == 3 and img.shape[2] == 4:
+        return cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    if img.ndim == 3 and img.shape[2] == 3:
+        return np.ascontiguousarray(img)
+    raise InputError(f"{name}: unsupported image shape {img.shape}")
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """Read an image file as 8-bit BGR, or raise InputError saying what is wrong with it."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: file not found")
+    if not path.is_file():
+        raise InputError(f"{path}: not a file")
+    try:
+        data = np.fromfile(str(path), dtype=np.uint8)
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from exc
+    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    if img is None:
+        raise InputError(f"{path}: not a readable image (corrupt, truncated or unsupported format)")
+    img = to_bgr8(img, str(path))
+    if min(img.shape[:2]) < MIN_SIDE_PX:
+        raise InputError(
+            f"{path}: image is {img.shape[1]}x{img.shape[0]} px; at least {MIN_SIDE_PX} px per side is needed"
+        )
+    return img
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike, inputs: tuple[str | os.PathLike, ...] = ()) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it to ``path`` only if the block succeeds.
+
+    Refuses an output that is one of the ``inputs`` or sits in a folder that cannot be written.
+    On any exception (including KeyboardInterrupt) the temporary file is removed.
+    """
+    path = Path(path)
+    for src in inputs:
+        if Path(src).exists() and path.exists() and os.path.samefile(src, path):
+            raise OutputError(f"{path}: output would overwrite an input; choose another output name")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise OutputError(f"{path}: folder {folder} does not exist")
+    if not os.access(folder, os.W_OK):
+        raise OutputError(f"{path}: folder {folder} is not writable")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=folder)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_image(path: str | os.PathLike, img: np.ndarray, inputs: tuple[str | os.PathLike, ...] = ()) -> None:
+    """Encode ``img`` (BGR or BGRA uint8) by the file extension and write it atomically."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext not in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp"):
+        raise OutputError(f"{path}: unknown image extension {ext!r}; use .png or .jpg")
+    if img.ndim == 3 and img.shape[2] == 4 and ext in (".jpg", ".jpeg", ".bmp"):
+        img = img[:, :, :3]
+    ok, buf = cv2.imencode(ext, img)
+    if not ok:
+        raise OutputError(f"{path}: image encoding failed")
+    with atomic_output(path, inputs) as tmp:
+        buf.tofile(str(tmp))

@@ -1,0 +1,29 @@
+"""Shared fixtures: bundled test data, the wider ../shared/data set (skipped when absent)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+BUNDLED = REPO / "tests" / "data"
+SHARED = REPO.parent / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def bundled_dir() -> Path:
+    return BUNDLED
+
+
+@pytest.fixture(scope="session")
+def shared_dir() -> Path:
+    if not (SHARED / "MANIFEST.md").exists():
+        pytest.skip("../shared/data is not present")
+    return SHARED
+
+
+def shared_pairs() -> list[str]:
+    """Names of the pair folders in ../shared/data/pairs (empty when absent), for parametrize."""
+    root = SHARED / "pairs"
+    return sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []

@@ -1,0 +1,1 @@
+"""Paired-video stitching with PyAV (installed as ``sena_warp.video``)."""
