@@ -1,7 +1,7 @@
-"""The output canvas: its size and where the unwarped target sits on it.
+"""The output canvas: its size and where the target image sits on it (SENA.md step 2).
 
-A target pixel ``p_tgt = (x, y)`` sits at canvas position ``u = p_tgt + offset_tgt`` (SENA.md,
-"Frames and conventions"). Points are float64 ``(N, 2)`` arrays of ``(x, y)``.
+A target pixel ``p_tgt`` (x, y) sits at ``u = p_tgt + o`` on the canvas, ``o = offset_tgt``. The
+canvas grid is indexed ``canvas_img[y, x]`` like every image in the package.
 """
 
 from __future__ import annotations
@@ -13,7 +13,10 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Canvas:
-    """Canvas of ``width x height`` pixels; the target's origin is at ``offset_tgt = (ox, oy)``."""
+    """Output pixel grid of ``height`` rows by ``width`` columns.
+
+    ``offset_tgt`` = o = (ox, oy): canvas position (x, y) of target pixel (0, 0), in pixels.
+    """
 
     width: int
     height: int
@@ -21,13 +24,13 @@ class Canvas:
 
     @property
     def shape(self) -> tuple[int, int]:
-        """``(H, W)``, numpy order, for allocating canvas-sized arrays."""
+        """(H, W) = (rows, columns), the leading shape of every canvas map."""
         return (self.height, self.width)
 
     def tgt_to_canvas(self, pts_tgt: np.ndarray) -> np.ndarray:
-        """Target ``(x, y)`` points ``(N, 2)`` -> canvas points ``(N, 2)`` float64."""
+        """(N, 2) float64 (x, y) target pixels -> (N, 2) float64 (x, y) canvas pixels."""
         return np.asarray(pts_tgt, dtype=np.float64) + np.asarray(self.offset_tgt, dtype=np.float64)
 
     def canvas_to_tgt(self, pts_canvas: np.ndarray) -> np.ndarray:
-        """Canvas ``(x, y)`` points ``(N, 2)`` -> target points ``(N, 2)`` float64."""
+        """(N, 2) float64 (x, y) canvas pixels -> (N, 2) float64 (x, y) target pixels."""
         return np.asarray(pts_canvas, dtype=np.float64) - np.asarray(self.offset_tgt, dtype=np.float64)

@@ -27,3 +27,12 @@ def shared_pairs() -> list[str]:
     """Names of the pair folders in ../shared/data/pairs (empty when absent), for parametrize."""
     root = SHARED / "pairs"
     return sorted(p.name for p in root.iterdir() if p.is_dir()) if root.is_dir() else []
+
+
+@pytest.fixture(scope="session")
+def warp_device() -> str:
+    """Warp's CPU device with every kernel module of sena_warp.kernels loaded once for the session."""
+    from sena_warp.kernels import runtime
+
+    runtime.prewarm("cpu")
+    return "cpu"

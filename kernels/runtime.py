@@ -1,0 +1,111 @@
+"""Where and how the Warp kernels run: device choice, row-band launches, pre-warm.
+
+Every kernel of this package takes ``row0: int`` as its first argument and is launched with
+``dim=(rows, width)``; the pixel row it handles is ``row0 + i``. Warp's CPU backend runs one launch
+on one thread, so on CPU ``launch_rows`` cuts the image into horizontal bands and launches each band
+from a small persistent thread pool (a launch releases the GIL while it runs). On CUDA one launch
+covers the whole image.
+
+Typical use (other kernel modules, e.g. ``seam.py``, follow the same pattern)::
+
+    from sena_warp.kernels import runtime
+    device = runtime.resolve_device(cfg.device)
+    runtime.launch_rows(my_kernel, height, width, [arg1, arg2, out], device, cfg.cpu_threads)
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import pkgutil
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import warp as wp
+
+from sena_warp.errors import InputError
+
+# The init banner would go to stdout of every CLI run; Warp reads the level when it initialises
+# (``config.quiet`` is deprecated in favour of this in Warp 1.19).
+wp.config.log_level = wp.LOG_WARNING
+
+_pools: dict[int, ThreadPoolExecutor] = {}
+_pools_lock = threading.Lock()
+_loaded: set[tuple[str, str]] = set()
+
+
+def resolve_device(name: str) -> str:
+    """Warp device for a ``Config.device`` value: "auto" -> "cuda" when a GPU is present else "cpu".
+
+    Raises InputError for "cuda" without a GPU or for an unknown name.
+    """
+    has_cuda = wp.get_cuda_device_count() > 0
+    if name == "auto":
+        return "cuda" if has_cuda else "cpu"
+    if name == "cuda" and not has_cuda:
+        raise InputError("device 'cuda' was requested but no CUDA GPU is available; use --device cpu or auto")
+    if name not in ("cpu", "cuda"):
+        raise InputError(f"unknown device {name!r}; choose auto, cpu or cuda")
+    return name
+
+
+def cpu_threads(threads: int = 0) -> int:
+    """Number of CPU launch threads: ``threads`` when > 0, else one per core."""
+    return threads if threads > 0 else (os.cpu_count() or 1)
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """The persistent pool of ``threads`` workers (created once per size)."""
+    with _pools_lock:
+        if threads not in _pools:
+            _pools[threads] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="sena-warp")
+        return _pools[threads]
+
+
+def _ensure_loaded(kernel, device: str) -> None:
+    """Load (compile if needed) the kernel's module once, before bands launch concurrently."""
+    key = (kernel.module.name, device)
+    if key not in _loaded:
+        wp.load_module(kernel.module, device=device)
+        _loaded.add(key)
+
+
+def row_bands(height: int, bands: int) -> list[tuple[int, int]]:
+    """Split rows [0, height) into at most ``bands`` contiguous (row0, rows) pieces of near-equal size."""
+    bands = max(1, min(bands, height))
+    edges = [height * k // bands for k in range(bands + 1)]
+    return [(edges[k], edges[k + 1] - edges[k]) for k in range(bands) if edges[k + 1] > edges[k]]
+
+
+def launch_rows(kernel, height: int, width: int, inputs: list, device: str, threads: int = 0) -> None:
+    """Run ``kernel(row0, *inputs)`` over a (height, width) grid and wait until it has finished.
+
+    On "cpu" the rows are split into ``cpu_threads(threads)`` bands launched in parallel; on
+    "cuda" one launch of dim (height, width). Arrays in ``inputs`` must live on ``device``.
+    """
+    if height <= 0 or width <= 0:
+        return
+    _ensure_loaded(kernel, device)
+    if device != "cpu":
+        wp.launch(kernel, dim=(height, width), inputs=[0, *inputs], device=device)
+        wp.synchronize_device(device)
+        return
+    bands = row_bands(height, cpu_threads(threads))
+    if len(bands) == 1:
+        wp.launch(kernel, dim=(height, width), inputs=[0, *inputs], device=device)
+        return
+    futures = [
+        _pool(len(bands)).submit(wp.launch, kernel, (rows, width), [row0, *inputs], device=device)
+        for row0, rows in bands
+    ]
+    for future in futures:
+        future.result()
+
+
+def prewarm(device: str) -> None:
+    """Import every module of ``sena_warp.kernels`` and load (compile once, then cached) its kernels."""
+    package = importlib.import_module("sena_warp.kernels")
+    for info in pkgutil.iter_modules(package.__path__):
+        module = importlib.import_module(f"sena_warp.kernels.{info.name}")
+        if any(isinstance(obj, wp.Kernel) for obj in vars(module).values()):
+            wp.load_module(module, device=device)
