@@ -33,6 +33,8 @@ class Config:
     max_canvas_area_ratio: float = 4.0  # refuse a canvas larger than this x (area_src + area_tgt)
     grid_x: int = 2  # G_x: cells across the overlap's bounding box
     grid_y: int = 2  # G_y: cells down the overlap's bounding box
+    min_global_det: float = 0.05  # |det A_glob| below this (or det < 0, a flip): implausible model
+    min_overlap_area_px: float = 64.0  # overlap polygon smaller than this (px^2): no overlap
 
     # --- Step 3: local affines T_j ------------------------------------------------------------
     alpha: float = 0.35  # alpha: sigma_j = alpha * diag(c_j), Gaussian weight of matches
