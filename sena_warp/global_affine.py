@@ -1,0 +1,122 @@
+"""SENA step 1: the global affine ``A_glob`` (source -> target) by RANSAC.
+
+Two models are tried on the same matches, OpenCV's full affine (6 dof) and its partial affine
+(similarity: rotation, uniform scale, translation; 4 dof); the one with more RANSAC inliers is kept
+and a tie goes to the similarity, the more rigid model (SENA.md step 1). Only its inliers go on to
+the local models.
+
+Also the two small affine helpers every later stage uses: ``apply_affine`` and ``invert_affine``.
+Affines are ``(2, 3)`` float64 matrices mapping ``[x, y, 1]`` of the frame before ``_to_`` to the
+frame after it; points are float64 ``(N, 2)`` arrays of ``(x, y)`` pixels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .config import Config
+from .errors import GeometryError, InputError, MatchError
+
+MODEL_AFFINE = "affine"
+MODEL_SIMILARITY = "similarity"
+
+
+@dataclass(frozen=True)
+class GlobalAffine:
+    """Result of step 1.
+
+    ``affine_src_to_tgt``: ``(2, 3)`` float64 ``A_glob``; ``inliers``: ``(N,)`` bool over the input
+    matches; ``model``: ``"affine"`` or ``"similarity"``; ``n_matches``, ``n_inliers``: counts.
+    """
+
+    affine_src_to_tgt: np.ndarray
+    inliers: np.ndarray
+    model: str
+    n_matches: int
+    n_inliers: int
+
+
+def apply_affine(affine: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Map ``(N, 2)`` ``(x, y)`` points through a ``(2, 3)`` affine; returns ``(N, 2)`` float64."""
+    affine = np.asarray(affine, dtype=np.float64)
+    pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+    return pts @ affine[:, :2].T + affine[:, 2]
+
+
+def invert_affine(affine: np.ndarray) -> np.ndarray:
+    """Inverse of a ``(2, 3)`` affine (``affine_a_to_b`` -> ``affine_b_to_a``), ``(2, 3)`` float64.
+
+    Raises ``GeometryError`` for a singular linear part (the model collapses the image).
+    """
+    affine = np.asarray(affine, dtype=np.float64)
+    linear = affine[:, :2]
+    if abs(np.linalg.det(linear)) < np.finfo(np.float64).eps * max(1.0, np.abs(linear).max() ** 2):
+        raise GeometryError("the affine model is singular (it collapses the image); check the matches")
+    linear_inv = np.linalg.inv(linear)
+    return np.hstack([linear_inv, -linear_inv @ affine[:, 2:3]])
+
+
+def _validated_matches(pts_src: np.ndarray, pts_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    pts_src = np.asarray(pts_src, dtype=np.float64)
+    pts_tgt = np.asarray(pts_tgt, dtype=np.float64)
+    if pts_src.ndim != 2 or pts_src.shape[1] != 2 or pts_src.shape != pts_tgt.shape:
+        raise InputError(
+            f"matched points must be two (N, 2) arrays of equal length, got {pts_src.shape} and {pts_tgt.shape}"
+        )
+    if not (np.isfinite(pts_src).all() and np.isfinite(pts_tgt).all()):
+        raise InputError("matched points contain NaN or infinite coordinates")
+    return pts_src, pts_tgt
+
+
+def _ransac(estimator, pts_src: np.ndarray, pts_tgt: np.ndarray, cfg: Config) -> tuple[np.ndarray | None, np.ndarray]:
+    """Run one OpenCV RANSAC estimator; returns (affine or None, inlier mask (N,) bool)."""
+    affine, mask = estimator(
+        pts_src,
+        pts_tgt,
+        method=cv2.RANSAC,
+        ransacReprojThreshold=cfg.ransac_reproj_px,
+        maxIters=cfg.ransac_max_iters,
+        confidence=cfg.ransac_confidence,
+    )
+    if affine is None or mask is None:
+        return None, np.zeros(len(pts_src), dtype=bool)
+    return affine.astype(np.float64), mask.reshape(-1).astype(bool)
+
+
+def fit_global_affine(pts_src: np.ndarray, pts_tgt: np.ndarray, cfg: Config) -> GlobalAffine:
+    """Fit ``A_glob`` (src -> tgt) to matches with RANSAC, affine vs similarity (SENA.md step 1).
+
+    ``pts_src``, ``pts_tgt``: float64 ``(N, 2)`` ``(x, y)`` pixel positions of the same matches.
+    Raises ``MatchError`` when fewer than ``cfg.min_inliers`` matches or inliers are available.
+    """
+    pts_src, pts_tgt = _validated_matches(pts_src, pts_tgt)
+    n_matches = len(pts_src)
+    if n_matches < cfg.min_inliers:
+        raise MatchError(
+            f"only {n_matches} matches between the images, {cfg.min_inliers} inliers are needed: check that "
+            f"the images overlap, or try the other detector (--features sift / xfeat)"
+        )
+    affine_full, inliers_full = _ransac(cv2.estimateAffine2D, pts_src, pts_tgt, cfg)
+    affine_sim, inliers_sim = _ransac(cv2.estimateAffinePartial2D, pts_src, pts_tgt, cfg)
+    # Tie goes to the similarity: the more rigid model keeps shapes (SENA.md step 1).
+    if affine_sim is not None and inliers_sim.sum() >= inliers_full.sum():
+        affine, inliers, model = affine_sim, inliers_sim, MODEL_SIMILARITY
+    else:
+        affine, inliers, model = affine_full, inliers_full, MODEL_AFFINE
+    n_inliers = int(inliers.sum())
+    if affine is None or n_inliers < cfg.min_inliers:
+        raise MatchError(
+            f"only {n_inliers} of {n_matches} matches agree on one affine model (RANSAC "
+            f"{cfg.ransac_reproj_px} px), {cfg.min_inliers} are needed: check that the images overlap, "
+            f"or try the other detector (--features sift / xfeat)"
+        )
+    return GlobalAffine(
+        affine_src_to_tgt=affine,
+        inliers=inliers,
+        model=model,
+        n_matches=n_matches,
+        n_inliers=n_inliers,
+    )
