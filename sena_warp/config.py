@@ -84,6 +84,13 @@ class Config:
     transition_px: int = 24  # width of the linear alpha ramp across the seam
     seam_smooth_sigma_px: float = 1.5  # light Gaussian smoothing inside the transition only
 
+    # --- Video I/O (no paper symbol: encoder and pipeline settings) ---------------------------
+    video_codec: str = "libx264"  # H.264 encoder: "libx264" or "h264_nvenc" (falls back to libx264)
+    video_crf: int = 20  # constant rate factor (libx264 crf, nvenc cq): lower = better, larger files
+    video_preset: str = "veryfast"  # libx264 speed/size preset
+    video_queue_frames: int = 8  # decoded frames buffered per input between decoder thread and loop
+    video_audio: str = "left"  # audio copied into the output: "left", "right" or "none"
+
     # --- Execution ----------------------------------------------------------------------------
     device: str = "auto"  # Warp device: "auto", "cpu" or "cuda"
     cpu_threads: int = 0  # row-band launch threads on CPU; 0 = one per core
