@@ -69,6 +69,10 @@ class Config:
     gamma_min: float = 0.30  # gamma_min: gate floor where matches are sparse
     sigma_g_px: float = 1.1  # sigma_g: blur of the guarded field
 
+    # --- Step 6: warp map ---------------------------------------------------------------------
+    forward_tol_px: float = 0.01  # stop inverting M_s once |M_s(u) - s| is below this (source px)
+    forward_max_iters: int = 30  # iteration cap of the numeric inversion of M_s
+
     # --- Step 7: adequate zone ----------------------------------------------------------------
     zone_classes: int = 20  # disparity classes of width W / zone_classes
     zone_jump_px: float = 2.0  # v: join a class to the cluster while |d_i - d_(i-1)| <= v
