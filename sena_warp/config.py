@@ -87,6 +87,7 @@ class Config:
     # --- Step 9: partition and reconstruction -------------------------------------------------
     transition_px: int = 24  # width of the linear alpha ramp across the seam
     seam_smooth_sigma_px: float = 1.5  # light Gaussian smoothing inside the transition only
+    seam_fade_px: float = 64.0  # distance beyond the transition over which the source's anchor correction fades to 0
 
     # --- Video I/O (no paper symbol: encoder and pipeline settings) ---------------------------
     video_codec: str = "libx264"  # H.264 encoder: "libx264" or "h264_nvenc" (falls back to libx264)
