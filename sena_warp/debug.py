@@ -18,6 +18,8 @@ HUE_STEPS = 180  # OpenCV's 8-bit hue range
 
 def _match_colours(n: int) -> np.ndarray:
     """n distinct saturated BGR colours (uint8 (n, 3)), hue cycling with the golden ratio."""
+    if n == 0:
+        return np.zeros((0, 3), np.uint8)  # cvtColor refuses an empty image
     golden = (np.sqrt(5.0) - 1.0) / 2.0
     hues = (np.arange(n) * golden % 1.0 * HUE_STEPS).astype(np.uint8)
     hsv = np.stack([hues, np.full(n, 255, np.uint8), np.full(n, 255, np.uint8)], axis=1)
