@@ -1,0 +1,209 @@
+"""The paired-video loop: decode both inputs in threads, pair by time, composite, encode.
+
+The stitch itself is not in here: the loop takes a *frame compositor*, built once from the first
+pair of frames (that is where a real stitch estimates its maps: "cached warps, per-frame seam
+slicing", SENA.md "Maps, not images"), then called for every pair on YUV 4:2:0 planes, so frames
+never go through RGB on the hot path.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass
+from fractions import Fraction
+from itertools import chain
+from operator import attrgetter
+from typing import Callable, Protocol, TextIO
+
+import numpy as np
+
+from ..config import Config
+from ..errors import InputError, VideoError
+from ..imageio import atomic_output
+from .pairing import PairingStats, pair_by_time
+from .reader import FrameReader, VideoInfo, YuvFrame, probe_video
+from .writer import VideoWriter
+
+AUDIO_SOURCES = ("left", "right", "none")
+_PROGRESS_INTERVAL_S = 0.5  # redraw the progress line at most this often
+
+
+class FrameCompositor(Protocol):
+    """Turns one pair of YUV 4:2:0 frames into one output frame.
+
+    ``output_size`` is ``(width, height)`` of the output in pixels. ``composite_yuv`` takes the left
+    and right planes (``y (H, W)``, ``u, v (ceil(H/2), ceil(W/2))``, uint8, ``plane[row, col]``) and
+    returns the output's ``(y, u, v)`` planes of ``output_size`` (chroma halved, rounded up).
+    """
+
+    output_size: tuple[int, int]
+
+    def composite_yuv(
+        self, y_l: np.ndarray, u_l: np.ndarray, v_l: np.ndarray, y_r: np.ndarray, u_r: np.ndarray, v_r: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+
+CompositorFactory = Callable[[YuvFrame, YuvFrame], FrameCompositor]
+"""Builds the compositor from the first (left, right) pair of frames (e.g. by estimating maps)."""
+
+
+@dataclass(frozen=True)
+class VideoOptions:
+    """Settings of one video run.
+
+    ``offset_s`` shifts the right (second) input's clock: its frame at time t is paired as if it
+    were at t + offset_s (+0.5: the right camera started 0.5 s after the left one). ``audio``: whose
+    audio to copy. ``progress``: None = a progress line only when stderr is a terminal.
+    """
+
+    offset_s: float = 0.0
+    audio: str = Config.video_audio
+    codec: str = Config.video_codec
+    crf: int = Config.video_crf
+    preset: str = Config.video_preset
+    queue_frames: int = Config.video_queue_frames
+    progress: bool | None = None
+
+    @classmethod
+    def from_config(cls, cfg: Config, **changes) -> "VideoOptions":
+        """Options taking their encoder and queue settings from ``cfg``."""
+        base = dict(audio=cfg.video_audio, codec=cfg.video_codec, crf=cfg.video_crf,
+                    preset=cfg.video_preset, queue_frames=cfg.video_queue_frames)
+        return cls(**{**base, **changes})
+
+
+class Progress:
+    """A one-line ``frames / total, fps, ETA`` display on ``stream``, redrawn in place."""
+
+    def __init__(self, total: int, enabled: bool, stream: TextIO):
+        self.total, self.enabled, self.stream = total, enabled, stream
+        self._t0 = time.perf_counter()
+        self._last_draw = 0.0
+
+    def update(self, frames: int, force: bool = False) -> None:
+        now = time.perf_counter()
+        if not self.enabled or (now - self._last_draw < _PROGRESS_INTERVAL_S and not force):
+            return
+        self._last_draw = now
+        elapsed = now - self._t0
+        fps = frames / elapsed if elapsed > 0 else 0.0
+        eta = f"{max(self.total - frames, 0) / fps:.0f} s" if fps > 0 else "?"
+        self.stream.write(f"\rsena-warp video: {frames}/{self.total} frames  {fps:.1f} fps  ETA {eta} ")
+        self.stream.flush()
+
+    def close(self, frames: int) -> None:
+        """Draw the final count and end the line."""
+        self.update(frames, force=True)
+        if self.enabled:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
+    return {
+        "path": str(info.path), "width": info.width, "height": info.height, "fps": float(info.fps),
+        "pix_fmt": info.pix_fmt, "converted_from": reader.converted_from, "offset_s": float(reader.offset_s),
+        "frames_decoded": reader.decoded, "damaged": reader.damaged, "decode_wait_s": round(reader.wait_s, 4),
+    }
+
+
+def run_video(
+    left: str | os.PathLike,
+    right: str | os.PathLike,
+    output: str | os.PathLike,
+    compositor_factory: CompositorFactory,
+    options: VideoOptions = VideoOptions(),
+) -> dict:
+    """Stitch two videos frame pair by frame pair into ``output``; return the run's report.
+
+    Output frames follow the left input's frames (its rate and times); each is paired with the
+    right frame nearest in time (see ``pairing.py``). The output appears under its name only once
+    complete. Report keys: ``frames_in``, ``frames_out``, ``dropped``, ``repeated``, ``damaged``,
+    ``pairing`` (all counts), ``timing_s`` (decode_wait, composite, encode, total), ``output_fps``,
+    ``inputs``, ``output``, ``notes``.
+    """
+    t_run = time.perf_counter()
+    if options.audio not in AUDIO_SOURCES:
+        raise InputError(f"audio source {options.audio!r} unknown; use one of {', '.join(AUDIO_SOURCES)}")
+    infos = {"left": probe_video(left), "right": probe_video(right)}
+    offsets = {"left": Fraction(0), "right": Fraction(str(options.offset_s))}
+    notes: list[str] = []
+    audio_side = None if options.audio == "none" else options.audio
+    if audio_side is not None and not infos[audio_side].has_audio:
+        notes.append(f"{audio_side} input has no audio: output has none")
+        audio_side = None
+    rate = infos["left"].fps
+    stats = PairingStats()
+    timing = {"composite": 0.0, "encode": 0.0}
+    show = sys.stderr.isatty() if options.progress is None else options.progress
+    expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
+
+    with FrameReader(left, offsets["left"], options.queue_frames) as reader_l, \
+            FrameReader(right, offsets["right"], options.queue_frames) as reader_r:
+        pairs = pair_by_time(reader_l, reader_r, 1 / infos["right"].fps, attrgetter("time_s"), stats)
+        first = next(pairs, None)
+        if first is None:
+            raise VideoError(
+                f"{left} and {right}: no frames overlap in time with offset {options.offset_s} s; check --offset"
+            )
+        compositor = compositor_factory(*first)
+        width, height = compositor.output_size
+        t_first = first[0].time_s
+        progress = Progress(expected, show, sys.stderr)
+        with atomic_output(output, inputs=(left, right)) as tmp, \
+                VideoWriter(tmp, width, height, rate, options.codec, options.crf, options.preset) as writer:
+            if writer.note:
+                notes.append(writer.note)
+            if audio_side is not None:
+                # Audio time in its file -> output clock: the same shift as that input's video frames.
+                side_info = infos[audio_side]
+                writer.add_audio(side_info.path, side_info.start_time_s - offsets[audio_side] + t_first)
+            last_pts = -1
+            for frame_l, frame_r in chain([first], pairs):
+                t0 = time.perf_counter()
+                planes = compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
+                t1 = time.perf_counter()
+                # The left frame's own time, on the 1/fps grid; forced to increase should rounding collide.
+                last_pts = max(last_pts + 1, round((frame_l.time_s - t_first) * rate))
+                writer.write(*planes, pts=last_pts)
+                timing["encode"] += time.perf_counter() - t1
+                timing["composite"] += t1 - t0
+                progress.update(writer.frames)
+            t0 = time.perf_counter()
+            writer.finish()
+            timing["encode"] += time.perf_counter() - t0
+            progress.close(writer.frames)
+    total_s = time.perf_counter() - t_run
+    audio = writer.audio
+    return {
+        "frames_in": {"left": reader_l.decoded, "right": reader_r.decoded},
+        "frames_out": writer.frames,
+        "dropped": stats.dropped,
+        "repeated": stats.repeated,
+        "damaged": {"left": reader_l.damaged, "right": reader_r.damaged},
+        "pairing": stats.as_dict(),
+        "timing_s": {
+            "decode_wait": round(reader_l.wait_s + reader_r.wait_s, 4),
+            "composite": round(timing["composite"], 4),
+            "encode": round(timing["encode"], 4),
+            "total": round(total_s, 4),
+        },
+        "output_fps": round(writer.frames / total_s, 2),
+        "inputs": {"left": _input_summary(infos["left"], reader_l), "right": _input_summary(infos["right"], reader_r)},
+        "output": {
+            "path": str(output), "width": writer.width, "height": writer.height, "fps": float(rate),
+            "codec": writer.codec, "audio": audio_side or "none",
+            "audio_mode": None if audio is None else ("copy" if audio.remux else "aac"),
+            "audio_span_s": None if audio is None else [audio.first_s, audio.end_s],
+        },
+        "notes": notes,
+    }
+
+
+def write_report(report: dict, path: str | os.PathLike) -> None:
+    """Write a run's report as indented JSON (atomically, like every output)."""
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(report, indent=2) + "\n")

@@ -1,0 +1,226 @@
+"""Encoding the stitched frames with PyAV, and copying one input's audio alongside.
+
+The caller writes into a temporary path (``sena_warp.imageio.atomic_output``) so a failed or
+interrupted run never leaves a partial file under the final name. Video is H.264 in yuv420p, at the
+input's frame rate: the encoder's time base is ``1 / fps`` and each frame's pts comes from the tick
+input's presentation time, so timing is carried through rather than recounted. Audio is remuxed
+(packets copied, no re-encoding) when the output container accepts its codec, else re-encoded to AAC;
+either way it is trimmed to the span of the video that was written.
+"""
+
+from __future__ import annotations
+
+import os
+from fractions import Fraction
+from pathlib import Path
+
+import av
+import numpy as np
+
+from ..config import Config
+from ..errors import OutputError, VideoError
+from .reader import PIX_FMT, open_input
+
+FALLBACK_CODEC = "libx264"  # always in PyAV's wheels
+
+
+def choose_codec(requested: str, width: int, height: int, rate: Fraction) -> tuple[str, str | None]:
+    """The encoder to use for ``requested`` and a note when it had to fall back to libx264.
+
+    A hardware encoder can be compiled in yet unusable (no GPU, no driver), so it is opened once
+    with the real frame size to find out.
+    """
+    if requested == FALLBACK_CODEC:
+        return requested, None
+    if requested not in av.codecs_available:
+        return FALLBACK_CODEC, f"encoder {requested} is not in this FFmpeg build; used {FALLBACK_CODEC}"
+    try:
+        ctx = av.CodecContext.create(requested, "w")
+        ctx.width, ctx.height, ctx.pix_fmt, ctx.time_base = width, height, PIX_FMT, 1 / Fraction(rate)
+        ctx.open()
+        ctx.close()
+    except (av.error.FFmpegError, ValueError) as exc:
+        reason = getattr(exc, "strerror", None) or exc
+        return FALLBACK_CODEC, f"encoder {requested} cannot be opened ({reason}); used {FALLBACK_CODEC}"
+    return requested, None
+
+
+def encoder_options(codec: str, crf: int, preset: str) -> dict[str, str]:
+    """FFmpeg private options for constant-quality H.264 with ``codec``."""
+    if codec == "h264_nvenc":
+        return {"rc": "vbr", "cq": str(crf)}
+    return {"crf": str(crf), "preset": preset}
+
+
+def even_size(width: int, height: int) -> tuple[int, int]:
+    """The largest even ``(width, height)`` not above the given one (yuv420p needs even sides)."""
+    return width - width % 2, height - height % 2
+
+
+class AudioCopier:
+    """Copy the audio of ``source`` into ``out`` on the output clock, trimmed to ``[0, end)``.
+
+    ``shift_s``: output time = source audio time - ``shift_s``. Packets (or decoded frames, when
+    re-encoding) are kept when they start inside the span, so the audio matches the video within
+    one audio packet (~21 ms for AAC at 48 kHz). Call :meth:`advance` as video is written (keeps the
+    file interleaved without buffering) and :meth:`finish` at the end.
+    """
+
+    def __init__(self, source: str | os.PathLike, out: av.container.OutputContainer, shift_s: Fraction):
+        self._input = open_input(source)
+        if not self._input.streams.audio:
+            self._input.close()
+            raise VideoError(f"{source}: has no audio stream to copy; choose another audio source or none")
+        self._in_stream = self._input.streams.audio[0]
+        self._out = out
+        self._time_base = Fraction(self._in_stream.time_base)
+        self._shift_s = shift_s
+        self.remux = self._in_stream.codec_context.name in out.supported_codecs
+        if self.remux:
+            self._out_stream = out.add_stream_from_template(self._in_stream)
+        else:
+            ctx = self._in_stream.codec_context
+            self._out_stream = out.add_stream("aac", rate=ctx.sample_rate, layout=ctx.layout.name)
+            self._resampler = av.AudioResampler(format="fltp", layout=ctx.layout.name, rate=ctx.sample_rate)
+            self._next_pts: int | None = None
+        self._packets = self._input.demux(self._in_stream)
+        self._pending: av.Packet | None = None
+        self.packets = 0
+        self.first_s: float | None = None  # start of the first audio written, output seconds
+        self.end_s: float | None = None  # end of the last audio written, output seconds
+
+    def _out_time(self, pts: int) -> Fraction:
+        return pts * self._time_base - self._shift_s
+
+    def advance(self, end_s: Fraction) -> None:
+        """Write the audio that starts before ``end_s`` (output seconds) and was not written yet."""
+        while True:
+            if self._pending is None:
+                self._pending = next((p for p in self._packets if p.pts is not None), None)
+                if self._pending is None:
+                    return
+            start_s = self._out_time(self._pending.pts)
+            if start_s >= end_s:
+                return
+            packet, self._pending = self._pending, None
+            if start_s >= 0:
+                self._write(packet, start_s)
+
+    def _write(self, packet: av.Packet, start_s: Fraction) -> None:
+        self.packets += 1
+        if self.first_s is None:
+            self.first_s = float(start_s)
+        self.end_s = float(start_s + (packet.duration or 0) * self._time_base)
+        if self.remux:
+            shift = round(self._shift_s / self._time_base)
+            packet.pts -= shift
+            packet.dts = packet.pts if packet.dts is None else packet.dts - shift
+            packet.stream = self._out_stream
+            self._out.mux(packet)
+            return
+        for frame in packet.decode():
+            for resampled in self._resampler.resample(frame):
+                self._encode(resampled, start_s)
+
+    def _encode(self, frame: av.AudioFrame | None, start_s: Fraction) -> None:
+        if frame is not None:
+            if self._next_pts is None:
+                self._next_pts = round(start_s * frame.sample_rate)
+            frame.pts, frame.time_base = self._next_pts, Fraction(1, frame.sample_rate)
+            self._next_pts += frame.samples
+        self._out.mux(self._out_stream.encode(frame))
+
+    def finish(self, end_s: Fraction) -> None:
+        """Write the audio up to ``end_s``, flush the encoder if any, and close the source."""
+        self.advance(end_s)
+        if not self.remux:
+            for resampled in self._resampler.resample(None):
+                self._encode(resampled, Fraction(0))
+            self._encode(None, Fraction(0))
+        self.close()
+
+    def close(self) -> None:
+        self._input.close()
+
+
+class VideoWriter:
+    """H.264/yuv420p encoder into ``path`` at ``rate`` frames per second (optionally with audio).
+
+    ``width``/``height`` are cropped to even values (see :func:`even_size`); :meth:`write` takes
+    planes at least that large. Frame pts are in units of ``1 / rate`` and must increase.
+    Use as a context manager: a clean exit flushes the encoder; an exception just closes the file.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        width: int,
+        height: int,
+        rate: Fraction,
+        codec: str = FALLBACK_CODEC,
+        crf: int = Config.video_crf,
+        preset: str = Config.video_preset,
+    ):
+        self.path = Path(path)
+        self.width, self.height = even_size(width, height)
+        if self.width < 2 or self.height < 2:
+            raise VideoError(f"{self.path}: output frame {width}x{height} is too small to encode")
+        self.rate = Fraction(rate)
+        self.codec, self.note = choose_codec(codec, self.width, self.height, self.rate)
+        try:
+            self.container = av.open(str(self.path), mode="w")
+        except av.error.FFmpegError as exc:
+            raise OutputError(f"{self.path}: cannot create the video file ({exc.strerror})") from exc
+        self.stream = self.container.add_stream(
+            self.codec, rate=self.rate, options=encoder_options(self.codec, crf, preset)
+        )
+        self.stream.width, self.stream.height = self.width, self.height
+        self.stream.pix_fmt = PIX_FMT
+        self.stream.codec_context.time_base = 1 / self.rate
+        self.audio: AudioCopier | None = None
+        self.frames = 0
+        self._last_pts: int | None = None
+        self._finished = False
+
+    def add_audio(self, source: str | os.PathLike, shift_s: Fraction) -> AudioCopier:
+        """Copy ``source``'s audio (output time = its time - ``shift_s``); call before :meth:`write`."""
+        self.audio = AudioCopier(source, self.container, shift_s)
+        return self.audio
+
+    def __enter__(self) -> "VideoWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if exc_type is None and not self._finished:
+                self.finish()
+        finally:
+            if self.audio is not None:
+                self.audio.close()
+            self.container.close()
+
+    def write(self, y: np.ndarray, u: np.ndarray, v: np.ndarray, pts: int) -> None:
+        """Encode one frame given as uint8 planes ``y (H, W)``, ``u, v (ceil(H/2), ceil(W/2))``."""
+        if self._last_pts is not None and pts <= self._last_pts:
+            raise VideoError(f"{self.path}: frame pts {pts} does not increase (previous {self._last_pts})")
+        frame = av.VideoFrame(self.width, self.height, PIX_FMT)
+        for plane, src in zip(frame.planes, (y, u, v)):
+            if src.shape[0] < plane.height or src.shape[1] < plane.width:
+                raise VideoError(
+                    f"{self.path}: plane {src.shape} smaller than the {plane.height}x{plane.width} the frame needs"
+                )
+            rows = np.frombuffer(plane, dtype=np.uint8, count=plane.height * plane.line_size)
+            rows.reshape(plane.height, plane.line_size)[:, : plane.width] = src[: plane.height, : plane.width]
+        frame.pts, frame.time_base = pts, 1 / self.rate
+        self.container.mux(self.stream.encode(frame))
+        self._last_pts = pts
+        self.frames += 1
+        if self.audio is not None:
+            self.audio.advance((pts + 1) / self.rate)
+
+    def finish(self) -> None:
+        """Flush the encoder and write the audio to the end of the last frame."""
+        self._finished = True
+        self.container.mux(self.stream.encode(None))
+        if self.audio is not None and self._last_pts is not None:
+            self.audio.finish((self._last_pts + 1) / self.rate)
