@@ -1,0 +1,191 @@
+"""Step 9: partition the canvas at the keypoint chain and build the seam maps (SENA.md step 9, paper
+"Partitioning and Reconstruction").
+
+The K anchors cut the canvas into K+1 horizontal bands. In each band the seam x follows the target
+anchors, interpolated linearly in y (constant above the first and below the last anchor). The
+output row is the source left of its seam and the target right of it, blended by a linear alpha of
+width ``cfg.transition_px`` (Gaussian-smoothed with ``cfg.seam_smooth_sigma_px`` across the seam).
+The source is resampled so that each source anchor lands on its target anchor: per row, the
+anchor residual (dx, dy) = anchor_src - anchor_tgt is interpolated like the seam, applied in full
+inside the transition and faded out (smootherstep) over ``cfg.seam_fade_px`` beyond it, so the
+source far from the seam keeps its step-6 shape. The per-pixel part is ``kernels/seam.py``.
+Convention: the source is the LEFT view on the canvas (the caller transposes/flips other rigs).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import warp as wp
+
+from sena_warp.canvas import Canvas
+from sena_warp.config import Config
+from sena_warp.errors import GeometryError, InputError
+from sena_warp.kernels import runtime
+from sena_warp.kernels.seam import seam_maps_kernel
+
+NEWTON_STEPS = 5  # anchor_residuals_px: Newton steps to invert the map (converges in 2-3 on smooth maps)
+JACOBIAN_STEP_PX = 0.5  # half-step of the central differences of the map's Jacobian
+
+
+@dataclass(frozen=True)
+class SeamRows:
+    """Per canvas row y (all (H,) float32): seam x ``s(y)``, the source row ``y + dy(y)`` that
+    row y samples at the seam, and the x shift ``dx(y)`` applied there."""
+
+    seam_x: np.ndarray
+    src_row_y: np.ndarray
+    shift_x: np.ndarray
+
+
+@dataclass
+class SeamMaps:
+    """The three per-pixel maps of the stitch and the anchors they were built from.
+
+    map_src_canvas, map_tgt_canvas: (H, W, 2) float32 (x, y) sample positions in the source and
+    target images (map_tgt = u - o); alpha_canvas: (H, W) float32 weight of the source;
+    seam_x_canvas: (H,) float32 seam x per row; anchors_*_canvas: (K, 2) float64 (x, y).
+    """
+
+    map_src_canvas: np.ndarray
+    map_tgt_canvas: np.ndarray
+    alpha_canvas: np.ndarray
+    seam_x_canvas: np.ndarray
+    anchors_src_canvas: np.ndarray
+    anchors_tgt_canvas: np.ndarray
+
+
+def seam_rows(anchors_src_canvas: np.ndarray, anchors_tgt_canvas: np.ndarray, height: int) -> SeamRows:
+    """Interpolate seam x and the anchor residual over canvas rows 0..height-1.
+
+    anchors_*_canvas: (K, 2) float64 (x, y), K >= 1, target y strictly increasing. Linear between
+    anchors in target y, constant beyond the first and last anchor.
+    """
+    anchors_src = np.asarray(anchors_src_canvas, np.float64)
+    anchors_tgt = np.asarray(anchors_tgt_canvas, np.float64)
+    if len(anchors_tgt) == 0 or anchors_src.shape != anchors_tgt.shape:
+        raise GeometryError("the seam needs at least one anchor, with as many source as target anchors")
+    if np.any(np.diff(anchors_tgt[:, 1]) <= 0):
+        raise GeometryError("seam anchors must be sorted by strictly increasing target y")
+    rows = np.arange(height, dtype=np.float64)
+    residual = anchors_src - anchors_tgt
+    return SeamRows(
+        seam_x=np.interp(rows, anchors_tgt[:, 1], anchors_tgt[:, 0]).astype(np.float32),
+        src_row_y=(rows + np.interp(rows, anchors_tgt[:, 1], residual[:, 1])).astype(np.float32),
+        shift_x=np.interp(rows, anchors_tgt[:, 1], residual[:, 0]).astype(np.float32),
+    )
+
+
+def seam_maps(
+    map_src_canvas: np.ndarray,
+    canvas: Canvas,
+    anchors_src_canvas: np.ndarray,
+    anchors_tgt_canvas: np.ndarray,
+    cfg: Config,
+    device: str,
+) -> SeamMaps:
+    """SENA step 9: source map, target map and alpha of the stitch (Warp kernel ``seam_maps_kernel``).
+
+    map_src_canvas: (H, W, 2) float32 step-6 source sampling map; canvas: its size and target offset;
+    anchors_*_canvas: (K, 2) float64 (x, y) from ``keypoint_chain`` (warped source / target
+    positions). device: a Warp device name ("cpu" or "cuda", see ``runtime.resolve_device``).
+    """
+    if map_src_canvas.shape != (canvas.height, canvas.width, 2):
+        raise InputError(f"source map shape {map_src_canvas.shape} does not match the canvas {canvas.shape}")
+    if cfg.transition_px < 1 or cfg.seam_fade_px <= 0:
+        raise InputError("transition_px must be >= 1 and seam_fade_px > 0")
+    rows = seam_rows(anchors_src_canvas, anchors_tgt_canvas, canvas.height)
+    shape = canvas.shape
+    map_src_out = wp.empty(shape, dtype=wp.vec2, device=device)
+    map_tgt_out = wp.empty(shape, dtype=wp.vec2, device=device)
+    alpha_out = wp.empty(shape, dtype=float, device=device)
+    inputs = [
+        wp.array(np.ascontiguousarray(map_src_canvas, np.float32), dtype=wp.vec2, device=device),
+        wp.array(rows.seam_x, dtype=float, device=device),
+        wp.array(rows.src_row_y, dtype=float, device=device),
+        wp.array(rows.shift_x, dtype=float, device=device),
+        wp.vec2(*canvas.offset_tgt),
+        float(cfg.transition_px),
+        float(cfg.seam_smooth_sigma_px),
+        float(cfg.seam_fade_px),
+        map_src_out,
+        map_tgt_out,
+        alpha_out,
+    ]
+    runtime.launch_rows(seam_maps_kernel, canvas.height, canvas.width, inputs, device, cfg.cpu_threads)
+    return SeamMaps(
+        map_src_canvas=map_src_out.numpy().reshape(*shape, 2),
+        map_tgt_canvas=map_tgt_out.numpy().reshape(*shape, 2),
+        alpha_canvas=alpha_out.numpy(),
+        seam_x_canvas=rows.seam_x,
+        anchors_src_canvas=np.asarray(anchors_src_canvas, np.float64),
+        anchors_tgt_canvas=np.asarray(anchors_tgt_canvas, np.float64),
+    )
+
+
+def sample_map(map_canvas: np.ndarray, pts_canvas: np.ndarray) -> np.ndarray:
+    """Bilinear sample of a (H, W, 2) float32 canvas map at (N, 2) float64 (x, y) canvas points.
+
+    Returns (N, 2) float64; NaN for points outside [0, W-1] x [0, H-1] (no silent clamping).
+    """
+    height, width = map_canvas.shape[:2]
+    x, y = pts_canvas[:, 0], pts_canvas[:, 1]
+    inside = (x >= 0) & (x <= width - 1) & (y >= 0) & (y <= height - 1)
+    x0 = np.clip(np.floor(np.where(inside, x, 0)).astype(np.int64), 0, max(width - 2, 0))
+    y0 = np.clip(np.floor(np.where(inside, y, 0)).astype(np.int64), 0, max(height - 2, 0))
+    x1 = np.minimum(x0 + 1, width - 1)
+    y1 = np.minimum(y0 + 1, height - 1)
+    fx = (x - x0)[:, None]
+    fy = (y - y0)[:, None]
+    m = map_canvas.astype(np.float64)
+    top = (1 - fx) * m[y0, x0] + fx * m[y0, x1]
+    bottom = (1 - fx) * m[y1, x0] + fx * m[y1, x1]
+    return np.where(inside[:, None], (1 - fy) * top + fy * bottom, np.nan)
+
+
+def anchor_residuals_px(
+    map_src_canvas_before: np.ndarray,
+    map_src_canvas_after: np.ndarray,
+    anchors_src_canvas: np.ndarray,
+    anchors_tgt_canvas: np.ndarray,
+) -> np.ndarray:
+    """(K,) float64 canvas distance between where each source anchor lands after reconstruction and
+    its target anchor.
+
+    The source anchor's scene point is ``p = before(anchor_src)`` (a source-image position); where it
+    lands is the canvas point u with ``after(u) = p``, found by Newton steps from the target anchor
+    with a central-difference Jacobian of ``after`` (SENA.md step 6: invert maps numerically).
+    NaN where the maps are not defined, the Newton steps leave the canvas (anchors on its border),
+    or the Jacobian is singular.
+    """
+    p_src = sample_map(map_src_canvas_before, np.asarray(anchors_src_canvas, np.float64))
+    u = np.asarray(anchors_tgt_canvas, np.float64).copy()
+    step = np.array([JACOBIAN_STEP_PX, 0.0]), np.array([0.0, JACOBIAN_STEP_PX])
+    for _ in range(NEWTON_STEPS):
+        jac = np.stack(
+            [sample_map(map_src_canvas_after, u + h) - sample_map(map_src_canvas_after, u - h) for h in step], axis=-1
+        ) / (2 * JACOBIAN_STEP_PX)
+        residual = sample_map(map_src_canvas_after, u) - p_src
+        ok = np.isfinite(jac).all(axis=(1, 2)) & np.isfinite(residual).all(axis=1)
+        ok[ok] = np.linalg.matrix_rank(jac[ok]) == 2
+        delta = np.full_like(u, np.nan)
+        delta[ok] = np.linalg.solve(jac[ok], residual[ok][..., None])[..., 0]
+        u = u - delta
+    return np.hypot(*(u - anchors_tgt_canvas).T)
+
+
+def transition_mad(
+    out_src: np.ndarray, out_tgt: np.ndarray, valid: np.ndarray, seam_x: np.ndarray, width: float
+) -> float:
+    """Mean |src - tgt| (grey levels, over channels) inside the transition band |x - seam_x[y]| <= width/2.
+
+    out_src, out_tgt: (H, W) or (H, W, C) images remapped onto the canvas; valid: (H, W) bool where
+    both are defined; seam_x: (H,) seam x per row. NaN when the band holds no valid pixel.
+    """
+    cols = np.arange(valid.shape[1])[None, :]
+    band = valid & (np.abs(cols - np.asarray(seam_x, np.float64)[:, None]) <= 0.5 * width)
+    if not band.any():
+        return float("nan")
+    diff = np.abs(out_src.astype(np.float64) - out_tgt.astype(np.float64))
+    return float(diff[band].mean())

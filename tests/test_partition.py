@@ -1,0 +1,133 @@
+"""Step 9, partition and reconstruction: seam per row, alpha, anchors meeting, on synthetic and real canvases."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from sena_warp.canvas import Canvas
+from sena_warp.config import Config
+from sena_warp.errors import GeometryError
+from sena_warp.imageio import read_image
+from sena_warp.partition import anchor_residuals_px, sample_map, seam_maps, seam_rows, transition_mad
+
+DEVICE = "cpu"
+
+
+def _affine_map(height, width):
+    """A smooth step-6-like map: source (x, y) = a mild affine of the canvas pixel."""
+    ys, xs = np.mgrid[0:height, 0:width].astype(np.float64)
+    return np.stack([0.95 * xs + 0.05 * ys + 4.0, -0.03 * xs + 1.02 * ys - 2.0], -1).astype(np.float32)
+
+
+def test_seam_rows_interpolate_anchors():
+    tgt = np.array([[30.0, 0.0], [40.0, 50.0], [20.0, 99.0]])
+    src = tgt + np.array([[1.0, 2.0], [3.0, 6.0], [1.0, 2.0]])
+    rows = seam_rows(src, tgt, 120)
+    assert rows.seam_x[25] == pytest.approx(35.0)
+    assert rows.seam_x[50] == pytest.approx(40.0)
+    assert rows.seam_x[110] == pytest.approx(20.0)  # constant below the last anchor
+    assert rows.src_row_y[25] == pytest.approx(25.0 + 4.0)
+    assert rows.shift_x[25] == pytest.approx(2.0)
+    with pytest.raises(GeometryError):
+        seam_rows(src[::-1], tgt[::-1], 120)
+
+
+def test_seam_maps_alpha_and_target_map():
+    canvas = Canvas(width=120, height=100, offset_tgt=(30.0, 4.0))
+    tgt = np.array([[50.0, 0.0], [70.0, 60.0], [60.0, 99.0]])
+    cfg = Config(transition_px=20, seam_smooth_sigma_px=0.0)
+    maps = seam_maps(_affine_map(100, 120), canvas, tgt, tgt, cfg, DEVICE)
+    np.testing.assert_allclose(maps.seam_x_canvas, np.interp(np.arange(100), tgt[:, 1], tgt[:, 0]), atol=1e-4)
+    xs = np.arange(120)
+    for y in (0, 30, 60, 80):
+        s = maps.seam_x_canvas[y]
+        alpha = maps.alpha_canvas[y]
+        assert np.all(alpha[xs <= s - 10] == 1.0) and np.all(alpha[xs >= s + 10] == 0.0)
+        ramp = np.abs(xs - s) < 10
+        np.testing.assert_allclose(alpha[ramp], 0.5 - (xs[ramp] - s) / 20, atol=1e-6)
+    ys, xs2 = np.mgrid[0:100, 0:120]
+    np.testing.assert_allclose(maps.map_tgt_canvas, np.stack([xs2 - 30.0, ys - 4.0], -1))
+    # no residual between anchors: the source map is the step-6 map untouched
+    np.testing.assert_allclose(maps.map_src_canvas, _affine_map(100, 120), atol=1e-4)
+
+
+def test_smoothing_only_near_the_ramp_ends():
+    canvas = Canvas(width=120, height=10, offset_tgt=(0.0, 0.0))
+    tgt = np.array([[60.0, 0.0], [60.0, 9.0]])
+    cfg = Config(transition_px=20, seam_smooth_sigma_px=1.5)
+    alpha = seam_maps(_affine_map(10, 120), canvas, tgt, tgt, cfg, DEVICE).alpha_canvas[5]
+    plain = np.clip(0.5 - (np.arange(120) - 60.0) / 20, 0, 1)
+    assert np.abs(alpha - plain).max() > 0.01  # the corners are rounded
+    far = np.abs(np.abs(np.arange(120) - 60.0) - 10) > 6  # > 4 sigma from both ramp ends
+    np.testing.assert_allclose(alpha[far], plain[far], atol=1e-5)
+    k = np.arange(60)
+    np.testing.assert_allclose(alpha[60 + k] + alpha[60 - k], 1.0, atol=1e-5)  # odd about the seam
+    assert np.all(np.diff(alpha) <= 1e-7)
+
+
+def test_vertical_offset_anchors_meet_and_far_source_keeps_its_shape():
+    height, width = 160, 200
+    canvas = Canvas(width=width, height=height, offset_tgt=(60.0, 0.0))
+    map_before = _affine_map(height, width)
+    tgt = np.array([[120.0, 5.0], [126.3, 40.2], [118.7, 90.6], [123.0, 150.0]])
+    src = tgt + np.array([[0.5, 3.0], [0.8, 4.5], [-1.2, 2.5], [0.0, 3.5]])
+    cfg = Config(transition_px=24, seam_fade_px=40.0)
+    maps = seam_maps(map_before, canvas, src, tgt, cfg, DEVICE)
+    residual_before = anchor_residuals_px(map_before, map_before, src, tgt)
+    residual_after = anchor_residuals_px(map_before, maps.map_src_canvas, src, tgt)
+    assert residual_before.min() > 2.0
+    assert residual_after.max() < 0.1
+    # source at least T/2 + fade from the seam keeps its step-6 map exactly
+    far = np.arange(width)[None, :] < maps.seam_x_canvas[:, None] - 12 - 40
+    np.testing.assert_array_equal(maps.map_src_canvas[far], map_before[far])
+
+
+def test_real_image_shifted_source_meets_target_in_the_transition(shared_dir):
+    """Target = a real image on the canvas; source = the same image moved 3 px down, step-6 map = identity.
+
+    Anchors say the scene point at target (x, y) sits at (x, y + 3) in the warped source; after the
+    reconstruction the source equals the target inside the transition band (integer shift: exact).
+    """
+    grey = cv2.cvtColor(read_image(shared_dir / "pairs" / "udisd_test_000001" / "a.jpg"), cv2.COLOR_BGR2GRAY)
+    height, width = grey.shape
+    grey_src = np.zeros_like(grey)
+    grey_src[3:] = grey[:-3]
+    ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
+    map_identity = np.stack([xs, ys], -1)
+    tgt = np.array([[250.0, 0.0], [262.0, 200.0], [245.0, 511.0]])
+    src = tgt + [0.0, 3.0]
+    cfg = Config(transition_px=24)
+    maps = seam_maps(map_identity, Canvas(width, height, (0.0, 0.0)), src, tgt, cfg, DEVICE)
+
+    def remap(img, m):
+        return cv2.remap(img, m[..., 0], m[..., 1], cv2.INTER_LINEAR)
+
+    valid = np.zeros((height, width), bool)
+    valid[4 : height - 4] = True
+    out_tgt = remap(grey, maps.map_tgt_canvas)
+    mad_before = transition_mad(remap(grey_src, map_identity), out_tgt, valid, maps.seam_x_canvas, 24)
+    mad_after = transition_mad(remap(grey_src, maps.map_src_canvas), out_tgt, valid, maps.seam_x_canvas, 24)
+    assert mad_before > 3.0
+    assert mad_after < 0.05
+    residual = anchor_residuals_px(map_identity, maps.map_src_canvas, src[1:2], tgt[1:2])
+    assert residual[0] < 0.1
+
+
+def test_transition_mad_counts_only_the_band():
+    valid = np.ones((4, 10), bool)
+    src = np.zeros((4, 10))
+    tgt = np.zeros((4, 10))
+    tgt[:, 4:7] = 6.0  # inside |x - 5| <= 1
+    tgt[:, 0] = 100.0  # outside the band
+    assert transition_mad(src, tgt, valid, np.full(4, 5.0), 2.0) == pytest.approx(6.0)
+    assert np.isnan(transition_mad(src, tgt, np.zeros((4, 10), bool), np.full(4, 5.0), 2.0))
+
+
+def test_sample_map_is_exact_on_affine_maps():
+    m = _affine_map(30, 40)
+    pts = np.array([[3.25, 7.5], [39.0, 29.0], [0.0, 0.0]])
+    expected = np.stack([0.95 * pts[:, 0] + 0.05 * pts[:, 1] + 4, -0.03 * pts[:, 0] + 1.02 * pts[:, 1] - 2], -1)
+    np.testing.assert_allclose(sample_map(m, pts), expected, atol=1e-4)
+    assert np.isnan(sample_map(m, np.array([[-0.1, 3.0], [10.0, 29.5]]))).all()
