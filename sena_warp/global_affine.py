@@ -47,16 +47,19 @@ def apply_affine(affine: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 
 def invert_affine(affine: np.ndarray) -> np.ndarray:
-    """Inverse of a ``(2, 3)`` affine (``affine_a_to_b`` -> ``affine_b_to_a``), ``(2, 3)`` float64.
+    """Inverse of a ``(2, 3)`` affine, or of each in a ``(..., 2, 3)`` stack (``a_to_b`` -> ``b_to_a``), float64.
 
-    Raises ``GeometryError`` for a singular linear part (the model collapses the image).
+    Raises ``GeometryError`` when a linear part is singular (the model collapses the image).
     """
     affine = np.asarray(affine, dtype=np.float64)
-    linear = affine[:, :2]
-    if abs(np.linalg.det(linear)) < np.finfo(np.float64).eps * max(1.0, np.abs(linear).max() ** 2):
+    linear = affine[..., :2]
+    # Relative test: |det| against the squared size of the entries, so pixel scale does not matter.
+    scale_sq = np.maximum(1.0, np.abs(linear).max(axis=(-2, -1)) ** 2)
+    if np.any(np.abs(np.linalg.det(linear)) < np.finfo(np.float64).eps * scale_sq):
         raise GeometryError("the affine model is singular (it collapses the image); check the matches")
     linear_inv = np.linalg.inv(linear)
-    return np.hstack([linear_inv, -linear_inv @ affine[:, 2:3]])
+    translation_inv = -np.einsum("...ij,...j->...i", linear_inv, affine[..., 2])
+    return np.concatenate([linear_inv, translation_inv[..., None]], axis=-1)
 
 
 def _validated_matches(pts_src: np.ndarray, pts_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

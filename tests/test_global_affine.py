@@ -100,5 +100,8 @@ def test_apply_and_invert_round_trip_and_singular_refusal():
     back = apply_affine(invert_affine(affine), apply_affine(affine, pts))
     np.testing.assert_allclose(back, pts, atol=1e-9)
     np.testing.assert_allclose(apply_affine(affine, pts[1]), [[1.2 * 100 + 0.3 * 50 - 40, -10 + 45 + 12]])
+    stack = np.stack([affine, np.array([[2.0, 0.0, 10.0], [0.0, 0.5, -4.0]])])
+    np.testing.assert_allclose(invert_affine(stack)[1], [[0.5, 0.0, -5.0], [0.0, 2.0, 8.0]])
+    np.testing.assert_allclose(invert_affine(stack)[0], invert_affine(affine))
     with pytest.raises(GeometryError, match="singular"):
         invert_affine(np.array([[1.0, 2.0, 0.0], [2.0, 4.0, 0.0]]))
