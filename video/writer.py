@@ -22,6 +22,8 @@ from ..errors import OutputError, VideoError
 from .reader import PIX_FMT, open_input
 
 FALLBACK_CODEC = "libx264"  # always in PyAV's wheels
+_AAC_FRAME_SAMPLES = 1024  # AAC-LC encodes audio in frames of exactly this many samples
+_DEFAULT_LAYOUTS = {1: "mono", 2: "stereo"}  # for sources whose channel order is unspecified
 
 
 def choose_codec(requested: str, width: int, height: int, rate: Fraction) -> tuple[str, str | None]:
@@ -37,8 +39,7 @@ def choose_codec(requested: str, width: int, height: int, rate: Fraction) -> tup
     try:
         ctx = av.CodecContext.create(requested, "w")
         ctx.width, ctx.height, ctx.pix_fmt, ctx.time_base = width, height, PIX_FMT, 1 / Fraction(rate)
-        ctx.open()
-        ctx.close()
+        ctx.open()  # released when garbage-collected; PyAV has no explicit close
     except (av.error.FFmpegError, ValueError) as exc:
         reason = getattr(exc, "strerror", None) or exc
         return FALLBACK_CODEC, f"encoder {requested} cannot be opened ({reason}); used {FALLBACK_CODEC}"
@@ -55,6 +56,15 @@ def encoder_options(codec: str, crf: int, preset: str) -> dict[str, str]:
 def even_size(width: int, height: int) -> tuple[int, int]:
     """The largest even ``(width, height)`` not above the given one (yuv420p needs even sides)."""
     return width - width % 2, height - height % 2
+
+
+def _encodable_layout(layout: av.AudioLayout, source) -> str:
+    """A channel layout name the AAC encoder accepts for ``layout`` (e.g. "1 channels" -> "mono")."""
+    if not layout.name.endswith("channels"):
+        return layout.name
+    if layout.nb_channels not in _DEFAULT_LAYOUTS:
+        raise VideoError(f"{source}: audio has {layout.nb_channels} unnamed channels; use audio 'none'")
+    return _DEFAULT_LAYOUTS[layout.nb_channels]
 
 
 class AudioCopier:
@@ -80,8 +90,11 @@ class AudioCopier:
             self._out_stream = out.add_stream_from_template(self._in_stream)
         else:
             ctx = self._in_stream.codec_context
-            self._out_stream = out.add_stream("aac", rate=ctx.sample_rate, layout=ctx.layout.name)
-            self._resampler = av.AudioResampler(format="fltp", layout=ctx.layout.name, rate=ctx.sample_rate)
+            layout = _encodable_layout(ctx.layout, source)
+            self._out_stream = out.add_stream("aac", rate=ctx.sample_rate, layout=layout)
+            self._resampler = av.AudioResampler(
+                format="fltp", layout=layout, rate=ctx.sample_rate, frame_size=_AAC_FRAME_SAMPLES
+            )
             self._next_pts: int | None = None
         self._packets = self._input.demux(self._in_stream)
         self._pending: av.Packet | None = None

@@ -1,0 +1,259 @@
+"""The video path end to end on the bundled 2 s clips, with a side-by-side compositor of our own.
+
+Checks what a viewer would notice: the frame count, evenly spaced pts at the input rate, audio as
+long as the video, frames paired by time (also across frame rates), nothing left behind on failure.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import wave
+from fractions import Fraction
+from pathlib import Path
+
+import av
+import numpy as np
+import pytest
+
+from sena_warp.errors import InputError, VideoError
+from sena_warp.video.loop import VideoOptions, run_video, write_report
+from sena_warp.video.pairing import pair_times
+from sena_warp.video.reader import FrameReader, YuvFrame, probe_video
+from sena_warp.video.writer import VideoWriter, choose_codec
+
+
+class SideBySide:
+    """Left frame on the left, right frame on its right, on a black canvas (a real, if simple, stitch)."""
+
+    def __init__(self, first_l: YuvFrame, first_r: YuvFrame):
+        (self.h_l, self.w_l), (self.h_r, self.w_r) = first_l.y.shape, first_r.y.shape
+        self.output_size = (self.w_l + self.w_r, max(self.h_l, self.h_r))
+
+    def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r):
+        width, height = self.output_size
+        y = np.zeros((height, width), np.uint8)
+        y[: self.h_l, : self.w_l] = y_l
+        y[: self.h_r, self.w_l :] = y_r
+        chroma = []
+        for c_l, c_r in ((u_l, u_r), (v_l, v_r)):
+            c = np.full(((height + 1) // 2, (width + 1) // 2), 128, np.uint8)
+            c[: c_l.shape[0], : c_l.shape[1]] = c_l
+            c[: c_r.shape[0], c_l.shape[1] : c_l.shape[1] + c_r.shape[1]] = c_r
+            chroma.append(c)
+        return y, chroma[0], chroma[1]
+
+
+class FailsAt(SideBySide):
+    """Raises ``error`` on the ``n``-th frame pair, like a crash or Ctrl-C mid-video."""
+
+    n = 10
+    error: type[BaseException] = RuntimeError
+
+    def __init__(self, first_l, first_r):
+        super().__init__(first_l, first_r)
+        self.calls = 0
+
+    def composite_yuv(self, *planes):
+        self.calls += 1
+        if self.calls == self.n:
+            raise self.error("stop")
+        return super().composite_yuv(*planes)
+
+
+QUIET = VideoOptions(progress=False)
+
+
+@pytest.fixture(scope="module")
+def clips(bundled_dir) -> Path:
+    return bundled_dir / "video"
+
+
+def decoded_frames(path) -> list[YuvFrame]:
+    with FrameReader(path) as reader:
+        return list(reader)
+
+
+def stream_spans(path) -> dict:
+    """Per stream type: (number of video frames or audio packets, list of pts as exact seconds, end s)."""
+    spans = {}
+    with av.open(str(path)) as c:
+        for stream in c.streams:
+            times, end = [], Fraction(0)
+            for packet in c.demux(stream):
+                if packet.pts is None:
+                    continue
+                t = packet.pts * Fraction(stream.time_base)
+                times.append(t)
+                end = max(end, t + packet.duration * Fraction(stream.time_base))
+            spans[stream.type] = (len(times), sorted(times), end)
+            c.seek(0)
+    return spans
+
+
+def mean_abs_diff(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.mean(np.abs(a.astype(np.int16) - b.astype(np.int16))))
+
+
+def test_rooftop_side_by_side_frames_pts_audio_and_pairing(clips, tmp_path):
+    left, right, out = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "out.mp4"
+    report = run_video(left, right, out, SideBySide, QUIET)
+
+    assert report["frames_in"] == {"left": 60, "right": 63}
+    assert report["frames_out"] == 60
+    assert report["pairing"]["leftover_other"] == 3  # the right clip is 3 frames longer
+    assert report["dropped"] == 0 and report["repeated"] == 0
+    assert report["damaged"] == {"left": 0, "right": 0}
+    assert report["output"]["audio_mode"] == "copy"
+    assert set(report["timing_s"]) == {"decode_wait", "composite", "encode", "total"}
+
+    spans = stream_spans(out)
+    n_video, t_video, end_video = spans["video"]
+    assert n_video == 60
+    assert set(np.diff(t_video)) == {Fraction(1, 30)} and t_video[0] == 0
+    n_audio, t_audio, end_audio = spans["audio"]
+    assert n_audio > 0
+    assert abs(float(end_audio - t_audio[0]) - float(end_video)) < 0.1
+
+    # Content: the output's halves are the inputs' frames with the same time (not a neighbour).
+    out_frames, in_l, in_r = decoded_frames(out), decoded_frames(left), decoded_frames(right)
+    assert out_frames[0].y.shape == (480, 540)
+    for k in (5, 30, 59):
+        half_l, half_r = out_frames[k].y[:, :270], out_frames[k].y[:, 270:]
+        assert mean_abs_diff(half_l, in_l[k].y) < 3.0
+        assert mean_abs_diff(half_r, in_r[k].y) < min(mean_abs_diff(half_r, in_r[j].y) for j in (k - 1, k + 1) if j < 63)
+
+
+def test_office_yuv422_is_converted_and_missing_audio_is_noted(clips, tmp_path):
+    out = tmp_path / "office.mp4"
+    report = run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", out, SideBySide, QUIET)
+    assert report["inputs"]["left"]["converted_from"] == "yuv422p"
+    assert report["frames_out"] == 48 and report["output"]["width"] == 1280
+    assert report["output"]["audio"] == "none" and "no audio" in report["notes"][0]
+    spans = stream_spans(out)
+    assert set(spans) == {"video"} and spans["video"][0] == 48
+    assert set(np.diff(spans["video"][1])) == {Fraction(1, 24)}
+
+
+def test_offset_shifts_the_second_input(clips, tmp_path):
+    # Right camera "started" 0.25 s late = 6 frames at 24 fps: the first 6 left frames have no partner.
+    report = run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "o.mp4", SideBySide,
+                       VideoOptions(progress=False, offset_s=0.25))
+    assert report["frames_out"] == 42
+    assert report["pairing"]["unpaired_ticks_start"] == 6 and report["pairing"]["leftover_other"] == 6
+
+
+@pytest.fixture(scope="module")
+def right_24fps(clips, tmp_path_factory) -> Path:
+    """rooftop_right re-encoded at 24 fps: frame j (at j/24 s) is the 30 fps frame nearest in time."""
+    path = tmp_path_factory.mktemp("rate") / "right_24fps.mp4"
+    frames = decoded_frames(clips / "rooftop_right.mp4")
+    ticks = [Fraction(j, 24) for j in range(int(frames[-1].time_s * 24) + 1)]
+    pairs, _ = pair_times(ticks, [f.time_s for f in frames], Fraction(1, 30))
+    with VideoWriter(path, 270, 480, Fraction(24)) as writer:
+        for j, i in pairs:
+            writer.write(frames[i].y, frames[i].u, frames[i].v, pts=j)
+    return path
+
+
+def test_30fps_against_24fps_copy_is_paired_by_time(clips, right_24fps, tmp_path):
+    assert probe_video(right_24fps).fps == 24 and probe_video(right_24fps).frame_count == 50
+    report = run_video(clips / "rooftop_left.mp4", right_24fps, tmp_path / "mix.mp4", SideBySide, QUIET)
+    # ticks k/30 (k < 60) take frame round(0.8 k): 0..47 each used, 12 of them twice; 48, 49 left over.
+    assert report["frames_out"] == 60
+    assert (report["repeated"], report["dropped"], report["pairing"]["leftover_other"]) == (12, 0, 2)
+
+
+def test_24fps_ticks_against_30fps_drop_frames_and_copy_the_right_audio(clips, right_24fps, tmp_path):
+    out = tmp_path / "mix.mp4"
+    options = VideoOptions(progress=False, audio="right")
+    report = run_video(right_24fps, clips / "rooftop_left.mp4", out, SideBySide, options)
+    # ticks j/24 pair up to the 30 fps clip's end (59/30 s + half a frame): j <= 47, then 2 left over.
+    assert report["frames_out"] == 48 and report["pairing"]["leftover_ticks"] == 2
+    assert (report["dropped"], report["repeated"]) == (12, 0)
+    spans = stream_spans(out)
+    assert set(np.diff(spans["video"][1])) == {Fraction(1, 24)}
+    n_audio, t_audio, end_audio = spans["audio"]
+    assert abs(float(end_audio - t_audio[0]) - float(spans["video"][2])) < 0.1
+
+
+@pytest.mark.parametrize("error", [RuntimeError, KeyboardInterrupt])
+def test_interrupt_leaves_no_output_and_no_temp_file(clips, tmp_path, error):
+    out = tmp_path / "out.mp4"
+    failing = type("Failing", (FailsAt,), {"error": error})
+    with pytest.raises(error):
+        run_video(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", out, failing, QUIET)
+    assert list(tmp_path.iterdir()) == []
+    assert not [t for t in threading.enumerate() if t.name.startswith("decode:")]
+
+
+def test_missing_and_non_video_inputs_give_one_line_errors(clips, tmp_path):
+    with pytest.raises(InputError, match="file not found") as missing:
+        run_video(tmp_path / "nope.mp4", clips / "rooftop_right.mp4", tmp_path / "o.mp4", SideBySide, QUIET)
+    text = tmp_path / "notes.mp4"
+    text.write_text("not a video at all\n" * 50)
+    with pytest.raises(InputError, match="not a readable media file") as garbage:
+        run_video(clips / "rooftop_left.mp4", text, tmp_path / "o.mp4", SideBySide, QUIET)
+    sound = tmp_path / "tone.wav"
+    with wave.open(str(sound), "wb") as w:
+        w.setnchannels(1)
+        w.setsampwidth(2)
+        w.setframerate(8000)
+        w.writeframes((np.sin(np.arange(8000) * 0.1) * 8000).astype("<i2").tobytes())
+    with pytest.raises(VideoError, match="no video stream") as audio_only:
+        run_video(sound, clips / "rooftop_right.mp4", tmp_path / "o.mp4", SideBySide, QUIET)
+    for exc in (missing, garbage, audio_only):
+        assert "\n" not in str(exc.value)
+    assert not (tmp_path / "o.mp4").exists()
+
+
+def test_odd_output_size_is_cropped_even_and_nvenc_falls_back_with_a_note(clips, tmp_path):
+    path = tmp_path / "odd.mp4"
+    frames = decoded_frames(clips / "rooftop_left.mp4")[:3]
+    with VideoWriter(path, 269, 479, Fraction(30)) as writer:
+        for k, f in enumerate(frames):
+            writer.write(f.y, f.u, f.v, pts=k)
+    assert probe_video(path).width == 268 and probe_video(path).height == 478
+    with pytest.raises(VideoError, match="does not increase"):
+        with VideoWriter(tmp_path / "bad.mp4", 270, 480, Fraction(30)) as writer:
+            writer.write(frames[0].y, frames[0].u, frames[0].v, pts=1)
+            writer.write(frames[1].y, frames[1].u, frames[1].v, pts=1)
+    codec, note = choose_codec("no_such_encoder", 270, 480, Fraction(30))
+    assert codec == "libx264" and "no_such_encoder" in note
+
+
+def test_report_json_round_trips(clips, tmp_path):
+    report = run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "o.mp4", SideBySide,
+                       VideoOptions(progress=False, audio="none"))
+    write_report(report, tmp_path / "report.json")
+    assert json.loads((tmp_path / "report.json").read_text()) == report
+    assert report["output_fps"] > 0 and report["notes"] == []
+
+
+def test_audio_the_output_cannot_hold_is_reencoded_to_aac(clips, tmp_path):
+    # Source: rooftop_left's video packets with its audio as pcm_u8 in Matroska (MP4 cannot carry pcm_u8).
+    source = tmp_path / "pcm.mkv"
+    with av.open(str(clips / "rooftop_left.mp4")) as inp, av.open(str(source), "w") as out:
+        a_in = inp.streams.audio[0]
+        v_out = out.add_stream_from_template(inp.streams.video[0])
+        a_out = out.add_stream("pcm_u8", rate=a_in.codec_context.sample_rate, layout="mono")
+        resampler = av.AudioResampler(format="u8", layout="mono", rate=a_in.codec_context.sample_rate)
+        for packet in inp.demux():
+            if packet.pts is None:
+                continue
+            if packet.stream.type == "video":
+                packet.stream = v_out
+                out.mux(packet)
+                continue
+            for frame in packet.decode():
+                for pcm in resampler.resample(frame):
+                    out.mux(a_out.encode(pcm))
+        out.mux(a_out.encode(None))
+    output = tmp_path / "out.mp4"
+    report = run_video(source, clips / "rooftop_right.mp4", output, SideBySide, QUIET)
+    assert report["output"]["audio_mode"] == "aac" and report["frames_out"] == 60
+    with av.open(str(output)) as c:
+        assert c.streams.audio[0].codec_context.name == "aac"
+    spans = stream_spans(output)
+    n_audio, t_audio, end_audio = spans["audio"]
+    assert abs(float(end_audio - t_audio[0]) - float(spans["video"][2])) < 0.1
