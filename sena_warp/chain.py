@@ -9,7 +9,7 @@ the top and bottom edges of the overlap. All points are canvas (x, y) float64.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -17,21 +17,16 @@ from sena_warp.config import Config
 from sena_warp.errors import GeometryError
 from sena_warp.zone import Zone, patch_values
 
-EDGE_ANCHOR = -1  # point index of an anchor added by the edge extension
 
-
-@dataclass(frozen=True)
-class KeypointChain:
-    """Anchors sorted by target y, top to bottom.
+class KeypointChain(NamedTuple):
+    """Anchors sorted by target y, top to bottom (unpacks as ``anchors_src, anchors_tgt``).
 
     ``anchors_src_canvas``, ``anchors_tgt_canvas``: (K, 2) float64 (x, y) canvas positions of the
-    warped source point and the target point of each anchor. ``point_indices`` (K,) int64: index
-    into the match arrays, ``EDGE_ANCHOR`` (-1) for the edge extensions.
+    warped source point and the target point of each anchor, edge extensions included.
     """
 
     anchors_src_canvas: np.ndarray
     anchors_tgt_canvas: np.ndarray
-    point_indices: np.ndarray
 
 
 def brightness_consistent(
@@ -157,9 +152,5 @@ def keypoint_chain(
         )
     walked = candidates[walk_chain(pts_src_canvas[candidates], pts_tgt_canvas[candidates])]
     chain = walked[validate_directions(pts_src_canvas[walked], pts_tgt_canvas[walked])]
-    anchors_src, anchors_tgt, is_edge = extend_to_edges(
-        pts_src_canvas[chain], pts_tgt_canvas[chain], overlap_mask_canvas
-    )
-    point_indices = np.full(len(is_edge), EDGE_ANCHOR, np.int64)
-    point_indices[~is_edge] = chain
-    return KeypointChain(anchors_src, anchors_tgt, point_indices)
+    anchors_src, anchors_tgt, _ = extend_to_edges(pts_src_canvas[chain], pts_tgt_canvas[chain], overlap_mask_canvas)
+    return KeypointChain(anchors_src, anchors_tgt)

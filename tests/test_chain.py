@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from sena_warp.chain import (
-    EDGE_ANCHOR,
     brightness_consistent,
     extend_to_edges,
     keypoint_chain,
@@ -98,17 +97,18 @@ def test_keypoint_chain_on_real_image_with_known_shift(shared_dir):
     mask = np.zeros(grey.shape, bool)
     mask[10:500, 100:400] = True
     zone = Zone(150.0, 350.0, np.arange(len(pts_tgt)), (), -1, True)
-    chain = keypoint_chain(zone, pts_src, pts_tgt, grey_src, grey_tgt, mask, Config())
-    inner = chain.point_indices != EDGE_ANCHOR
-    assert inner.sum() >= 5
-    assert chain.point_indices[0] == EDGE_ANCHOR and chain.point_indices[-1] == EDGE_ANCHOR
-    assert chain.anchors_tgt_canvas[0, 1] == 10.0 and chain.anchors_tgt_canvas[-1, 1] == 499.0
-    assert np.all(np.diff(chain.anchors_tgt_canvas[:, 1]) > 0)
-    x_int = np.rint(chain.anchors_tgt_canvas[inner, 0])
+    anchors_src, anchors_tgt = keypoint_chain(zone, pts_src, pts_tgt, grey_src, grey_tgt, mask, Config())
+    # edge extensions first and last, on the overlap's top and bottom rows
+    assert anchors_tgt[0, 1] == 10.0 and anchors_tgt[-1, 1] == 499.0
+    inner_src, inner_tgt = anchors_src[1:-1], anchors_tgt[1:-1]
+    assert len(inner_tgt) >= 5
+    assert np.all(np.diff(anchors_tgt[:, 1]) > 0)
+    x_int = np.rint(inner_tgt[:, 0])
     assert len(np.unique(x_int)) == len(x_int)
-    np.testing.assert_allclose(chain.anchors_src_canvas - chain.anchors_tgt_canvas, np.tile([7.0, 3.0], (len(inner), 1)))
-    np.testing.assert_array_equal(chain.anchors_tgt_canvas[inner], pts_tgt[chain.point_indices[inner]])
-    assert bad not in chain.point_indices
+    np.testing.assert_allclose(anchors_src - anchors_tgt, np.tile([7.0, 3.0], (len(anchors_tgt), 1)))
+    # every inner anchor is one of the matches, and the flared one is not among them
+    assert all(np.any(np.all(pts_tgt == a, axis=1)) for a in inner_tgt)
+    assert not np.any(np.all(inner_tgt == pts_tgt[bad], axis=1))
 
 
 def test_keypoint_chain_without_consistent_brightness_is_a_geometry_error():
