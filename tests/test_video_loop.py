@@ -257,3 +257,22 @@ def test_audio_the_output_cannot_hold_is_reencoded_to_aac(clips, tmp_path):
     spans = stream_spans(output)
     n_audio, t_audio, end_audio = spans["audio"]
     assert abs(float(end_audio - t_audio[0]) - float(spans["video"][2])) < 0.1
+
+
+def test_damaged_frames_are_skipped_counted_and_paired_around(clips, tmp_path):
+    # Overwrite the payload of 3 video packets with noise (the 4-byte NAL length is kept).
+    left = clips / "rooftop_left.mp4"
+    data = bytearray(left.read_bytes())
+    with av.open(str(left)) as c:
+        packets = [(p.pos, p.size) for p in c.demux(video=0) if p.pts is not None]
+    rng = np.random.default_rng(0)
+    for pos, size in (packets[10], packets[20], packets[30]):
+        data[pos + 4 : pos + size] = rng.integers(0, 256, size - 4, dtype=np.uint8).tobytes()
+    damaged = tmp_path / "damaged.mp4"
+    damaged.write_bytes(bytes(data))
+    report = run_video(damaged, clips / "rooftop_right.mp4", tmp_path / "out.mp4", SideBySide, QUIET)
+    assert report["damaged"] == {"left": 3, "right": 0}
+    assert report["frames_in"]["left"] == 57 and report["frames_out"] == 57
+    # The right frames shown with the lost left frames are passed over: dropped, not misaligned.
+    assert report["dropped"] == 3 and report["repeated"] == 0
+    assert stream_spans(tmp_path / "out.mp4")["video"][0] == 57
