@@ -97,14 +97,17 @@ def convex_polygon_mask(polygon: np.ndarray, shape: tuple[int, int]) -> np.ndarr
     y1 = min(height, int(np.ceil(polygon[:, 1].max())) + 1)
     if x0 >= x1 or y0 >= y1:
         return mask
-    grid_x, grid_y = np.meshgrid(np.arange(x0, x1, dtype=np.float64), np.arange(y0, y1, dtype=np.float64))
-    centres = np.stack([grid_x, grid_y], axis=-1)
-    inside = np.ones(grid_x.shape, dtype=bool)
+    xs = np.arange(x0, x1, dtype=np.float64)[None, :]
+    ys = np.arange(y0, y1, dtype=np.float64)[:, None]
+    inside = np.ones((y1 - y0, x1 - x0), dtype=bool)
     for i in range(len(polygon)):
         edge_start, edge_end = polygon[i], polygon[(i + 1) % len(polygon)]
-        edge_len = float(np.hypot(*(edge_end - edge_start)))
+        edge_x, edge_y = edge_end - edge_start
+        edge_len = float(np.hypot(edge_x, edge_y))
         if edge_len > 0:
-            inside &= _cross_edge(edge_start, edge_end, centres) / edge_len >= -_EDGE_TOL_PX
+            # Signed distance of each pixel centre to the edge's line (positive inside), separable in x and y.
+            dist = (edge_x * (ys - edge_start[1]) - edge_y * (xs - edge_start[0])) / edge_len
+            inside &= dist >= -_EDGE_TOL_PX
     mask[y0:y1, x0:x1] = inside
     return mask
 
