@@ -176,7 +176,7 @@ def fit_local_affines(
 
     ``pts_src``, ``pts_tgt``: float64 ``(N, 2)`` ``(x, y)`` of the RANSAC INLIER matches only;
     ``affine_src_to_tgt``: ``(2, 3)`` A_glob; ``cells``: from ``grid_cells``. A cell whose matches
-    all have zero weight keeps A_glob with confidence k_min and is flagged unstable.
+    all have zero weight (or a one-pixel cell) keeps A_glob with confidence k_min, flagged unstable.
     """
     pts_src = np.asarray(pts_src, dtype=np.float64).reshape(-1, 2)
     pts_tgt = np.asarray(pts_tgt, dtype=np.float64).reshape(-1, 2)
@@ -208,8 +208,8 @@ def _fit_cell(pts_src: np.ndarray, pts_tgt: np.ndarray, affine_glob: np.ndarray,
     n_in_cell = int(in_cell.sum())
     sigma_px = cfg.alpha * cell.diag_px
     dist_sq = np.sum((pts_tgt - centre_tgt) ** 2, axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        weights = np.exp(-dist_sq / (2.0 * sigma_px**2)) if sigma_px > 0 else (dist_sq == 0).astype(np.float64)
+    # A one-pixel cell (diagonal 0) has no Gaussian: it gets no weight and keeps A_glob below.
+    weights = np.exp(-dist_sq / (2.0 * sigma_px**2)) if sigma_px > 0 else np.zeros(len(pts_tgt))
     conf = confidence(weights, cfg)
     if weights.sum() <= 0:
         glob = _diagnose(affine_glob, affine_glob, pts_src, pts_tgt, weights, bbox_tgt, cfg)
