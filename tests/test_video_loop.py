@@ -222,6 +222,15 @@ def test_odd_output_size_is_cropped_even_and_nvenc_falls_back_with_a_note(clips,
     assert codec == "libx264" and "no_such_encoder" in note
 
 
+def test_progress_line_only_when_asked(clips, tmp_path, capsys):
+    run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "a.mp4", SideBySide, QUIET)
+    assert capsys.readouterr().err == ""
+    run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "b.mp4", SideBySide,
+              VideoOptions(progress=True))
+    err = capsys.readouterr().err
+    assert "48/48 frames" in err and "fps" in err and err.endswith("\n")
+
+
 def test_report_json_round_trips(clips, tmp_path):
     report = run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "o.mp4", SideBySide,
                        VideoOptions(progress=False, audio="none"))

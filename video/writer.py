@@ -189,7 +189,7 @@ class VideoWriter:
         )
         self.stream.width, self.stream.height = self.width, self.height
         self.stream.pix_fmt = PIX_FMT
-        self.stream.codec_context.time_base = 1 / self.rate
+        self.stream.time_base = self.stream.codec_context.time_base = 1 / self.rate
         self.audio: AudioCopier | None = None
         self.frames = 0
         self._last_pts: int | None = None
