@@ -1,0 +1,178 @@
+"""The SENA stitch, one stage per line (SENA.md steps 0-9).
+
+``estimate_maps`` turns two images into three per-pixel maps over the output canvas (where to sample
+the source, where to sample the target, the alpha between them); ``stitch_images`` applies them once.
+The video path estimates maps the same way and applies them to every frame pair.
+
+Stages run in the *working frame* of :mod:`sena_warp.rig` (source left, vertical rigs transposed);
+the final maps are expressed in the input frame so the compositor never transposes frames.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from .cells import grid_cells
+from .chain import keypoint_chain
+from .composite import Compositor
+from .config import Config
+from .features import Matches, match_images
+from .ffd import ffd_field_canvas
+from .gate import gate_canvas, guard_field
+from .global_affine import GlobalAffine, fit_global_affine
+from .local_affine import LocalAffines, fit_local_affines, sigma_f
+from .overlap import Overlap, plan_overlap
+from .partition import SeamMaps, seam_maps
+from .rig import Rig, detect_rig, image_to_working, map_from_working, points_to_working
+from .warp_map import forward_points, source_map_canvas, warp_image
+from .zone import Zone, adequate_zone
+from sena_warp.kernels.runtime import resolve_device
+
+
+class StageClock:
+    """Runs stages and keeps their wall-clock time in seconds, in call order."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+
+    def run(self, name, fn, *args, **kwargs):
+        t0 = time.perf_counter()
+        result = fn(*args, **kwargs)
+        self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+        return result
+
+
+@dataclass(frozen=True)
+class Warp:
+    """Steps 1-6 in the working frame: models, overlap, gate and the source sampling map."""
+
+    glob: GlobalAffine
+    overlap: Overlap
+    local: LocalAffines
+    inliers_src: np.ndarray  # (N, 2) inlier source points, source pixels
+    inliers_tgt: np.ndarray  # (N, 2) matching target points, target pixels
+    field_canvas: np.ndarray  # (H, W, 2) float32 FFD displacement before the gate (source px)
+    gate_canvas: np.ndarray  # (H, W) float32 G in [0, 1]
+    map_src_canvas: np.ndarray  # (H, W, 2) float32 M_s: source (x, y) per canvas pixel
+
+
+@dataclass(frozen=True)
+class Seam:
+    """Steps 7-9 in the working frame."""
+
+    zone: Zone
+    anchors_src_canvas: np.ndarray  # (K, 2) warped-source anchor positions
+    anchors_tgt_canvas: np.ndarray  # (K, 2) target anchor positions
+    maps: SeamMaps
+
+
+@dataclass
+class StitchMaps:
+    """What a stitch needs to be applied to any frame pair of the same two cameras.
+
+    Maps are in the input frame: ``map_src_canvas[y, x]`` is the (x, y) to sample in the source input
+    (``rig.source``), ``map_tgt_canvas`` likewise in the target input, ``alpha_canvas`` the source weight.
+    """
+
+    rig: Rig
+    map_src_canvas: np.ndarray
+    map_tgt_canvas: np.ndarray
+    alpha_canvas: np.ndarray
+    matches: Matches
+    warp: Warp
+    seam: Seam
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class Panorama:
+    image: np.ndarray  # (H, W, 4) uint8 BGRA; alpha 0 where neither input covers the canvas
+    maps: StitchMaps
+    seconds: dict[str, float]
+
+
+def estimate_warp(img_src: np.ndarray, img_tgt: np.ndarray, pts_src: np.ndarray, pts_tgt: np.ndarray,
+                  cfg: Config, clock: StageClock) -> Warp:
+    """SENA steps 1-6 ("Locally adaptive image warping") in the working frame."""
+    glob = clock.run("global_affine", fit_global_affine, pts_src, pts_tgt, cfg)
+    inl_src, inl_tgt = pts_src[glob.inliers], pts_tgt[glob.inliers]
+    overlap = clock.run("overlap", plan_overlap, img_src.shape, img_tgt.shape, glob.affine_src_to_tgt, cfg)
+    cells = clock.run("cells", grid_cells, overlap, cfg)
+    local = clock.run("local_affines", fit_local_affines, inl_src, inl_tgt, glob.affine_src_to_tgt, cells, cfg)
+    field = clock.run("ffd", ffd_field_canvas, overlap.canvas, glob.affine_src_to_tgt, local.affines_src_to_tgt,
+                      local.centres_tgt, local.conf, sigma_f(local, cfg), cfg)
+    gate = clock.run("gate", gate_canvas, overlap.mask_canvas, overlap.canvas.tgt_to_canvas(inl_tgt),
+                     _diagonal_px(img_src, img_tgt), max(*img_src.shape[:2], *img_tgt.shape[:2]), cfg)
+    map_src = clock.run("warp_map", source_map_canvas, overlap.canvas, glob.affine_src_to_tgt,
+                        guard_field(field, gate, cfg))
+    return Warp(glob, overlap, local, inl_src, inl_tgt, field, gate, map_src)
+
+
+def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, warp: Warp, cfg: Config, clock: StageClock) -> Seam:
+    """SENA steps 7-9 ("Optimal stitching line", "Partitioning and Reconstruction") in the working frame."""
+    canvas = warp.overlap.canvas
+    pts_src_canvas = clock.run("forward_points", forward_points, warp.map_src_canvas,
+                               warp.glob.affine_src_to_tgt, canvas, warp.inliers_src)
+    pts_tgt_canvas = canvas.tgt_to_canvas(warp.inliers_tgt)
+    grey_src_canvas, grey_tgt_canvas = clock.run("grey_canvas", _grey_canvas, img_src, img_tgt, warp)
+    zone = clock.run("zone", adequate_zone, pts_src_canvas, pts_tgt_canvas, warp.overlap.mask_canvas,
+                     grey_src_canvas, grey_tgt_canvas, cfg)
+    anchors_src, anchors_tgt = clock.run("chain", keypoint_chain, zone, pts_src_canvas, pts_tgt_canvas,
+                                         grey_src_canvas, grey_tgt_canvas, warp.overlap.mask_canvas, cfg)
+    maps = clock.run("seam_maps", seam_maps, warp.map_src_canvas, canvas, anchors_src, anchors_tgt, cfg,
+                     resolve_device(cfg.device))
+    return Seam(zone, anchors_src, anchors_tgt, maps)
+
+
+def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto") -> StitchMaps:
+    """All of SENA on one image pair: the maps that stitch it (and every later frame of the same rig)."""
+    clock = StageClock()
+    matches = clock.run("features", match_images, img_a, img_b, cfg)
+    rig = detect_rig(matches.pts_a, matches.pts_b, reference)
+    img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
+    pts_src, pts_tgt = (points_to_working(pts, rig) for pts in rig.pick(matches.pts_a, matches.pts_b))
+    warp = estimate_warp(img_src, img_tgt, pts_src, pts_tgt, cfg, clock)
+    seam = estimate_seam(img_src, img_tgt, warp, cfg, clock)
+    return StitchMaps(
+        rig=rig,
+        map_src_canvas=map_from_working(seam.maps.map_src_canvas, rig),
+        map_tgt_canvas=map_from_working(seam.maps.map_tgt_canvas, rig),
+        alpha_canvas=map_from_working(seam.maps.alpha_canvas, rig),
+        matches=matches,
+        warp=warp,
+        seam=seam,
+        seconds=clock.seconds,
+    )
+
+
+def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto") -> Panorama:
+    """Stitch two BGR uint8 images; returns a BGRA panorama (alpha 0 where nothing was covered)."""
+    maps = estimate_maps(img_a, img_b, cfg, reference)
+    clock = StageClock()
+    clock.seconds.update(maps.seconds)
+    compositor = Compositor(maps.map_src_canvas, maps.map_tgt_canvas, maps.alpha_canvas,
+                            resolve_device(cfg.device), cfg.cpu_threads)
+    img_src, img_tgt = maps.rig.pick(img_a, img_b)
+    out, coverage = clock.run("composite", compositor.apply, img_src, img_tgt)
+    return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
+
+
+def _diagonal_px(img_src: np.ndarray, img_tgt: np.ndarray) -> float:
+    """The larger image diagonal, the scale of the gate's ramp band b (SENA.md step 5)."""
+    return float(max(np.hypot(*img_src.shape[:2]), np.hypot(*img_tgt.shape[:2])))
+
+
+def _grey_canvas(img_src: np.ndarray, img_tgt: np.ndarray, warp: Warp) -> tuple[np.ndarray, np.ndarray]:
+    """Warped-source and placed-target grey images on the canvas, float32, NaN where not covered."""
+    canvas = warp.overlap.canvas
+    warped, valid = warp_image(cv2.cvtColor(img_src, cv2.COLOR_BGR2GRAY)[:, :, None], warp.map_src_canvas)
+    grey_src = np.where(valid, warped[:, :, 0].astype(np.float32), np.nan)
+    grey_tgt = np.full(canvas.shape, np.nan, np.float32)
+    ox, oy = (int(round(v)) for v in canvas.offset_tgt)
+    h, w = img_tgt.shape[:2]
+    grey_tgt[oy:oy + h, ox:ox + w] = cv2.cvtColor(img_tgt, cv2.COLOR_BGR2GRAY)
+    return grey_src.astype(np.float32), grey_tgt

@@ -1,0 +1,59 @@
+import numpy as np
+import pytest
+
+from sena_warp.config import Config
+from sena_warp.imageio import read_image
+from sena_warp.metrics import overlap_psnr_ssim
+from sena_warp.stitch import stitch_images
+
+
+@pytest.fixture(scope="module")
+def udis_pair(bundled_dir):
+    d = bundled_dir / "udisd_test_000001"
+    return read_image(d / "a.jpg"), read_image(d / "b.jpg")
+
+
+@pytest.fixture(scope="module")
+def pano(udis_pair, warp_device):
+    return stitch_images(*udis_pair, Config(device=warp_device))
+
+
+def test_panorama_covers_both_inputs_once(pano, udis_pair):
+    img_a, img_b = udis_pair
+    covered = int((pano.image[:, :, 3] > 0).sum())
+    # The union of two 512x512 views that overlap: more than one view, less than two.
+    assert 512 * 512 * 1.05 < covered < 512 * 512 * 2
+    assert pano.maps.rig.source == "b"  # b is the left view of this pair (median dx < 0)
+
+
+def test_target_is_pasted_unwarped_right_of_the_seam(pano, udis_pair):
+    maps = pano.maps
+    img_tgt = maps.rig.pick(*udis_pair)[1]
+    ox, oy = (int(round(v)) for v in maps.warp.overlap.canvas.offset_tgt)
+    seam_x = maps.seam.maps.seam_x_canvas
+    rows = np.arange(oy + 20, oy + img_tgt.shape[0] - 20)
+    x = int(np.nanmax(seam_x[rows])) + Config().transition_px + 5
+    region = pano.image[rows, x:ox + img_tgt.shape[1] - 5, :3]
+    expect = img_tgt[rows - oy, x - ox:img_tgt.shape[1] - 5]
+    assert np.abs(region.astype(int) - expect).max() <= 1
+
+
+def test_anchors_meet_and_sena_warp_aligns_the_overlap(pano, udis_pair):
+    seam = pano.maps.seam
+    assert len(seam.anchors_src_canvas) >= 5
+    warp = pano.maps.warp
+    img_src, img_tgt = pano.maps.rig.pick(*udis_pair)
+    from sena_warp.warp_map import source_map_canvas, warp_image
+
+    def overlap_psnr(map_src):
+        warped, valid = warp_image(img_src, map_src)
+        placed = np.zeros_like(warped)
+        valid_tgt = np.zeros(valid.shape, bool)
+        ox, oy = (int(round(v)) for v in warp.overlap.canvas.offset_tgt)
+        placed[oy:oy + img_tgt.shape[0], ox:ox + img_tgt.shape[1]] = img_tgt
+        valid_tgt[oy:oy + img_tgt.shape[0], ox:ox + img_tgt.shape[1]] = True
+        return overlap_psnr_ssim(warped, valid, placed, valid_tgt)[0]
+
+    affine_only = source_map_canvas(warp.overlap.canvas, warp.glob.affine_src_to_tgt,
+                                    np.zeros_like(warp.field_canvas))
+    assert overlap_psnr(warp.map_src_canvas) > overlap_psnr(affine_only)
