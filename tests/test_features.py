@@ -43,7 +43,7 @@ def test_graf_matches_agree_with_ground_truth_homography(graf, detector, min_cor
     print(f"\ngraf_gt {detector}: {len(matches)} matches, {correct} within {GT_TOLERANCE_PX:g} px "
           f"({correct / max(len(matches), 1):.1%}); keypoints {matches.n_keypoints_a}/{matches.n_keypoints_b}")
     assert correct >= min_correct
-    assert correct / len(matches) >= 0.4  # graf1 -> graf3 is a 40-degree viewpoint change: many wrong ones
+    assert correct / len(matches) >= 0.4  # graf1 -> graf3 is a ~30-degree viewpoint change: many wrong ones
     assert matches.pts_a.dtype == np.float64 and matches.pts_a.shape == matches.pts_b.shape == (len(matches), 2)
 
 
