@@ -121,9 +121,9 @@ def run_video(
 
     Output frames follow the left input's frames (its rate and times); each is paired with the
     right frame nearest in time (see ``pairing.py``). The output appears under its name only once
-    complete. Report keys: ``frames_in``, ``frames_out``, ``dropped``, ``repeated``, ``damaged``,
-    ``pairing`` (all counts), ``timing_s`` (decode_wait, composite, encode, total), ``output_fps``,
-    ``inputs``, ``output``, ``notes``.
+    complete. Report keys: ``frames_in``, ``frames_out``, ``dropped``, ``repeated``, ``damaged``
+    (per input), ``pairing`` (all counts), ``timing_s`` (decode_wait, compositor_setup, composite,
+    encode, total), ``output_fps``, ``inputs``, ``output``, ``notes``.
     """
     t_run = time.perf_counter()
     if options.audio not in AUDIO_SOURCES:
@@ -137,9 +137,7 @@ def run_video(
         audio_side = None
     rate = infos["left"].fps
     stats = PairingStats()
-    timing = {"composite": 0.0, "encode": 0.0}
-    show = sys.stderr.isatty() if options.progress is None else options.progress
-    expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
+    timing = {"compositor_setup": 0.0, "composite": 0.0, "encode": 0.0}
 
     with FrameReader(left, offsets["left"], options.queue_frames) as reader_l, \
             FrameReader(right, offsets["right"], options.queue_frames) as reader_r:
@@ -149,34 +147,50 @@ def run_video(
             raise VideoError(
                 f"{left} and {right}: no frames overlap in time with offset {options.offset_s} s; check --offset"
             )
+        t0 = time.perf_counter()
         compositor = compositor_factory(*first)
+        timing["compositor_setup"] = time.perf_counter() - t0
         width, height = compositor.output_size
-        t_first = first[0].time_s
-        progress = Progress(expected, show, sys.stderr)
         with atomic_output(output, inputs=(left, right)) as tmp, \
                 VideoWriter(tmp, width, height, rate, options.codec, options.crf, options.preset) as writer:
             if writer.note:
                 notes.append(writer.note)
             if audio_side is not None:
                 # Audio time in its file -> output clock: the same shift as that input's video frames.
-                side_info = infos[audio_side]
-                writer.add_audio(side_info.path, side_info.start_time_s - offsets[audio_side] + t_first)
-            last_pts = -1
-            for frame_l, frame_r in chain([first], pairs):
-                t0 = time.perf_counter()
-                planes = compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
-                t1 = time.perf_counter()
-                # The left frame's own time, on the 1/fps grid; forced to increase should rounding collide.
-                last_pts = max(last_pts + 1, round((frame_l.time_s - t_first) * rate))
-                writer.write(*planes, pts=last_pts)
-                timing["encode"] += time.perf_counter() - t1
-                timing["composite"] += t1 - t0
-                progress.update(writer.frames)
-            t0 = time.perf_counter()
-            writer.finish()
-            timing["encode"] += time.perf_counter() - t0
-            progress.close(writer.frames)
-    total_s = time.perf_counter() - t_run
+                side = infos[audio_side]
+                writer.add_audio(side.path, side.start_time_s - offsets[audio_side] + first[0].time_s)
+            show = sys.stderr.isatty() if options.progress is None else options.progress
+            expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
+            _encode_pairs(chain([first], pairs), compositor, writer, Progress(expected, show, sys.stderr), timing)
+    timing["total"] = time.perf_counter() - t_run
+    timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
+    return _report(infos, (reader_l, reader_r), writer, stats, timing, notes, output, audio_side)
+
+
+def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Progress, timing: dict) -> None:
+    """Composite and encode every ``(left, right)`` pair; the output pts follow the left frames' times."""
+    t_first, last_pts = None, -1
+    for frame_l, frame_r in pairs:
+        t0 = time.perf_counter()
+        planes = compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
+        t1 = time.perf_counter()
+        t_first = frame_l.time_s if t_first is None else t_first
+        # The left frame's own time on the 1/fps grid; forced to increase should rounding collide.
+        last_pts = max(last_pts + 1, round((frame_l.time_s - t_first) * writer.rate))
+        writer.write(*planes, pts=last_pts)
+        timing["composite"] += t1 - t0
+        timing["encode"] += time.perf_counter() - t1
+        progress.update(writer.frames)
+    t0 = time.perf_counter()
+    writer.finish()
+    timing["encode"] += time.perf_counter() - t0
+    progress.close(writer.frames)
+
+
+def _report(infos, readers, writer: VideoWriter, stats: PairingStats, timing: dict, notes: list[str],
+            output, audio_side: str | None) -> dict:
+    """The run's report as plain JSON-ready values (see :func:`run_video`)."""
+    reader_l, reader_r = readers
     audio = writer.audio
     return {
         "frames_in": {"left": reader_l.decoded, "right": reader_r.decoded},
@@ -185,16 +199,11 @@ def run_video(
         "repeated": stats.repeated,
         "damaged": {"left": reader_l.damaged, "right": reader_r.damaged},
         "pairing": stats.as_dict(),
-        "timing_s": {
-            "decode_wait": round(reader_l.wait_s + reader_r.wait_s, 4),
-            "composite": round(timing["composite"], 4),
-            "encode": round(timing["encode"], 4),
-            "total": round(total_s, 4),
-        },
-        "output_fps": round(writer.frames / total_s, 2),
+        "timing_s": {name: round(seconds, 4) for name, seconds in timing.items()},
+        "output_fps": round(writer.frames / timing["total"], 2),
         "inputs": {"left": _input_summary(infos["left"], reader_l), "right": _input_summary(infos["right"], reader_r)},
         "output": {
-            "path": str(output), "width": writer.width, "height": writer.height, "fps": float(rate),
+            "path": str(output), "width": writer.width, "height": writer.height, "fps": float(writer.rate),
             "codec": writer.codec, "audio": audio_side or "none",
             "audio_mode": None if audio is None else ("copy" if audio.remux else "aac"),
             "audio_span_s": None if audio is None else [audio.first_s, audio.end_s],
