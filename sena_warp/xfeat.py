@@ -36,7 +36,7 @@ CUBIC_A = -0.75
 @functools.lru_cache(maxsize=1)
 def xfeat_session() -> ort.InferenceSession:
     """The ONNX backbone from the installed package, loaded once (CUDA provider when available)."""
-    model = importlib.resources.files("sena_warp").joinpath("models", MODEL_FILE)
+    model = importlib.resources.files("sena_warp") / "models" / MODEL_FILE
     if not model.is_file():
         raise InputError(f"XFeat model {MODEL_FILE} is missing from the sena_warp package; reinstall it "
                          "or use --features sift")
