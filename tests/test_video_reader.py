@@ -31,6 +31,7 @@ def test_frames_carry_exact_times_and_offset(clips):
     with FrameReader(clips / "rooftop_right.mp4", offset_s=Fraction(1, 4)) as reader:
         times = [f.time_s for f in reader]
     assert len(times) == 63 and reader.damaged == 0
+    assert list(reader) == []  # exhausted: a second pass ends at once instead of waiting
     assert times == [Fraction(1, 4) + Fraction(k, 30) for k in range(63)]
 
 

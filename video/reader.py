@@ -148,6 +148,7 @@ class FrameReader:
         self._container = open_input(self.path)
         self._queue: queue.Queue = queue.Queue(maxsize=queue_frames)
         self._stop = threading.Event()
+        self._ended = False  # the end marker (or an error) was taken: iterating again yields nothing
         self._thread = threading.Thread(target=self._run, name=f"decode:{self.path.name}", daemon=True)
 
     def __enter__(self) -> "FrameReader":
@@ -165,15 +166,17 @@ class FrameReader:
         self._container.close()
 
     def __iter__(self) -> Iterator[YuvFrame]:
-        while True:
+        while not self._ended:
             t0 = time.perf_counter()
             item = self._queue.get()
             self.wait_s += time.perf_counter() - t0
             if item is _END:
-                return
-            if isinstance(item, BaseException):
+                self._ended = True
+            elif isinstance(item, BaseException):
+                self._ended = True
                 raise item
-            yield item
+            else:
+                yield item
 
     def _put(self, item) -> bool:
         """Queue ``item``, waiting while the queue is full; False when asked to stop meanwhile."""
@@ -204,8 +207,9 @@ class FrameReader:
                     if frame.is_corrupt:  # FFmpeg concealed errors in it: skip rather than stitch garbage
                         self.damaged += 1
                         continue
-                    # A frame without pts (rare, broken muxing) sits one frame after the previous one.
-                    pts = frame.pts if frame.pts is not None else (last_pts or start_pts) + period_pts
+                    pts = frame.pts
+                    if pts is None:  # rare (broken muxing): place it one frame after the previous one
+                        pts = start_pts if last_pts is None else last_pts + period_pts
                     last_pts = pts
                     if not self._put(self._to_yuv(frame, (pts - start_pts) * time_base + self.offset_s)):
                         return
