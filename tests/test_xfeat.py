@@ -108,6 +108,6 @@ def test_detect_maps_points_back_to_input_pixels(bundled_dir):
     pts_full, _, _ = detect_xfeat(img, Config())
     pts_small, _, _ = detect_xfeat(img, Config(xfeat_max_side=512))
     assert pts_small[:, 0].max() > 0.9 * img.shape[1]  # spread over the whole input, not the 512 px image
-    # The strongest corners at half resolution: the nearest full-resolution keypoint is close by.
+    # The strongest corners at 512 px: the nearest full-resolution keypoint is close by.
     dist = np.linalg.norm(pts_small[:200, None, :] - pts_full[None, :, :], axis=2).min(axis=1)
     assert np.median(dist) < 2.0
