@@ -1,0 +1,209 @@
+"""Seam evaluation (issue 4, SENA.md "Measuring: Seam"): every shared pair in both input orders.
+
+For each pair folder (``a.*``, ``b.*``) and each input order (a, b) and (b, a), runs
+``stitch_images`` with the default Config and measures, in the pipeline's working frame:
+
+* zone: the adequate zone's canvas x-range [x0, x1) and whether it fell back to the whole overlap;
+* anchors: number of keypoint-chain anchors (edge extensions included) and the median over them of
+  the canvas distance between where the warped-source anchor lands after the step-9 reconstruction
+  and its target anchor (``partition.anchor_residuals_px``);
+* seam MAD: mean |src - tgt| (grey levels, averaged over B, G, R) between the seam-corrected warped
+  source and the placed target over the pixels where both are valid and |x - seam_x(y)| <= T/2
+  (T = ``cfg.transition_px``), i.e. where the step-9 alpha blends;
+* feather MAD: the same mean between the step-6 warped source (no seam correction) and the placed
+  target over every pixel where both are valid and the canvas x lies in the overlap's x-extent: a
+  linear feather ramping across that extent blends there, so that is its transition band.
+
+Prints a Markdown table and summary lines; optionally writes them to ``--markdown`` and a JPEG contact
+sheet of the default-order panoramas to ``--sheet``. Not a test: no assertions.
+
+    .venv/bin/python benchmarks/eval_seam.py [--data ../shared/data] [--markdown FILE] [--sheet FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from sena_warp.config import Config
+from sena_warp.errors import StitchError
+from sena_warp.imageio import read_image
+from sena_warp.partition import anchor_residuals_px, transition_mad
+from sena_warp.rig import image_to_working
+from sena_warp.stitch import Panorama, stitch_images
+from sena_warp.warp_map import warp_image
+from sena_warp.zone import overlap_x_extent
+
+REPO = Path(__file__).resolve().parents[1]
+ORDERS = ("ab", "ba")
+TARGET_RESIDUAL_PX = 1.5  # issue 4: median anchor residual at most this
+TARGET_SEAM_WINS = 14  # issue 4: seam MAD below feather MAD on at least this many pairs
+THUMB_W, THUMB_H, LABEL_H = 400, 260, 26  # contact-sheet cell: thumbnail box and label strip (px)
+SHEET_COLUMNS = 4
+SHEET_BACKGROUND = 64  # grey behind transparent canvas pixels, so uncovered corners stay visible
+SHEET_JPEG_QUALITY = 82
+
+
+@dataclass(frozen=True)
+class SeamFigures:
+    """Seam figures of one stitch (canvas pixels of the working frame, grey levels for MADs)."""
+
+    zone_x0: float
+    zone_x1: float
+    fallback: bool
+    n_anchors: int
+    anchor_residual_px: float  # median over anchors; NaN if none could be located
+    seam_mad: float
+    feather_mad: float
+
+
+@dataclass(frozen=True)
+class Row:
+    """One (pair, order) result: figures on success, else the error message."""
+
+    pair: str
+    order: str
+    figures: SeamFigures | None
+    error: str = ""
+    is_bug: bool = False  # an exception outside the StitchError family
+
+
+def feather_mad(warped_src: np.ndarray, valid_src: np.ndarray, placed_tgt: np.ndarray, valid_tgt: np.ndarray,
+                overlap_mask_canvas: np.ndarray) -> float:
+    """Mean |src - tgt| over the blending region of a linear feather across the overlap's x-extent.
+
+    warped_src, placed_tgt: (H, W, C) uint8 canvas images; valid_*: (H, W) bool; overlap_mask_canvas:
+    (H, W) bool step-2 overlap. The feather's alpha ramps from 1 to 0 over [x0, x1) of the overlap,
+    so its band is that whole extent: ``transition_mad`` with the seam at its middle and width x1 - x0.
+    """
+    x0, x1 = overlap_x_extent(overlap_mask_canvas)
+    seam_x = np.full(valid_src.shape[0], 0.5 * (x0 + x1 - 1))
+    return transition_mad(warped_src, placed_tgt, valid_src & valid_tgt, seam_x, x1 - x0)
+
+
+def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> SeamFigures:
+    """The seam figures of a finished stitch of (img_a, img_b) (BGR uint8), see the module docstring."""
+    maps = pano.maps
+    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
+    warp, seam = maps.warp, maps.seam
+    placed_tgt, valid_tgt = warp_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
+    seam_src, valid_seam_src = warp_image(img_src, seam.maps.map_src_canvas, cfg)
+    step6_src, valid_step6_src = warp_image(img_src, warp.map_src_canvas, cfg)
+    residuals = anchor_residuals_px(warp.map_src_canvas, seam.maps.map_src_canvas,
+                                    seam.anchors_src_canvas, seam.anchors_tgt_canvas)
+    finite = residuals[np.isfinite(residuals)]
+    return SeamFigures(
+        zone_x0=seam.zone.x0,
+        zone_x1=seam.zone.x1,
+        fallback=seam.zone.fallback,
+        n_anchors=len(seam.anchors_tgt_canvas),
+        anchor_residual_px=float(np.median(finite)) if finite.size else math.nan,
+        seam_mad=transition_mad(seam_src, placed_tgt, valid_seam_src & valid_tgt, seam.maps.seam_x_canvas,
+                                cfg.transition_px),
+        feather_mad=feather_mad(step6_src, valid_step6_src, placed_tgt, valid_tgt, warp.overlap.mask_canvas),
+    )
+
+
+def evaluate(pair: str, order: str, img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> tuple[Row, Panorama | None]:
+    """Stitch one pair in one order; a StitchError is a recorded failure, any other exception a bug."""
+    first, second = (img_a, img_b) if order == "ab" else (img_b, img_a)
+    try:
+        pano = stitch_images(first, second, cfg)
+        return Row(pair, order, seam_figures(first, second, pano, cfg)), pano
+    except StitchError as err:
+        return Row(pair, order, None, f"{type(err).__name__}: {err}"), None
+    except Exception as err:  # noqa: BLE001 - a benchmark reports bugs instead of stopping at the first
+        traceback.print_exc()
+        return Row(pair, order, None, f"BUG {type(err).__name__}: {err}", is_bug=True), None
+
+
+def table_line(row: Row) -> str:
+    """One Markdown table line for ``row``."""
+    if row.figures is None:
+        return f"| {row.pair} | {row.order} | {'bug' if row.is_bug else 'failed'}: {row.error} | | | | | |"
+    f = row.figures
+    zone = f"{f.zone_x0:.0f}-{f.zone_x1:.0f}" + (" (fallback)" if f.fallback else "")
+    win = "yes" if f.seam_mad < f.feather_mad else "no"
+    return (f"| {row.pair} | {row.order} | ok | {zone} | {f.n_anchors} | {f.anchor_residual_px:.3f} | "
+            f"{f.seam_mad:.2f} / {f.feather_mad:.2f} | {win} |")
+
+
+def summary_lines(rows: list[Row]) -> list[str]:
+    """Summary of the issue-4 targets over all rows."""
+    done = [r for r in rows if r.figures is not None]
+    pairs = sorted({r.pair for r in rows})
+    residuals = np.array([r.figures.anchor_residual_px for r in done])
+    default = [r for r in done if r.order == "ab"]
+    wins = sum(r.figures.seam_mad < r.figures.feather_mad for r in default)
+    wins_ba = sum(r.figures.seam_mad < r.figures.feather_mad for r in done if r.order == "ba")
+    failures = [f"{r.pair} ({r.order}): {r.error}" for r in rows if r.figures is None]
+    median_residual = float(np.nanmedian(residuals)) if residuals.size else math.nan
+    return [
+        f"- stitched: {len(done)} of {len(rows)} pair x order runs ({len(pairs)} pairs x {len(ORDERS)} orders)",
+        f"- median anchor residual over all runs: {median_residual:.3f} px (target <= {TARGET_RESIDUAL_PX})",
+        f"- seam MAD < feather MAD: {wins} of {len(pairs)} pairs in order (a, b) (target >= {TARGET_SEAM_WINS}); "
+        f"{wins_ba} of {len(pairs)} in order (b, a)",
+        f"- median seam MAD {np.median([r.figures.seam_mad for r in done]):.2f}, median feather MAD "
+        f"{np.median([r.figures.feather_mad for r in done]):.2f} (grey levels, all runs)",
+        "- failures: " + ("; ".join(failures) if failures else "none"),
+    ]
+
+
+def thumbnail(image_bgra: np.ndarray, label: str) -> np.ndarray:
+    """A (THUMB_H + LABEL_H, THUMB_W, 3) uint8 cell: the panorama over grey, fitted, with its label."""
+    alpha = image_bgra[:, :, 3:4].astype(np.float32) / 255.0
+    flat = (image_bgra[:, :, :3] * alpha + SHEET_BACKGROUND * (1.0 - alpha)).astype(np.uint8)
+    scale = min(THUMB_W / flat.shape[1], THUMB_H / flat.shape[0])
+    small = cv2.resize(flat, (max(1, round(flat.shape[1] * scale)), max(1, round(flat.shape[0] * scale))),
+                       interpolation=cv2.INTER_AREA)
+    cell = np.zeros((THUMB_H + LABEL_H, THUMB_W, 3), np.uint8)
+    cell[LABEL_H:LABEL_H + small.shape[0], :small.shape[1]] = small
+    cv2.putText(cell, label, (4, LABEL_H - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1, cv2.LINE_AA)
+    return cell
+
+
+def contact_sheet(cells: list[np.ndarray]) -> np.ndarray:
+    """Cells of equal shape tiled ``SHEET_COLUMNS`` across, row-major; empty slots black."""
+    rows = math.ceil(len(cells) / SHEET_COLUMNS)
+    blank = np.zeros_like(cells[0])
+    padded = cells + [blank] * (rows * SHEET_COLUMNS - len(cells))
+    return np.vstack([np.hstack(padded[r * SHEET_COLUMNS:(r + 1) * SHEET_COLUMNS]) for r in range(rows)])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
+    parser.add_argument("--markdown", type=Path, help="also write the table and summary to this file")
+    parser.add_argument("--sheet", type=Path, help="write a JPEG contact sheet of the (a, b) panoramas here")
+    args = parser.parse_args()
+    cfg = Config()
+    lines = ["| pair | order | result | zone x (canvas) | anchors | median anchor residual px | "
+             "seam MAD / feather MAD | seam wins |", "|---|---|---|---|---:|---:|---:|---|"]
+    print("\n".join(lines), flush=True)
+    rows, cells = [], []
+    for folder in sorted(p for p in (args.data / "pairs").iterdir() if p.is_dir()):
+        img_a, img_b = read_image(next(folder.glob("a.*"))), read_image(next(folder.glob("b.*")))
+        for order in ORDERS:
+            row, pano = evaluate(folder.name, order, img_a, img_b, cfg)
+            rows.append(row)
+            lines.append(table_line(row))
+            print(lines[-1], flush=True)
+            if order == "ab":
+                failed = np.zeros((THUMB_H, THUMB_W, 4), np.uint8)
+                cells.append(thumbnail(pano.image if pano else failed, folder.name + ("" if pano else " FAILED")))
+    summary = summary_lines(rows)
+    print("\n" + "\n".join(summary))
+    if args.markdown:
+        args.markdown.write_text("\n".join(lines) + "\n\n" + "\n".join(summary) + "\n")
+    if args.sheet:
+        cv2.imwrite(str(args.sheet), contact_sheet(cells), [cv2.IMWRITE_JPEG_QUALITY, SHEET_JPEG_QUALITY])
+
+
+if __name__ == "__main__":
+    main()
