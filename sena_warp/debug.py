@@ -45,3 +45,107 @@ def draw_matches(img_a: np.ndarray, img_b: np.ndarray, matches: Matches) -> np.n
         cv2.circle(canvas, pa, POINT_RADIUS, colour, LINE_THICKNESS, cv2.LINE_AA)
         cv2.circle(canvas, pb, POINT_RADIUS, colour, LINE_THICKNESS, cv2.LINE_AA)
     return canvas
+
+
+def _heatmap(values: np.ndarray, vmax: float) -> np.ndarray:
+    """(H, W) float values in [0, vmax] as a BGR colour map (turbo)."""
+    scaled = np.clip(np.nan_to_num(values) / max(vmax, 1e-9) * 255.0, 0, 255).astype(np.uint8)
+    return cv2.applyColorMap(scaled, cv2.COLORMAP_TURBO)
+
+
+def _placed_target(img_tgt: np.ndarray, canvas) -> np.ndarray:
+    """The target pasted on a black canvas at its integer offset."""
+    out = np.zeros((*canvas.shape, 3), np.uint8)
+    ox, oy = (int(round(v)) for v in canvas.offset_tgt)
+    out[oy:oy + img_tgt.shape[0], ox:ox + img_tgt.shape[1]] = img_tgt
+    return out
+
+
+def draw_overlap_cells(img_tgt: np.ndarray, warp) -> np.ndarray:
+    """Target on the canvas with the overlap polygon (yellow) and each cell's box and confidence."""
+    canvas = warp.overlap.canvas
+    pic = _placed_target(img_tgt, canvas)
+    poly = np.round(warp.overlap.polygon_canvas).astype(np.int32)
+    cv2.polylines(pic, [poly], True, (0, 255, 255), 2, cv2.LINE_AA)
+    offset = np.asarray(canvas.offset_tgt)
+    for centre, conf, affine in zip(warp.local.centres_tgt, warp.local.conf, warp.local.affines_src_to_tgt):
+        c = tuple(int(round(v)) for v in centre + offset)
+        cv2.circle(pic, c, 6, (0, 0, 255), -1, cv2.LINE_AA)
+        cv2.putText(pic, f"conf {conf:.2f}", (c[0] + 8, c[1]), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 255), 1,
+                    cv2.LINE_AA)
+    for pt in np.round(canvas.tgt_to_canvas(warp.inliers_tgt)).astype(int):
+        cv2.circle(pic, tuple(pt), 2, (0, 255, 0), -1)
+    return pic
+
+
+def draw_field(field_canvas: np.ndarray) -> np.ndarray:
+    """Magnitude of an (H, W, 2) displacement field (px) as a colour map, with arrows every 40 px."""
+    magnitude = np.hypot(field_canvas[:, :, 0], field_canvas[:, :, 1])
+    pic = _heatmap(magnitude, float(np.nanmax(magnitude)) if magnitude.size else 1.0)
+    step = 40
+    for y in range(step // 2, field_canvas.shape[0], step):
+        for x in range(step // 2, field_canvas.shape[1], step):
+            dx, dy = field_canvas[y, x]
+            tip = (int(round(x + 4 * dx)), int(round(y + 4 * dy)))
+            cv2.arrowedLine(pic, (x, y), tip, (255, 255, 255), 1, cv2.LINE_AA, tipLength=0.3)
+    cv2.putText(pic, f"max |D| {np.nanmax(magnitude):.1f} px (arrows x4)", (10, 24), cv2.FONT_HERSHEY_SIMPLEX,
+                0.6, (255, 255, 255), 1, cv2.LINE_AA)
+    return pic
+
+
+def draw_warped_over_target(img_src: np.ndarray, img_tgt: np.ndarray, warp) -> np.ndarray:
+    """50/50 mix of the warped source and the placed target: misalignment shows as ghosting."""
+    from .warp_map import warp_image
+
+    warped, valid = warp_image(img_src, warp.map_src_canvas)
+    placed = _placed_target(img_tgt, warp.overlap.canvas)
+    mix = np.where(valid[:, :, None], warped, placed)
+    both = valid & placed.any(axis=2)
+    mix[both] = (warped[both].astype(np.uint16) + placed[both]) // 2
+    return mix
+
+
+def draw_seam(pano_working: np.ndarray, seam) -> np.ndarray:
+    """The panorama with the adequate zone (blue band), the anchors (red) and the seam (green)."""
+    pic = pano_working[:, :, :3].copy()
+    x0, x1 = int(round(seam.zone.x0)), int(round(seam.zone.x1))
+    band = pic[:, x0:x1 + 1].astype(np.uint16)
+    band[:, :, 0] = np.minimum(band[:, :, 0] + 80, 255)
+    pic[:, x0:x1 + 1] = band.astype(np.uint8)
+    seam_x = seam.maps.seam_x_canvas
+    pts = np.stack([seam_x, np.arange(len(seam_x))], axis=1)
+    cv2.polylines(pic, [np.round(pts).astype(np.int32)], False, (0, 255, 0), 1, cv2.LINE_AA)
+    for a in np.round(seam.anchors_tgt_canvas).astype(int):
+        cv2.circle(pic, tuple(a), 4, (0, 0, 255), -1, cv2.LINE_AA)
+    return pic
+
+
+def dump_stages(folder, img_a: np.ndarray, img_b: np.ndarray, pano) -> list:
+    """Write one picture per stage into ``folder`` (created); returns the paths written.
+
+    Pictures after the features are in the working frame (source left; transposed for a vertical rig).
+    """
+    from pathlib import Path
+
+    from .imageio import write_image
+    from .rig import image_to_working
+
+    maps = pano.maps
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
+    pano_working = image_to_working(pano.image, maps.rig)
+    pictures = {
+        "01_matches.jpg": draw_matches(img_a, img_b, maps.matches),
+        "02_overlap_cells.jpg": draw_overlap_cells(img_tgt, maps.warp),
+        "03_ffd_field.jpg": draw_field(maps.warp.field_canvas),
+        "04_gate.jpg": _heatmap(maps.warp.gate_canvas, 1.0),
+        "05_warped_over_target.jpg": draw_warped_over_target(img_src, img_tgt, maps.warp),
+        "06_zone_chain_seam.jpg": draw_seam(pano_working, maps.seam),
+        "07_alpha.jpg": _heatmap(maps.seam.maps.alpha_canvas, 1.0),
+    }
+    paths = []
+    for name, pic in pictures.items():
+        write_image(folder / name, pic)
+        paths.append(folder / name)
+    return paths

@@ -1,0 +1,74 @@
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from sena_warp.cli import main
+
+
+@pytest.fixture(scope="module")
+def pair(bundled_dir):
+    d = bundled_dir / "udisd_test_000001"
+    return str(d / "a.jpg"), str(d / "b.jpg")
+
+
+def test_image_writes_transparent_png_report_and_debug(pair, tmp_path, warp_device, capsys):
+    out, report, debug = tmp_path / "pano.png", tmp_path / "r.json", tmp_path / "dbg"
+    rc = main(["image", *pair, "-o", str(out), "--report", str(report), "--debug", str(debug),
+               "--device", warp_device])
+    assert rc == 0
+    pano = cv2.imread(str(out), cv2.IMREAD_UNCHANGED)
+    assert pano.shape[2] == 4
+    covered = pano[:, :, 3] > 0
+    assert 0.6 < covered.mean() < 1.0  # both views, and transparent corners where nothing was covered
+    data = json.loads(report.read_text())
+    assert data["global_affine"]["inliers"] >= 100
+    assert data["anchors"]["count"] >= 5
+    assert data["metrics"]["anchor_residual_median_px"] <= 1.5
+    assert set(data["seconds"]) >= {"features", "global_affine", "ffd", "gate", "zone", "chain", "composite"}
+    assert len(list(debug.glob("*.jpg"))) == 7
+    assert str(out) in capsys.readouterr().out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dbg", "pano.png", "r.json"]
+
+
+def test_image_crop_is_fully_covered_jpeg(pair, tmp_path, warp_device):
+    out = tmp_path / "pano.jpg"
+    assert main(["image", *pair, "-o", str(out), "--crop", "--device", warp_device]) == 0
+    pano = cv2.imread(str(out))
+    # No black border left: every edge row/column is mostly image content.
+    for edge in (pano[0], pano[-1], pano[:, 0], pano[:, -1]):
+        assert (edge.max(axis=1) > 10).mean() > 0.9
+
+
+def test_reference_choice_swaps_the_warped_input(pair, tmp_path, warp_device):
+    report = tmp_path / "r.json"
+    assert main(["image", *pair, "-o", str(tmp_path / "p.png"), "--reference", "b", "--report", str(report),
+                 "--device", warp_device]) == 0
+    assert json.loads(report.read_text())["rig"]["source"] == "a"
+
+
+@pytest.mark.parametrize("make_input, message", [
+    (lambda d: d / "missing.jpg", "not found"),
+    (lambda d: (d / "junk.jpg").write_bytes(b"not an image") and d / "junk.jpg", "not a readable image"),
+])
+def test_bad_input_is_one_line_error_and_no_output(make_input, message, pair, tmp_path, capsys):
+    folder = tmp_path / "in"
+    folder.mkdir()
+    bad = make_input(folder)
+    out = tmp_path / "p.png"
+    assert main(["image", str(bad), pair[1], "-o", str(out), "--device", "cpu"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err
+    assert not out.exists() and list(tmp_path.iterdir()) == [folder]
+
+
+def test_unknown_output_type_is_refused_before_work(pair, tmp_path, capsys):
+    assert main(["image", *pair, "-o", str(tmp_path / "p.gif")]) == 6
+    assert "unsupported output type" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_unbuilt_subcommands_say_so(capsys):
+    assert main(["bench"]) == 64
+    assert "not implemented yet" in capsys.readouterr().err
