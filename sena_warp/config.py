@@ -95,6 +95,13 @@ class Config:
     video_preset: str = "veryfast"  # libx264 speed/size preset
     video_queue_frames: int = 8  # decoded frames buffered per input between decoder thread and loop
     video_audio: str = "left"  # audio copied into the output: "left", "right" or "none"
+    video_estimate_pairs: int = 5  # first frame pairs tried for the first estimate; most inliers wins
+    video_estimate_spacing: int = 5  # frame pairs between two of those tries
+    video_rig: str = "static"  # "static": maps estimated once; "moving": re-estimated every video_reestimate_s
+    video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
+    video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's
+    video_max_median_change_px: float = 8.0  # reject a re-estimate moving M_s by more (median over the overlap)
+    video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly
 
     # --- Execution ----------------------------------------------------------------------------
     device: str = "auto"  # Warp device: "auto", "cpu" or "cuda"
