@@ -12,16 +12,9 @@ import warp as wp
 
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
+from sena_warp.global_affine import invert_affine
 from sena_warp.kernels import runtime
 from sena_warp.kernels.ffd import ffd_lattice_kernel
-
-
-def invert_affine(affine: np.ndarray) -> np.ndarray:
-    """Inverse of a 2x3 affine (or a (J, 2, 3) stack) as float64 2x3 matrices of the opposite direction."""
-    affine = np.asarray(affine, dtype=np.float64)
-    linear_inv = np.linalg.inv(affine[..., :2])
-    translation_inv = -np.einsum("...ij,...j->...i", linear_inv, affine[..., 2])
-    return np.concatenate([linear_inv, translation_inv[..., None]], axis=-1)
 
 
 def ffd_lattice(

@@ -24,6 +24,7 @@ from sena_warp.config import Config
 from sena_warp.errors import GeometryError, InputError
 from sena_warp.kernels import runtime
 from sena_warp.kernels.seam import seam_maps_kernel
+from sena_warp.warp_map import sample_map_bilinear
 
 NEWTON_STEPS = 5  # anchor_residuals_px: Newton steps to invert the map (converges in 2-3 on smooth maps)
 JACOBIAN_STEP_PX = 0.5  # half-step of the central differences of the map's Jacobian
@@ -124,26 +125,6 @@ def seam_maps(
     )
 
 
-def sample_map(map_canvas: np.ndarray, pts_canvas: np.ndarray) -> np.ndarray:
-    """Bilinear sample of a (H, W, 2) float32 canvas map at (N, 2) float64 (x, y) canvas points.
-
-    Returns (N, 2) float64; NaN for points outside [0, W-1] x [0, H-1] (no silent clamping).
-    """
-    height, width = map_canvas.shape[:2]
-    x, y = pts_canvas[:, 0], pts_canvas[:, 1]
-    inside = (x >= 0) & (x <= width - 1) & (y >= 0) & (y <= height - 1)
-    x0 = np.clip(np.floor(np.where(inside, x, 0)).astype(np.int64), 0, max(width - 2, 0))
-    y0 = np.clip(np.floor(np.where(inside, y, 0)).astype(np.int64), 0, max(height - 2, 0))
-    x1 = np.minimum(x0 + 1, width - 1)
-    y1 = np.minimum(y0 + 1, height - 1)
-    fx = (x - x0)[:, None]
-    fy = (y - y0)[:, None]
-    m = map_canvas.astype(np.float64)
-    top = (1 - fx) * m[y0, x0] + fx * m[y0, x1]
-    bottom = (1 - fx) * m[y1, x0] + fx * m[y1, x1]
-    return np.where(inside[:, None], (1 - fy) * top + fy * bottom, np.nan)
-
-
 def anchor_residuals_px(
     map_src_canvas_before: np.ndarray,
     map_src_canvas_after: np.ndarray,
@@ -159,14 +140,14 @@ def anchor_residuals_px(
     NaN where the maps are not defined, the Newton steps leave the canvas (anchors on its border),
     or the Jacobian is singular.
     """
-    p_src = sample_map(map_src_canvas_before, np.asarray(anchors_src_canvas, np.float64))
+    p_src = sample_map_bilinear(map_src_canvas_before, np.asarray(anchors_src_canvas, np.float64))
     u = np.asarray(anchors_tgt_canvas, np.float64).copy()
     step = np.array([JACOBIAN_STEP_PX, 0.0]), np.array([0.0, JACOBIAN_STEP_PX])
     for _ in range(NEWTON_STEPS):
         jac = np.stack(
-            [sample_map(map_src_canvas_after, u + h) - sample_map(map_src_canvas_after, u - h) for h in step], axis=-1
+            [sample_map_bilinear(map_src_canvas_after, u + h) - sample_map_bilinear(map_src_canvas_after, u - h) for h in step], axis=-1
         ) / (2 * JACOBIAN_STEP_PX)
-        residual = sample_map(map_src_canvas_after, u) - p_src
+        residual = sample_map_bilinear(map_src_canvas_after, u) - p_src
         ok = np.isfinite(jac).all(axis=(1, 2)) & np.isfinite(residual).all(axis=1)
         ok[ok] = np.linalg.matrix_rank(jac[ok]) == 2
         delta = np.full_like(u, np.nan)

@@ -12,7 +12,7 @@ import warp as wp
 
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
-from sena_warp.ffd import invert_affine
+from sena_warp.global_affine import invert_affine
 from sena_warp.kernels import runtime
 from sena_warp.kernels.remap import remap_kernel
 from sena_warp.kernels.sampling import source_map_kernel
@@ -42,20 +42,23 @@ def source_map_canvas(
 
 
 def sample_map_bilinear(map_canvas: np.ndarray, pts_canvas: np.ndarray) -> np.ndarray:
-    """Bilinear samples (N, 2) float64 of a (H, W, 2) map at (N, 2) canvas (x, y); clamped at the border."""
+    """Bilinear sample of a (H, W, 2) float32 canvas map at (N, 2) float64 (x, y) canvas points.
+
+    Returns (N, 2) float64; NaN for points outside [0, W-1] x [0, H-1] (no silent clamping).
+    """
     height, width = map_canvas.shape[:2]
-    x = np.clip(pts_canvas[:, 0], 0.0, width - 1.0)
-    y = np.clip(pts_canvas[:, 1], 0.0, height - 1.0)
-    x0 = np.minimum(np.floor(x).astype(np.int64), width - 1)
-    y0 = np.minimum(np.floor(y).astype(np.int64), height - 1)
+    x, y = pts_canvas[:, 0], pts_canvas[:, 1]
+    inside = (x >= 0) & (x <= width - 1) & (y >= 0) & (y <= height - 1)
+    x0 = np.clip(np.floor(np.where(inside, x, 0)).astype(np.int64), 0, max(width - 2, 0))
+    y0 = np.clip(np.floor(np.where(inside, y, 0)).astype(np.int64), 0, max(height - 2, 0))
     x1 = np.minimum(x0 + 1, width - 1)
     y1 = np.minimum(y0 + 1, height - 1)
     fx = (x - x0)[:, None]
     fy = (y - y0)[:, None]
-    grid = map_canvas.astype(np.float64, copy=False)
-    top = (1 - fx) * grid[y0, x0] + fx * grid[y0, x1]
-    bottom = (1 - fx) * grid[y1, x0] + fx * grid[y1, x1]
-    return (1 - fy) * top + fy * bottom
+    m = map_canvas.astype(np.float64)
+    top = (1 - fx) * m[y0, x0] + fx * m[y0, x1]
+    bottom = (1 - fx) * m[y1, x0] + fx * m[y1, x1]
+    return np.where(inside[:, None], (1 - fy) * top + fy * bottom, np.nan)
 
 
 def forward_points(
@@ -76,12 +79,14 @@ def forward_points(
     affine = np.asarray(affine_src_to_tgt, dtype=np.float64)
     pts_src = np.asarray(pts_src, dtype=np.float64).reshape(-1, 2)
     pts_canvas = canvas.tgt_to_canvas(pts_src @ affine[:, :2].T + affine[:, 2])
+    border = np.array([canvas.width - 1.0, canvas.height - 1.0])
     for _ in range(cfg.forward_max_iters):
-        residual_src = pts_src - sample_map_bilinear(map_src_canvas, pts_canvas)
+        # Clamped to the canvas while iterating, so a point that steps outside can come back.
+        residual_src = pts_src - sample_map_bilinear(map_src_canvas, np.clip(pts_canvas, 0.0, border))
         if np.all(np.abs(residual_src) < cfg.forward_tol_px):
             break
         pts_canvas = pts_canvas + residual_src @ affine[:, :2].T
-    residual_src = pts_src - sample_map_bilinear(map_src_canvas, pts_canvas)
+    residual_src = pts_src - sample_map_bilinear(map_src_canvas, np.clip(pts_canvas, 0.0, border))
     height, width = canvas.shape
     on_canvas = (
         (pts_canvas[:, 0] >= 0) & (pts_canvas[:, 0] <= width - 1) & (pts_canvas[:, 1] >= 0) & (pts_canvas[:, 1] <= height - 1)

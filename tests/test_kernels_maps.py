@@ -130,7 +130,7 @@ def geo(shared_dir):
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_ffd_lattice_kernel_matches_numpy(geo, device, warp_device):
-    from sena_warp.ffd import invert_affine
+    from sena_warp.global_affine import invert_affine
 
     ny, nx, d_max = 48, 40, 60.0
     glob = invert_affine(geo["affine_src_to_tgt"])
@@ -180,7 +180,7 @@ def test_gate_kernels_match_numpy(geo, device, warp_device):
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_source_map_kernel_matches_numpy(geo, device, warp_device):
-    from sena_warp.ffd import invert_affine
+    from sena_warp.global_affine import invert_affine
 
     canvas = geo["canvas"]
     field = smooth_field(canvas.shape, 15.0)

@@ -10,7 +10,7 @@ from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.errors import GeometryError
 from sena_warp.imageio import read_image
-from sena_warp.partition import anchor_residuals_px, sample_map, seam_maps, seam_rows, transition_mad
+from sena_warp.partition import anchor_residuals_px, seam_maps, seam_rows, transition_mad
 
 DEVICE = "cpu"
 
@@ -123,11 +123,3 @@ def test_transition_mad_counts_only_the_band():
     tgt[:, 0] = 100.0  # outside the band
     assert transition_mad(src, tgt, valid, np.full(4, 5.0), 2.0) == pytest.approx(6.0)
     assert np.isnan(transition_mad(src, tgt, np.zeros((4, 10), bool), np.full(4, 5.0), 2.0))
-
-
-def test_sample_map_is_exact_on_affine_maps():
-    m = _affine_map(30, 40)
-    pts = np.array([[3.25, 7.5], [39.0, 29.0], [0.0, 0.0]])
-    expected = np.stack([0.95 * pts[:, 0] + 0.05 * pts[:, 1] + 4, -0.03 * pts[:, 0] + 1.02 * pts[:, 1] - 2], -1)
-    np.testing.assert_allclose(sample_map(m, pts), expected, atol=1e-4)
-    assert np.isnan(sample_map(m, np.array([[-0.1, 3.0], [10.0, 29.5]]))).all()

@@ -90,3 +90,12 @@ def test_warp_image_places_target_exactly_and_source_like_warp_affine(pipeline):
     assert inner.sum() > 0.8 * img_src.shape[0] * img_src.shape[1]
     assert np.abs(warped_src[inner].astype(int) - expected[inner].astype(int)).mean() < 0.5
     assert warped_src[~valid_src].max() == 0
+
+
+def test_sample_map_is_exact_on_affine_maps():
+    ys, xs = np.mgrid[0:30, 0:40].astype(np.float64)
+    m = np.dstack([0.95 * xs + 0.05 * ys + 4, -0.03 * xs + 1.02 * ys - 2]).astype(np.float32)
+    pts = np.array([[3.25, 7.5], [39.0, 29.0], [0.0, 0.0]])
+    expected = np.stack([0.95 * pts[:, 0] + 0.05 * pts[:, 1] + 4, -0.03 * pts[:, 0] + 1.02 * pts[:, 1] - 2], -1)
+    np.testing.assert_allclose(sample_map_bilinear(m, pts), expected, atol=1e-4)
+    assert np.isnan(sample_map_bilinear(m, np.array([[-0.1, 3.0], [10.0, 29.5]]))).all()
