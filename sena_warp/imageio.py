@@ -40,13 +40,19 @@ def to_bgr8(img: np.ndarray, name: str = "image") -> np.ndarray:
     raise InputError(f"{name}: unsupported image shape {img.shape}")
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
-    """Read an image file as 8-bit BGR, or raise InputError saying what is wrong with it."""
+def existing_file(path: str | os.PathLike) -> Path:
+    """``path`` as a Path, or InputError when it is missing or not a regular file."""
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: file not found")
     if not path.is_file():
         raise InputError(f"{path}: not a file")
+    return path
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """Read an image file as 8-bit BGR, or raise InputError saying what is wrong with it."""
+    path = existing_file(path)
     try:
         data = np.fromfile(str(path), dtype=np.uint8)
     except OSError as exc:

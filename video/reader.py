@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, VideoError
+from ..imageio import existing_file
 
 PIX_FMT = "yuv420p"
 _POLL_S = 0.1  # how often a blocked decoder thread re-checks whether it was asked to stop
@@ -75,11 +76,7 @@ class YuvFrame:
 
 def open_input(path: str | os.PathLike) -> av.container.InputContainer:
     """Open a media file for reading, or raise InputError/VideoError saying what is wrong."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: file not found")
-    if not path.is_file():
-        raise InputError(f"{path}: not a file")
+    path = existing_file(path)
     try:
         container = av.open(str(path), mode="r")
     except av.error.FFmpegError as exc:
