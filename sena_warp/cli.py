@@ -13,7 +13,7 @@ import time
 
 from . import __version__
 from .config import Config
-from .errors import NotImplementedYet, StitchError
+from .errors import InputError, NotImplementedYet, StitchError
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -77,6 +77,35 @@ def cmd_image(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_video(args: argparse.Namespace) -> int:
+    from sena_warp.kernels.runtime import resolve_device
+    from sena_warp.video.loop import VideoOptions, write_report
+    from sena_warp.video.stitch import check_output, stitch_videos
+
+    check_output(args.output, (args.left, args.right))
+    _check_output_suffix(args.output, (".mp4", ".mov", ".mkv"))
+    if args.reestimate is not None and args.rig != "moving":
+        raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
+    cfg = _config_from(args).replace(video_rig=args.rig)
+    if args.reestimate is not None:
+        cfg = cfg.replace(video_reestimate_s=args.reestimate)
+    # NVENC only where the kernels run on a GPU too; the writer falls back to libx264 if it cannot open.
+    codec = args.codec or ("h264_nvenc" if resolve_device(cfg.device) == "cuda" else cfg.video_codec)
+    options = VideoOptions.from_config(cfg, offset_s=args.offset, audio=args.audio, codec=codec,
+                                       crf=cfg.video_crf if args.crf is None else args.crf,
+                                       preset=args.preset or cfg.video_preset, progress=args.progress or None)
+    report = stitch_videos(args.left, args.right, args.output, cfg, options, reference=args.reference)
+    if args.report:
+        write_report(report, args.report)
+    out, st = report["output"], report["stitch"]
+    print(f"{args.output}: {out['width']}x{out['height']} px, {report['frames_out']} frames at {out['fps']:g} fps "
+          f"({out['codec']}), source={st['rig']['source']}, {st['first_estimate']['inliers']} inliers, "
+          f"re-estimations {st['reestimations']['accepted']} accepted / {st['reestimations']['rejected']} rejected, "
+          f"seam jitter {st['jitter']['seam_jitter_px_mean']} px, dropped {report['dropped']}, "
+          f"repeated {report['repeated']}, {report['output_fps']} fps")
+    return 0
+
+
 def _check_output_suffix(path: str, allowed: tuple[str, ...]) -> None:
     from pathlib import Path
 
@@ -119,8 +148,30 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     p.set_defaults(run=cmd_image)
 
-    for name, text in (("video", "stitch two synchronised videos"),
-                       ("bench", "frame-rate benchmark"),
+    p = sub.add_parser("video", help="stitch two synchronised videos")
+    p.add_argument("left", help="left (or top) video; its frames and times drive the output")
+    p.add_argument("right", help="right (or bottom) video, paired to the left one by time")
+    p.add_argument("-o", "--output", required=True, help="output video (.mp4, .mov or .mkv), H.264")
+    p.add_argument("--offset", type=float, default=0.0, metavar="S",
+                   help="seconds the right video started after the left one (default: 0)")
+    p.add_argument("--rig", choices=("static", "moving"), default=Config.video_rig,
+                   help="static: maps estimated once; moving: re-estimated now and then (default: %(default)s)")
+    p.add_argument("--reestimate", type=float, metavar="S",
+                   help=f"seconds between re-estimations of a moving rig (default: {Config.video_reestimate_s})")
+    p.add_argument("--crf", type=int, help=f"constant quality, lower is better (default: {Config.video_crf})")
+    p.add_argument("--preset", help=f"libx264 preset (default: {Config.video_preset})")
+    p.add_argument("--codec", choices=("libx264", "h264_nvenc"),
+                   help="H.264 encoder (default: h264_nvenc when the device is cuda and it opens, else libx264)")
+    p.add_argument("--audio", choices=("left", "right", "none"), default=Config.video_audio,
+                   help="whose audio to copy (default: %(default)s)")
+    p.add_argument("--report", help="write a JSON report (frames, drops, re-estimations, jitter, time per stage)")
+    p.add_argument("--reference", choices=("auto", "a", "b"), default="auto",
+                   help="input kept unwarped: a = left, b = right (default: auto = the right or bottom view)")
+    p.add_argument("--progress", action="store_true", help="show progress on stderr even when it is not a terminal")
+    _add_common(p)
+    p.set_defaults(run=cmd_video)
+
+    for name, text in (("bench", "frame-rate benchmark"),
                        ("eval", "quality evaluation against baselines")):
         p = sub.add_parser(name, help=f"{text} (not implemented yet)")
         p.add_argument("rest", nargs=argparse.REMAINDER)

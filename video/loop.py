@@ -37,6 +37,9 @@ class FrameCompositor(Protocol):
     ``output_size`` is ``(width, height)`` of the output in pixels. ``composite_yuv`` takes the left
     and right planes (``y (H, W)``, ``u, v (ceil(H/2), ceil(W/2))``, uint8, ``plane[row, col]``) and
     returns the output's ``(y, u, v)`` planes of ``output_size`` (chroma halved, rounded up).
+
+    Optionally it has ``update(frame_l, frame_r)``, called on the main thread before each pair is
+    composited (e.g. to re-estimate its maps between frames); its time is reported as ``maps_update``.
     """
 
     output_size: tuple[int, int]
@@ -123,7 +126,7 @@ def run_video(
     right frame nearest in time (see ``pairing.py``). The output appears under its name only once
     complete. Report keys: ``frames_in``, ``frames_out``, ``dropped``, ``repeated``, ``damaged``
     (per input), ``pairing`` (all counts), ``timing_s`` (decode_wait, compositor_setup, composite,
-    encode, total), ``output_fps``, ``inputs``, ``output``, ``notes``.
+    encode, total; maps_update when the compositor has ``update``), ``output_fps``, ``inputs``, ``output``, ``notes``.
     """
     t_run = time.perf_counter()
     if options.audio not in AUDIO_SOURCES:
@@ -170,7 +173,14 @@ def run_video(
 def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Progress, timing: dict) -> None:
     """Composite and encode every ``(left, right)`` pair; the output pts follow the left frames' times."""
     t_first, last_pts = None, -1
+    update = getattr(compositor, "update", None)
+    if update is not None:
+        timing["maps_update"] = 0.0
     for frame_l, frame_r in pairs:
+        if update is not None:
+            t0 = time.perf_counter()
+            update(frame_l, frame_r)
+            timing["maps_update"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         planes = compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
         t1 = time.perf_counter()

@@ -1,0 +1,94 @@
+"""Estimating a video's maps: the best of the first frame pairs, and checks on later re-estimates.
+
+The first estimate fixes the output canvas for the whole video, so it is taken from the pair with
+the most global-affine inliers among a few of the first pairs (a blurred or dark first frame is
+common). Re-estimates of a moving rig are judged against the maps in use before they are blended in.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from fractions import Fraction
+from operator import attrgetter
+
+from ..config import Config
+from ..errors import StitchError, VideoError
+from ..stitch import StitchMaps, estimate_maps
+from .maps import PlaneMaps, map_change_px
+from .pairing import pair_by_time
+from .reader import FrameReader, YuvFrame, probe_video
+
+MEDIAN_PERCENTILE = 50.0  # the rejection test compares the median map change
+
+
+@dataclass(frozen=True)
+class Attempt:
+    """One estimation try: its pair index and left time, and inliers or the error's message."""
+
+    pair: int
+    time_s: float
+    inliers: int | None
+    error: str | None
+
+    def as_dict(self) -> dict:
+        return {"pair": self.pair, "time_s": round(self.time_s, 4), "inliers": self.inliers, "error": self.error}
+
+
+def first_pairs(left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config
+                ) -> list[tuple[int, YuvFrame, YuvFrame]]:
+    """Pairs 0, s, 2s, ... (``cfg.video_estimate_pairs`` of them, s = ``cfg.video_estimate_spacing``).
+
+    Decoded and paired by time exactly as the main loop pairs them; returns (pair index, left, right).
+    """
+    span = cfg.video_estimate_pairs * cfg.video_estimate_spacing
+    right_period_s = 1 / probe_video(right).fps
+    with FrameReader(left, Fraction(0), cfg.video_queue_frames) as reader_l, \
+            FrameReader(right, Fraction(str(offset_s)), cfg.video_queue_frames) as reader_r:
+        pairs = pair_by_time(reader_l, reader_r, right_period_s, attrgetter("time_s"))
+        return [(i, fl, fr) for i, (fl, fr) in zip(range(span), pairs) if i % cfg.video_estimate_spacing == 0]
+
+
+def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str) -> StitchMaps:
+    """SENA maps for one frame pair (left = input a); the BGR conversion happens only here, not per frame."""
+    return estimate_maps(frame_l.to_bgr(), frame_r.to_bgr(), cfg, reference)
+
+
+def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
+                        reference: str) -> tuple[StitchMaps, int, list[Attempt]]:
+    """The estimate with the most inliers among :func:`first_pairs`; (maps, its pair index, all attempts).
+
+    A pair whose estimation fails is skipped; when all fail, the last failure is raised.
+    """
+    best: tuple[StitchMaps, int] | None = None
+    attempts: list[Attempt] = []
+    last_error: StitchError | None = None
+    for index, frame_l, frame_r in first_pairs(left, right, offset_s, cfg):
+        try:
+            maps = estimate_pair(frame_l, frame_r, cfg, reference)
+        except StitchError as exc:
+            last_error = exc
+            attempts.append(Attempt(index, float(frame_l.time_s), None, str(exc)))
+            continue
+        attempts.append(Attempt(index, float(frame_l.time_s), int(maps.warp.glob.n_inliers), None))
+        if best is None or maps.warp.glob.n_inliers > best[0].warp.glob.n_inliers:
+            best = (maps, index)
+    if best is None:
+        raise last_error or VideoError(f"{left} and {right}: no frame pair to estimate the stitch from")
+    return best[0], best[1], attempts
+
+
+def rejection_reason(candidate: PlaneMaps, current: PlaneMaps, first_inliers: int,
+                     shape_src: tuple[int, int], shape_tgt: tuple[int, int], cfg: Config) -> str | None:
+    """Why a re-estimate is implausible, or None to accept it.
+
+    Too few inliers against the first estimate, or a median source-map change over the overlap
+    (pixels sampling both planes, ``shape_*`` = (rows, cols) of the Y planes) above the threshold:
+    a rig moves little between two re-estimations, a wrong match set moves the map a lot.
+    """
+    if candidate.inliers < cfg.video_min_inlier_ratio * first_inliers:
+        return f"{candidate.inliers} inliers < {cfg.video_min_inlier_ratio} x {first_inliers} of the first estimate"
+    median_px = map_change_px(current, candidate, shape_src, MEDIAN_PERCENTILE, shape_tgt)
+    if median_px > cfg.video_max_median_change_px:
+        return f"median map change {median_px:.1f} px > {cfg.video_max_median_change_px} px"
+    return None

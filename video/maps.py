@@ -1,0 +1,177 @@
+"""SENA canvas maps adapted to YUV 4:2:0 video planes, on a canvas fixed for the whole video.
+
+A stitch estimate gives full-resolution maps over its canvas (``sena_warp.stitch.StitchMaps``). A
+video composites the decoder's planes directly (no RGB on the hot path, SENA.md "Maps, not images"):
+Y with those maps, U and V with half-resolution maps derived from them once per estimate. The
+output size is fixed by the first estimate; later estimates are expressed on that canvas.
+
+Conventions: maps are float32 ``(H, W, 2)`` of (x, y) sample positions, NaN where nothing may be
+sampled (the compositor treats NaN as outside); alpha is float32 ``(H, W)``, the source weight.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..rig import Rig
+from ..stitch import StitchMaps
+
+# Output pixels no input covers: black in limited-range BT.601, the range H.264 decoders assume.
+BLACK_Y, BLACK_UV = 16, 128
+
+
+@dataclass(frozen=True)
+class PlaneMaps:
+    """One estimate's maps on the fixed (even-sized) output canvas, for luma and for chroma.
+
+    ``map_src_luma`` / ``map_tgt_luma``: (H, W, 2) float32 (x, y) in the source / target Y plane;
+    ``alpha_luma`` (H, W). ``*_chroma``: the same at (H/2, W/2), positions in the U/V planes.
+    ``seam_x_working``: (rows,) float32 seam x per row of the *working* frame (``rig.py``), NaN
+    where the estimate's canvas does not reach. ``inliers``: global-affine inliers of the estimate.
+    """
+
+    map_src_luma: np.ndarray
+    map_tgt_luma: np.ndarray
+    alpha_luma: np.ndarray
+    map_src_chroma: np.ndarray
+    map_tgt_chroma: np.ndarray
+    alpha_chroma: np.ndarray
+    seam_x_working: np.ndarray
+    inliers: int
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) of the output luma plane."""
+        return self.alpha_luma.shape
+
+
+def target_offset(map_tgt_canvas: np.ndarray) -> np.ndarray:
+    """o = (ox, oy), the canvas position of target pixel (0, 0), read off the target map.
+
+    The target is pasted unwarped (``map_tgt = u - o`` everywhere, SENA.md step 2), so the map at
+    canvas pixel (0, 0) is -o. Float64 (2,), whole pixels, in the frame the map is in.
+    """
+    return -np.asarray(map_tgt_canvas[0, 0], dtype=np.float64)
+
+
+def even_shape(height: int, width: int) -> tuple[int, int]:
+    """The largest even (H, W) not above the given one: yuv420p needs even sides."""
+    return height - height % 2, width - width % 2
+
+
+def shift_onto(field: np.ndarray, shift_xy: np.ndarray, shape: tuple[int, int], fill: float) -> np.ndarray:
+    """``out[y, x] = field[y + dy, x + dx]`` on a grid of ``shape`` (H, W); ``fill`` outside ``field``.
+
+    ``field`` is (h, w) or (h, w, C); ``shift_xy`` = (dx, dy) whole pixels. Used to express an
+    estimate on the fixed canvas: u_new = u_fixed - o_fixed + o_new.
+    """
+    dx, dy = (int(round(v)) for v in shift_xy)
+    out = np.full((*shape, *field.shape[2:]), fill, dtype=field.dtype)
+    h, w = field.shape[:2]
+    y0, y1 = max(0, -dy), min(shape[0], h - dy)
+    x0, x1 = max(0, -dx), min(shape[1], w - dx)
+    if y0 < y1 and x0 < x1:
+        out[y0:y1, x0:x1] = field[y0 + dy:y1 + dy, x0 + dx:x1 + dx]
+    return out
+
+
+def target_map(shape: tuple[int, int], offset_tgt: np.ndarray) -> np.ndarray:
+    """(H, W, 2) float32 target map ``u - o`` of a canvas of ``shape`` (H, W) with target offset o = (ox, oy)."""
+    rows, cols = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float32)
+    return np.stack([cols - np.float32(offset_tgt[0]), rows - np.float32(offset_tgt[1])], axis=-1)
+
+
+def chroma_positions(map_luma: np.ndarray) -> np.ndarray:
+    """Half-resolution map for 4:2:0 planes from an even-sized luma map (H, W, 2) -> (H/2, W/2, 2).
+
+    Chroma pixel (xc, yc) sits at luma (2xc + 0.5, 2yc + 0.5) (MPEG-2/H.264 centred chroma), the
+    centre of its 2x2 luma block, so the bilinear sample of the luma map there is the block mean.
+    That gives the source luma position (xs, ys), i.e. chroma position ((xs - 0.5)/2, (ys - 0.5)/2).
+    NaN anywhere in the block stays NaN (nothing sampled).
+    """
+    pos_luma = block_mean(map_luma)
+    return ((pos_luma - 0.5) * 0.5).astype(np.float32)
+
+
+def block_mean(field: np.ndarray) -> np.ndarray:
+    """Mean of each 2x2 block of an even-sized (H, W) or (H, W, C) float array: (H/2, W/2[, C])."""
+    return 0.25 * (field[0::2, 0::2] + field[1::2, 0::2] + field[0::2, 1::2] + field[1::2, 1::2])
+
+
+def plane_maps(maps: StitchMaps, shape: tuple[int, int], offset_fixed: np.ndarray) -> PlaneMaps:
+    """An estimate's maps on the fixed canvas of ``shape`` (even H, W) whose target offset is ``offset_fixed``.
+
+    Canvas pixels outside the estimate's own canvas get a NaN source map and alpha 0; the target
+    map is the fixed canvas's own (the target is never warped, so it is the same for every estimate).
+    Chroma maps are derived once here so frames only sample.
+    """
+    shift_xy = target_offset(maps.map_tgt_canvas) - offset_fixed
+    map_src = shift_onto(maps.map_src_canvas.astype(np.float32), shift_xy, shape, np.nan)
+    map_tgt = target_map(shape, offset_fixed)
+    alpha = shift_onto(maps.alpha_canvas.astype(np.float32), shift_xy, shape, 0.0)
+    return PlaneMaps(
+        map_src_luma=map_src, map_tgt_luma=map_tgt, alpha_luma=alpha,
+        map_src_chroma=chroma_positions(map_src), map_tgt_chroma=chroma_positions(map_tgt),
+        alpha_chroma=block_mean(alpha).astype(np.float32),
+        seam_x_working=seam_on_canvas(maps.seam.maps.seam_x_canvas, maps.rig, shift_xy, shape),
+        inliers=int(maps.warp.glob.n_inliers),
+    )
+
+
+def seam_on_canvas(seam_x_working: np.ndarray, rig: Rig, shift_xy: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Seam x per working-frame row of the fixed canvas: ``s_fixed[r] = s_new[r + dy] - dx`` (working frame).
+
+    ``shift_xy`` and ``shape`` are in the input frame; a vertical rig works transposed, so both swap.
+    """
+    dx, dy = shift_xy[::-1] if rig.vertical else shift_xy
+    rows = shape[1] if rig.vertical else shape[0]
+    seam = shift_onto(seam_x_working.astype(np.float32)[:, None], np.array([0.0, dy]), (rows, 1), np.nan)
+    return seam[:, 0] - np.float32(round(dx))
+
+
+def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
+    """``start + weight * (goal - start)`` for every map; where either side is NaN, ``goal``'s value."""
+    def lerp(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        mixed = a + np.float32(weight) * (b - a)
+        return np.where(np.isnan(a) | np.isnan(b), b, mixed).astype(np.float32)
+
+    return PlaneMaps(
+        map_src_luma=lerp(start.map_src_luma, goal.map_src_luma),
+        map_tgt_luma=lerp(start.map_tgt_luma, goal.map_tgt_luma),
+        alpha_luma=lerp(start.alpha_luma, goal.alpha_luma),
+        map_src_chroma=lerp(start.map_src_chroma, goal.map_src_chroma),
+        map_tgt_chroma=lerp(start.map_tgt_chroma, goal.map_tgt_chroma),
+        alpha_chroma=lerp(start.alpha_chroma, goal.alpha_chroma),
+        seam_x_working=lerp(start.seam_x_working, goal.seam_x_working),
+        inliers=goal.inliers,
+    )
+
+
+def sampled_mask(map_canvas: np.ndarray, plane_shape: tuple[int, int]) -> np.ndarray:
+    """(H, W) bool: where the map's (x, y) has its bilinear footprint inside a plane of ``plane_shape`` (rows, cols)."""
+    x, y = map_canvas[:, :, 0], map_canvas[:, :, 1]
+    return (x >= 0) & (y >= 0) & (x <= plane_shape[1] - 1) & (y <= plane_shape[0] - 1)
+
+
+def seam_change_px(before: PlaneMaps, after: PlaneMaps) -> float:
+    """Mean over rows of |seam x after - seam x before| (working frame, px); rows either lacks are skipped."""
+    change = np.abs(after.seam_x_working - before.seam_x_working)
+    return float(np.nanmean(change)) if np.isfinite(change).any() else 0.0
+
+
+def map_change_px(before: PlaneMaps, after: PlaneMaps, shape_src: tuple[int, int], percentile: float,
+                  shape_tgt: tuple[int, int] | None = None) -> float:
+    """``percentile`` of |M_s after - M_s before| (source px) over pixels both sample in the source; 0 if none.
+
+    With ``shape_tgt`` (rows, cols of the target Y plane) only the overlap counts: pixels that also
+    sample the target.
+    """
+    both = sampled_mask(before.map_src_luma, shape_src) & sampled_mask(after.map_src_luma, shape_src)
+    if shape_tgt is not None:
+        both &= sampled_mask(after.map_tgt_luma, shape_tgt)
+    if not both.any():
+        return 0.0
+    change = np.linalg.norm(after.map_src_luma[both] - before.map_src_luma[both], axis=1)
+    return float(np.percentile(change, percentile))

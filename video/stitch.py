@@ -1,0 +1,184 @@
+"""Stitching two videos with SENA maps: estimate once (or now and then for a moving rig), composite planes.
+
+``stitch_videos`` is the ``sena-warp video`` job: the best of the first frame pairs gives the maps and
+fixes the output canvas (``estimate.py``); every frame pair is then composited in YUV 4:2:0 with
+those maps (``maps.py``) by the loop in ``loop.py``. With a moving rig the maps are re-estimated
+every ``cfg.video_reestimate_s`` seconds on the main thread between frames (simple, deterministic);
+implausible estimates are rejected, accepted ones are blended in over ``cfg.video_blend_frames``
+frames so the warp and the seam glide rather than jump. Jitter figures measure what remains.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..composite import Compositor
+from ..config import Config
+from ..errors import InputError, OutputError, StitchError
+from ..stitch import StitchMaps
+from sena_warp.kernels.runtime import resolve_device
+from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
+from .loop import VideoOptions, run_video
+from .maps import (BLACK_UV, BLACK_Y, PlaneMaps, even_shape, lerp_maps, map_change_px, plane_maps,
+                   seam_change_px, target_offset)
+from .reader import YuvFrame
+
+RIGS = ("static", "moving")
+JITTER_PERCENTILE = 99.0  # "largest map change" = this percentile of |delta M_s| per frame (robust to edge pixels)
+
+
+class SenaFrameCompositor:
+    """The loop's frame compositor for a SENA stitch (see ``loop.FrameCompositor``).
+
+    Holds one :class:`~sena_warp.composite.Compositor` for the Y plane and one for the U/V planes
+    (stacked as two channels), both allocated once; new maps are uploaded into them in place.
+    ``update`` (called by the loop before each pair) re-estimates and blends for a moving rig and
+    records how much the maps moved for that frame.
+    """
+
+    def __init__(self, first: StitchMaps, first_attempts: list[Attempt], first_pair: int, cfg: Config):
+        self.cfg = cfg
+        self.rig = first.rig
+        self.reestimate_s = cfg.video_reestimate_s if cfg.video_rig == "moving" else None
+        shape = even_shape(*first.alpha_canvas.shape)
+        self.offset_tgt = target_offset(first.map_tgt_canvas)
+        self.maps = plane_maps(first, shape, self.offset_tgt)
+        self.output_size = (shape[1], shape[0])
+        device = resolve_device(cfg.device)
+        self.luma = Compositor(self.maps.map_src_luma, self.maps.map_tgt_luma, self.maps.alpha_luma,
+                               device, cfg.cpu_threads)
+        self.chroma = Compositor(self.maps.map_src_chroma, self.maps.map_tgt_chroma, self.maps.alpha_chroma,
+                                 device, cfg.cpu_threads)
+        self.first_inliers = self.maps.inliers
+        self.first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
+                           "inliers": self.first_inliers, "seconds": round(sum(first.seconds.values()), 4)}
+        self._blend: tuple[PlaneMaps, PlaneMaps, int] | None = None  # (start, goal, frames done)
+        self._last_estimate_s: float | None = None
+        self.reestimations = {"attempted": 0, "accepted": 0, "rejected": 0, "rejections": []}
+        self.seam_jitter_px: list[float] = []
+        self.map_change_px: list[float] = []
+        self.seconds = {"reestimate": 0.0, "maps_upload": 0.0}
+
+    def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
+        """Before compositing a pair: maybe re-estimate, advance a blend, and record the maps' change."""
+        before = self.maps
+        if self._blend is None and self._due(float(frame_l.time_s)):
+            self._reestimate(frame_l, frame_r)
+        if self._blend is not None:
+            self._advance_blend()
+        changed = self.maps is not before
+        self.seam_jitter_px.append(seam_change_px(before, self.maps) if changed else 0.0)
+        self.map_change_px.append(
+            map_change_px(before, self.maps, frame_l.y.shape if self.rig.source == "a" else frame_r.y.shape,
+                          JITTER_PERCENTILE) if changed else 0.0)
+
+    def _due(self, time_s: float) -> bool:
+        if self.reestimate_s is None:
+            return False
+        if self._last_estimate_s is None:  # the first estimate was made on the video's first pairs
+            self._last_estimate_s = time_s
+        return time_s - self._last_estimate_s >= self.reestimate_s
+
+    def _reestimate(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
+        t0 = time.perf_counter()
+        self._last_estimate_s = float(frame_l.time_s)
+        self.reestimations["attempted"] += 1
+        shape_src, shape_tgt = (f.y.shape for f in self.rig.pick(frame_l, frame_r))
+        try:
+            # Same roles as the first estimate: the target stays the unwarped view on the fixed canvas.
+            estimate = estimate_pair(frame_l, frame_r, self.cfg, reference=self.rig.target)
+            reason = None if estimate.rig.vertical == self.rig.vertical else "rig orientation changed"
+            candidate = plane_maps(estimate, self.maps.shape, self.offset_tgt)
+            reason = reason or rejection_reason(candidate, self.maps, self.first_inliers, shape_src, shape_tgt,
+                                                self.cfg)
+        except StitchError as exc:
+            reason = str(exc)
+        if reason is None:
+            self.reestimations["accepted"] += 1
+            self._blend = (self.maps, candidate, 0)
+        else:
+            self.reestimations["rejected"] += 1
+            self.reestimations["rejections"].append({"time_s": round(self._last_estimate_s, 4), "reason": reason})
+        self.seconds["reestimate"] += time.perf_counter() - t0
+
+    def _advance_blend(self) -> None:
+        start, goal, done = self._blend
+        done += 1
+        frames = max(self.cfg.video_blend_frames, 1)
+        self.maps = lerp_maps(start, goal, done / frames)
+        self._blend = None if done >= frames else (start, goal, done)
+        t0 = time.perf_counter()
+        # The target maps never change on the fixed canvas; only the source map and alpha move.
+        self.luma.map_src.assign(self.maps.map_src_luma)
+        self.luma.alpha.assign(self.maps.alpha_luma)
+        self.chroma.map_src.assign(self.maps.map_src_chroma)
+        self.chroma.alpha.assign(self.maps.alpha_chroma)
+        self.seconds["maps_upload"] += time.perf_counter() - t0
+
+    def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Output (y, u, v) planes of ``output_size``; uncovered pixels are black (Y 16, U = V = 128)."""
+        y_src, y_tgt = self.rig.pick(y_l, y_r)
+        uv_src, uv_tgt = self.rig.pick(np.dstack((u_l, v_l)), np.dstack((u_r, v_r)))
+        y, covered_y = self.luma.apply(y_src, y_tgt)
+        uv, covered_uv = self.chroma.apply(uv_src, uv_tgt)
+        y[covered_y == 0] = BLACK_Y
+        uv[covered_uv == 0] = BLACK_UV
+        return y, uv[:, :, 0], uv[:, :, 1]
+
+    def report(self) -> dict:
+        """Estimation, re-estimation and jitter figures (px) of the run, JSON-ready."""
+        seam = np.asarray(self.seam_jitter_px or [0.0])
+        return {
+            "rig": {"mode": self.cfg.video_rig, "source": "left" if self.rig.source == "a" else "right",
+                    "vertical": self.rig.vertical, "reestimate_s": self.reestimate_s},
+            "first_estimate": self.first_info,
+            "canvas": {"width": self.output_size[0], "height": self.output_size[1],
+                       "offset_tgt": [float(v) for v in self.offset_tgt],
+                       "seam_x_working_range": [round(float(np.nanmin(self.maps.seam_x_working)), 2),
+                                                round(float(np.nanmax(self.maps.seam_x_working)), 2)]},
+            "reestimations": self.reestimations,
+            "jitter": {
+                "seam_jitter_px_mean": round(float(seam.mean()), 4),
+                "seam_jitter_px_max": round(float(seam.max()), 4),
+                "map_change_p99_px_max": round(max(self.map_change_px, default=0.0), 4),
+                "frames": len(self.seam_jitter_px),
+            },
+            "timing_s": {name: round(seconds, 4) for name, seconds in self.seconds.items()},
+        }
+
+
+def check_output(output: str | os.PathLike, inputs: tuple[str | os.PathLike, ...]) -> None:
+    """Refuse, before any work, an output path that is one of the inputs."""
+    out = Path(output).resolve()
+    for src in inputs:
+        if Path(src).resolve() == out:
+            raise OutputError(f"{output}: output would overwrite an input; choose another output name")
+
+
+def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike, cfg: Config,
+                  options: VideoOptions, reference: str = "auto") -> dict:
+    """Stitch two videos into ``output`` with SENA maps; return the run's report.
+
+    ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
+    ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
+    The report is :func:`loop.run_video`'s plus ``stitch`` (see :meth:`SenaFrameCompositor.report`).
+    """
+    check_output(output, (left, right))
+    if cfg.video_rig not in RIGS:
+        raise InputError(f"rig {cfg.video_rig!r} unknown; use one of {', '.join(RIGS)}")
+    if cfg.video_reestimate_s <= 0:
+        raise InputError(f"re-estimation period {cfg.video_reestimate_s} s must be positive")
+    built: list[SenaFrameCompositor] = []
+
+    def factory(first_l: YuvFrame, first_r: YuvFrame) -> SenaFrameCompositor:
+        maps, pair, attempts = best_first_estimate(left, right, options.offset_s, cfg, reference)
+        built.append(SenaFrameCompositor(maps, attempts, pair, cfg))
+        return built[0]
+
+    report = run_video(left, right, output, factory, options)
+    report["stitch"] = built[0].report()
+    return report
