@@ -57,3 +57,23 @@ def test_anchors_meet_and_sena_warp_aligns_the_overlap(pano, udis_pair):
     affine_only = source_map_canvas(warp.overlap.canvas, warp.glob.affine_src_to_tgt,
                                     np.zeros_like(warp.field_canvas))
     assert overlap_psnr(warp.map_src_canvas) > overlap_psnr(affine_only)
+
+
+def test_vertical_rig_is_stitched_like_the_transposed_horizontal_one(pano, udis_pair, warp_device):
+    img_a, img_b = (np.ascontiguousarray(img.transpose(1, 0, 2)) for img in udis_pair)
+    vertical = stitch_images(img_a, img_b, Config(device=warp_device))
+    maps = vertical.maps
+    assert maps.rig.vertical and maps.rig.source == pano.maps.rig.source
+    h, w = vertical.image.shape[:2]
+    # XFeat sees other keypoints on transposed images, so A_glob differs slightly: sizes within 2 %.
+    assert abs(h / pano.image.shape[1] - 1) < 0.02 and abs(w / pano.image.shape[0] - 1) < 0.02
+    # Below the seam the (top/bottom) target is pasted unwarped: the maps came back transposed right.
+    img_tgt = maps.rig.pick(img_a, img_b)[1]
+    # The working frame swaps x and y: the target's input-frame offset is (columns oy, rows ox).
+    ox, oy = (int(round(v)) for v in maps.warp.overlap.canvas.offset_tgt)
+    seam_row = int(np.nanmax(maps.seam.maps.seam_x_canvas)) + Config().transition_px + 5
+    h_t, w_t = img_tgt.shape[:2]
+    region = vertical.image[seam_row:ox + h_t - 5, oy + 5:oy + w_t - 5, :3]
+    expect = img_tgt[seam_row - ox:h_t - 5, 5:w_t - 5]
+    assert region.shape == expect.shape and region.shape[0] > 50
+    assert np.abs(region.astype(int) - expect).max() <= 1
