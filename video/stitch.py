@@ -138,8 +138,8 @@ class SenaFrameCompositor:
             "first_estimate": self.first_info,
             "canvas": {"width": self.output_size[0], "height": self.output_size[1],
                        "offset_tgt": [float(v) for v in self.offset_tgt],
-                       "seam_x_working_range": [round(float(np.nanmin(self.maps.seam_x_working)), 2),
-                                                round(float(np.nanmax(self.maps.seam_x_working)), 2)]},
+                       "seam_x_working": [None if np.isnan(x) else round(float(x), 2)
+                                          for x in self.maps.seam_x_working]},
             "reestimations": self.reestimations,
             "jitter": {
                 "seam_jitter_px_mean": round(float(seam.mean()), 4),

@@ -1,0 +1,208 @@
+"""``sena-warp video`` end to end on the bundled 2 s clips: real SENA maps on YUV planes.
+
+Checks what a viewer would notice: frame count, pts at the input rate, audio as long as the video,
+frames that are real stitches (the unwarped target appears unchanged on a canvas wider than either
+input), a static rig's seam that never moves, re-estimation counts and finite jitter for a moving
+rig, pairing by time across frame rates, and one-line CLI errors that leave no output behind.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from fractions import Fraction
+from pathlib import Path
+
+import av
+import numpy as np
+import pytest
+
+from sena_warp.cli import main
+from sena_warp.config import Config
+from sena_warp.video.loop import VideoOptions
+from sena_warp.video.maps import chroma_positions, target_map
+from sena_warp.video.pairing import pair_times
+from sena_warp.video.reader import FrameReader, YuvFrame
+from sena_warp.video.stitch import stitch_videos
+from sena_warp.video.writer import VideoWriter
+
+CFG = Config(device="cpu")
+FAST = CFG.replace(video_estimate_pairs=2)  # fewer first-pair tries where the test is not about them
+AWAY_FROM_SEAM_PX = 8  # margin beyond the transition band where the output must be the target alone
+
+
+@pytest.fixture(scope="module")
+def clips(bundled_dir) -> Path:
+    return bundled_dir / "video"
+
+
+def decoded_frames(path) -> list[YuvFrame]:
+    with FrameReader(path) as reader:
+        return list(reader)
+
+
+def stream_spans(path) -> dict:
+    """Per stream type: (packet count, sorted pts as exact seconds, end in seconds)."""
+    spans = {}
+    with av.open(str(path)) as c:
+        for stream in c.streams:
+            times, end = [], Fraction(0)
+            for packet in c.demux(stream):
+                if packet.pts is None:
+                    continue
+                t = packet.pts * Fraction(stream.time_base)
+                times.append(t)
+                end = max(end, t + packet.duration * Fraction(stream.time_base))
+            spans[stream.type] = (len(times), sorted(times), end)
+            c.seek(0)
+    return spans
+
+
+def target_region_diff(out: YuvFrame, tgt: YuvFrame, report: dict, cfg: Config) -> float:
+    """Mean |output Y - target Y| right of each row's seam transition band, where the output is the target alone.
+
+    For a left-to-right rig (working frame = input frame); the seam is the last maps' seam per row.
+    """
+    canvas = report["stitch"]["canvas"]
+    ox, oy = (int(v) for v in canvas["offset_tgt"])
+    h, w = tgt.y.shape
+    diffs = []
+    for row, seam_x in enumerate(canvas["seam_x_working"]):
+        if seam_x is None or not oy <= row < oy + h:
+            continue
+        first_col = int(math.ceil(seam_x)) + cfg.transition_px + AWAY_FROM_SEAM_PX
+        last_col = min(ox + w, canvas["width"])
+        diffs.append(out.y[row, first_col:last_col].astype(np.int16)
+                     - tgt.y[row - oy, first_col - ox:last_col - ox].astype(np.int16))
+    pixels = np.abs(np.concatenate(diffs))
+    assert pixels.size > 0.2 * tgt.y.size  # a real part of the target, not a sliver
+    return float(pixels.mean())
+
+
+@pytest.fixture(scope="module")
+def rooftop_static(clips, tmp_path_factory):
+    out = tmp_path_factory.mktemp("rooftop") / "static.mp4"
+    report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", out, CFG,
+                           VideoOptions.from_config(CFG, progress=False))
+    return out, report
+
+
+def test_rooftop_frames_pts_audio(rooftop_static):
+    out, report = rooftop_static
+    assert report["frames_out"] == 60 and report["dropped"] == 0 and report["repeated"] == 0
+    spans = stream_spans(out)
+    n_video, t_video, end_video = spans["video"]
+    assert n_video == 60 and t_video[0] == 0
+    assert set(np.diff(t_video)) == {Fraction(1, 30)}
+    n_audio, t_audio, end_audio = spans["audio"]
+    assert n_audio > 0 and abs(float(end_audio - t_audio[0]) - float(end_video)) < 0.1
+
+
+def test_rooftop_frames_are_real_stitches(clips, rooftop_static):
+    out, report = rooftop_static
+    stitch = report["stitch"]
+    assert stitch["rig"]["source"] == "left"  # the right camera is the unwarped target
+    assert [a["error"] for a in stitch["first_estimate"]["tried"]] == [None] * CFG.video_estimate_pairs
+    assert stitch["first_estimate"]["inliers"] == max(a["inliers"] for a in stitch["first_estimate"]["tried"])
+    out_frames, in_r = decoded_frames(out), decoded_frames(clips / "rooftop_right.mp4")
+    height, width = out_frames[0].y.shape
+    assert (width, height) == (report["output"]["width"], report["output"]["height"])
+    assert width > 270 * 1.1 and width % 2 == 0 and height % 2 == 0
+    for k in (0, 30, 59):
+        own = target_region_diff(out_frames[k], in_r[k], report, CFG)
+        assert own < 3.0
+        # ... and it is that frame, not a neighbour (the rig moves between frames).
+        assert own < target_region_diff(out_frames[k], in_r[k + 3], report, CFG)
+    # Uncovered corners are limited-range black, not Y = 0 or green chroma.
+    rows, cols = np.nonzero(out_frames[30].y <= 20)
+    assert len(rows) > 100
+    assert abs(np.median(out_frames[30].y[rows, cols]) - 16) <= 2
+    assert abs(np.median(out_frames[30].u[rows // 2, cols // 2]) - 128) <= 2
+
+
+def test_office_static_rig_seam_never_moves(clips, tmp_path):
+    out = tmp_path / "office.mp4"
+    report = stitch_videos(clips / "office_cam1.mp4", clips / "office_cam2.mp4", out, FAST,
+                           VideoOptions.from_config(FAST, progress=False))
+    assert report["frames_out"] == 48
+    spans = stream_spans(out)
+    assert spans["video"][0] == 48 and set(np.diff(spans["video"][1])) == {Fraction(1, 24)}
+    stitch = report["stitch"]
+    assert stitch["rig"]["source"] == "right"  # cam2 is the left view in this pair
+    assert stitch["reestimations"]["attempted"] == 0
+    assert stitch["jitter"] == {"seam_jitter_px_mean": 0.0, "seam_jitter_px_max": 0.0,
+                                "map_change_p99_px_max": 0.0, "frames": 48}
+    out_frames, in_1 = decoded_frames(out), decoded_frames(clips / "office_cam1.mp4")
+    assert out_frames[0].y.shape[1] > 640 * 1.2
+    assert target_region_diff(out_frames[20], in_1[20], report, FAST) < 3.0
+
+
+def test_moving_rig_reestimates_and_reports_finite_jitter(clips, tmp_path):
+    cfg = FAST.replace(video_rig="moving", video_reestimate_s=0.5)
+    report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "m.mp4", cfg,
+                           VideoOptions.from_config(cfg, progress=False))
+    re = report["stitch"]["reestimations"]
+    # Left times 0 .. 59/30 s: due at 0.5, 1.0, 1.5 s (attempts are not made while a blend runs).
+    assert re["attempted"] == 3 and re["accepted"] + re["rejected"] == 3 and len(re["rejections"]) == re["rejected"]
+    jitter = report["stitch"]["jitter"]
+    assert jitter["frames"] == 60
+    assert all(math.isfinite(v) for v in jitter.values())
+    if re["accepted"]:
+        assert jitter["seam_jitter_px_max"] > 0 and jitter["map_change_p99_px_max"] > 0
+    assert report["frames_out"] == 60 and "maps_update" in report["timing_s"]
+
+
+def test_copy_at_another_frame_rate_is_paired_by_time_and_stitched(clips, tmp_path):
+    right_24 = tmp_path / "right_24fps.mp4"
+    frames = decoded_frames(clips / "rooftop_right.mp4")
+    ticks = [Fraction(j, 24) for j in range(int(frames[-1].time_s * 24) + 1)]
+    pairs_24, _ = pair_times(ticks, [f.time_s for f in frames], Fraction(1, 30))
+    with VideoWriter(right_24, 270, 480, Fraction(24)) as writer:
+        for j, i in pairs_24:
+            writer.write(frames[i].y, frames[i].u, frames[i].v, pts=j)
+    out = tmp_path / "mix.mp4"
+    report = stitch_videos(clips / "rooftop_left.mp4", right_24, out, FAST,
+                           VideoOptions.from_config(FAST, progress=False))
+    # ticks k/30 (k < 60) take 24 fps frame round(0.8 k): 0..47 each used, 12 twice; 48, 49 left over.
+    assert report["frames_out"] == 60
+    assert (report["repeated"], report["dropped"], report["pairing"]["leftover_other"]) == (12, 0, 2)
+    out_frames, in_24 = decoded_frames(out), decoded_frames(right_24)
+    for k in (10, 45):
+        assert target_region_diff(out_frames[k], in_24[round(0.8 * k)], report, FAST) < 3.0
+
+
+def test_chroma_map_samples_the_luma_map_at_the_chroma_centre():
+    offset = np.array([6.0, 2.0])
+    chroma = chroma_positions(target_map((8, 12), offset))
+    # Chroma pixel (xc, yc) <- luma (2xc + 0.5 - ox, 2yc + 0.5 - oy) <- chroma ((that - 0.5) / 2).
+    assert chroma.shape == (4, 6, 2)
+    np.testing.assert_allclose(chroma[1, 4], [4 - 3.0, 1 - 1.0])
+
+
+def test_cli_errors_are_one_line_and_leave_no_output(clips, tmp_path, capsys):
+    out = tmp_path / "out.mp4"
+    left = clips / "rooftop_left.mp4"
+    assert main(["video", str(left), str(tmp_path / "missing.mp4"), "-o", str(out), "--device", "cpu"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("sena-warp: error: ") and "missing.mp4: file not found" in err[-1]
+    copy = tmp_path / "copy.mp4"
+    copy.write_bytes(left.read_bytes())
+    assert main(["video", str(copy), str(clips / "rooftop_right.mp4"), "-o", str(copy), "--device", "cpu"]) == 6
+    assert "overwrite an input" in capsys.readouterr().err.strip().splitlines()[-1]
+    assert copy.read_bytes() == left.read_bytes()
+    assert main(["video", str(left), str(left), "-o", str(out), "--reestimate", "1", "--device", "cpu"]) == 2
+    assert "--rig moving" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["copy.mp4"]
+
+
+def test_cli_writes_video_report_and_summary(clips, tmp_path, capsys):
+    out, report_path = tmp_path / "o.mp4", tmp_path / "r.json"
+    code = main(["video", str(clips / "rooftop_left.mp4"), str(clips / "rooftop_right.mp4"), "-o", str(out),
+                 "--report", str(report_path), "--device", "cpu", "--audio", "none", "--crf", "30"])
+    assert code == 0 and out.exists()
+    report = json.loads(report_path.read_text())
+    assert report["frames_out"] == 60 and report["output"]["audio_mode"] is None
+    assert report["stitch"]["rig"]["mode"] == "static" and report["stitch"]["jitter"]["seam_jitter_px_max"] == 0.0
+    assert set(stream_spans(out)) == {"video"}
+    summary = capsys.readouterr().out.strip().splitlines()
+    assert len(summary) == 1 and "60 frames at 30 fps" in summary[0]
