@@ -80,9 +80,8 @@ def cmd_image(args: argparse.Namespace) -> int:
 def cmd_video(args: argparse.Namespace) -> int:
     from sena_warp.kernels.runtime import resolve_device
     from sena_warp.video.loop import VideoOptions, write_report
-    from sena_warp.video.stitch import check_output, stitch_videos
+    from sena_warp.video.stitch import stitch_videos
 
-    check_output(args.output, (args.left, args.right))
     _check_output_suffix(args.output, (".mp4", ".mov", ".mkv"))
     if args.reestimate is not None and args.rig != "moving":
         raise InputError("--reestimate re-estimates a moving rig; add --rig moving")

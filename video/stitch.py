@@ -73,8 +73,8 @@ class SenaFrameCompositor:
         changed = self.maps is not before
         self.seam_jitter_px.append(seam_change_px(before, self.maps) if changed else 0.0)
         self.map_change_px.append(
-            map_change_px(before, self.maps, frame_l.y.shape if self.rig.source == "a" else frame_r.y.shape,
-                          JITTER_PERCENTILE) if changed else 0.0)
+            map_change_px(before, self.maps, self.rig.pick(frame_l, frame_r)[0].y.shape, JITTER_PERCENTILE)
+            if changed else 0.0)
 
     def _due(self, time_s: float) -> bool:
         if self.reestimate_s is None:
