@@ -20,7 +20,8 @@ import pytest
 from sena_warp.cli import main
 from sena_warp.config import Config
 from sena_warp.video.loop import VideoOptions
-from sena_warp.video.maps import chroma_positions, target_map
+from sena_warp.video.estimate import rejection_reason
+from sena_warp.video.maps import PlaneMaps, chroma_positions, lerp_maps, map_change_px, seam_change_px, target_map
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import FrameReader, YuvFrame
 from sena_warp.video.stitch import stitch_videos
@@ -206,3 +207,32 @@ def test_cli_writes_video_report_and_summary(clips, tmp_path, capsys):
     assert set(stream_spans(out)) == {"video"}
     summary = capsys.readouterr().out.strip().splitlines()
     assert len(summary) == 1 and "60 frames at 30 fps" in summary[0]
+
+
+def synthetic_maps(shift_px: float, inliers: int, shape=(40, 60)) -> PlaneMaps:
+    """PlaneMaps whose source map is the target map moved by ``shift_px`` in x (a rig that turned a little)."""
+    map_tgt = target_map(shape, np.array([10.0, 0.0]))
+    map_src = map_tgt + np.float32([shift_px + 20.0, 0.0])
+    alpha = np.full(shape, 0.5, np.float32)
+    return PlaneMaps(map_src, map_tgt, alpha, chroma_positions(map_src), chroma_positions(map_tgt),
+                     alpha[::2, ::2].copy(), np.full(shape[0], 30.0 + shift_px, np.float32), inliers)
+
+
+def test_reestimates_with_few_inliers_or_a_large_map_change_are_rejected():
+    current = synthetic_maps(0.0, 300)
+    planes = (40, 60)
+    assert rejection_reason(synthetic_maps(2.0, 280, planes), current, 300, planes, planes, CFG) is None
+    assert "inliers" in rejection_reason(synthetic_maps(2.0, 100, planes), current, 300, planes, planes, CFG)
+    too_far = CFG.video_max_median_change_px + 1.0
+    assert "median map change" in rejection_reason(synthetic_maps(too_far, 300), current, 300, planes, planes, CFG)
+
+
+def test_blend_moves_maps_and_seam_linearly_and_takes_the_goal_where_the_start_had_nothing():
+    start, goal = synthetic_maps(0.0, 300), synthetic_maps(8.0, 320)
+    start.map_src_luma[0, 0] = np.nan
+    half = lerp_maps(start, goal, 0.5)
+    np.testing.assert_allclose(half.map_src_luma[5, 5], start.map_src_luma[5, 5] + [4.0, 0.0])
+    np.testing.assert_allclose(half.map_src_luma[0, 0], goal.map_src_luma[0, 0])
+    assert seam_change_px(start, half) == pytest.approx(4.0)
+    assert map_change_px(start, half, (40, 60), 99.0) == pytest.approx(4.0)
+    assert half.inliers == 320

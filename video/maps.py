@@ -56,11 +56,6 @@ def target_offset(map_tgt_canvas: np.ndarray) -> np.ndarray:
     return -np.asarray(map_tgt_canvas[0, 0], dtype=np.float64)
 
 
-def even_shape(height: int, width: int) -> tuple[int, int]:
-    """The largest even (H, W) not above the given one: yuv420p needs even sides."""
-    return height - height % 2, width - width % 2
-
-
 def shift_onto(field: np.ndarray, shift_xy: np.ndarray, shape: tuple[int, int], fill: float) -> np.ndarray:
     """``out[y, x] = field[y + dy, x + dx]`` on a grid of ``shape`` (H, W); ``fill`` outside ``field``.
 

@@ -23,9 +23,9 @@ from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import resolve_device
 from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
 from .loop import VideoOptions, run_video
-from .maps import (BLACK_UV, BLACK_Y, PlaneMaps, even_shape, lerp_maps, map_change_px, plane_maps,
-                   seam_change_px, target_offset)
+from .maps import BLACK_UV, BLACK_Y, PlaneMaps, lerp_maps, map_change_px, plane_maps, seam_change_px, target_offset
 from .reader import YuvFrame
+from .writer import even_size
 
 RIGS = ("static", "moving")
 JITTER_PERCENTILE = 99.0  # "largest map change" = this percentile of |delta M_s| per frame (robust to edge pixels)
@@ -44,7 +44,8 @@ class SenaFrameCompositor:
         self.cfg = cfg
         self.rig = first.rig
         self.reestimate_s = cfg.video_reestimate_s if cfg.video_rig == "moving" else None
-        shape = even_shape(*first.alpha_canvas.shape)
+        width, height = even_size(first.alpha_canvas.shape[1], first.alpha_canvas.shape[0])  # yuv420p: even sides
+        shape = (height, width)
         self.offset_tgt = target_offset(first.map_tgt_canvas)
         self.maps = plane_maps(first, shape, self.offset_tgt)
         self.output_size = (shape[1], shape[0])
