@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 import tempfile
 from pathlib import Path
 from typing import Iterator
@@ -26,9 +27,10 @@ def to_bgr8(img: np.ndarray, name: str = "image") -> np.ndarray:
     if img.dtype == np.uint16:
         img = (img.astype(np.float32) / 257.0 + 0.5).astype(np.uint8)
     elif img.dtype in (np.float32, np.float64):
-        img = np.clip(img * 255.0 + 0.5, 0, 255).astype(np.uint8)
+        # NaN (e.g. no-data pixels of a float TIFF) would cast to an undefined byte with a warning: black.
+        img = np.clip(np.nan_to_num(img, nan=0.0) * 255.0 + 0.5, 0, 255).astype(np.uint8)
     elif img.dtype != np.uint8:
-        raise InputError(f"{name}: unsupported pixel type {img.dtype}")
+        raise InputError(f"{name}: unsupported pixel type {img.dtype}; convert it to 8- or 16-bit PNG or JPEG")
     if img.ndim == 2:
         return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
     if img.ndim == 3 and img.shape[2] == 1:
@@ -57,15 +59,37 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
         data = np.fromfile(str(path), dtype=np.uint8)
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror})") from exc
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    img, decoder_says = _decode_quietly(data) if data.size else (None, "")
     if img is None:
-        raise InputError(f"{path}: not a readable image (corrupt, truncated or unsupported format)")
+        reason = f"; the decoder says: {decoder_says}" if decoder_says else ""
+        raise InputError(f"{path}: not a readable image (corrupt, truncated or unsupported format{reason})")
     img = to_bgr8(img, str(path))
     if min(img.shape[:2]) < MIN_SIDE_PX:
         raise InputError(
             f"{path}: image is {img.shape[1]}x{img.shape[0]} px; at least {MIN_SIDE_PX} px per side is needed"
         )
     return img
+
+
+def _decode_quietly(data: np.ndarray) -> tuple[np.ndarray | None, str]:
+    """``cv2.imdecode(data, IMREAD_UNCHANGED)`` and what the C decoders wrote to stderr, on one line.
+
+    libpng prints its errors straight to file descriptor 2 (e.g. "libpng error: PNG input buffer is
+    incomplete" for a truncated file), which would break the CLI's one-line error; the text is caught
+    here so it can go into the InputError instead. Warnings on a file that still decodes are dropped.
+    """
+    sys.stderr.flush()
+    saved_fd = os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        finally:
+            os.dup2(saved_fd, 2)
+            os.close(saved_fd)
+        sink.seek(0)
+        decoder_says = " ".join(sink.read().decode(errors="replace").split())
+    return img, decoder_says
 
 
 @contextlib.contextmanager
