@@ -92,6 +92,28 @@ def _decode_quietly(data: np.ndarray) -> tuple[np.ndarray | None, str]:
     return img, decoder_says
 
 
+def check_output_path(path: str | os.PathLike, inputs: tuple[str | os.PathLike, ...] = ()) -> Path:
+    """``path`` as a Path, or OutputError when no file can be written there.
+
+    Refused: one of the ``inputs`` (same file, also through links), an existing folder, a parent that
+    is missing, not a folder or not writable. Cheap, so callers can check before any work.
+    """
+    path = Path(path)
+    for src in inputs:
+        if Path(src).exists() and path.exists() and os.path.samefile(src, path):
+            raise OutputError(f"{path}: output would overwrite an input; choose another output name")
+    if path.is_dir():
+        raise OutputError(f"{path}: is a folder; give a file name")
+    folder = path.parent
+    if not folder.exists():
+        raise OutputError(f"{path}: folder {folder} does not exist")
+    if not folder.is_dir():
+        raise OutputError(f"{path}: {folder} is not a folder")
+    if not os.access(folder, os.W_OK):
+        raise OutputError(f"{path}: folder {folder} is not writable")
+    return path
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike, inputs: tuple[str | os.PathLike, ...] = ()) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` only if the block succeeds.
@@ -99,21 +121,20 @@ def atomic_output(path: str | os.PathLike, inputs: tuple[str | os.PathLike, ...]
     Refuses an output that is one of the ``inputs`` or sits in a folder that cannot be written.
     On any exception (including KeyboardInterrupt) the temporary file is removed.
     """
-    path = Path(path)
-    for src in inputs:
-        if Path(src).exists() and path.exists() and os.path.samefile(src, path):
-            raise OutputError(f"{path}: output would overwrite an input; choose another output name")
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise OutputError(f"{path}: folder {folder} does not exist")
-    if not os.access(folder, os.W_OK):
-        raise OutputError(f"{path}: folder {folder} is not writable")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=folder)
+    path = check_output_path(path, inputs)
+    folder = path.parent
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=folder)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot create a file in {folder} ({exc.strerror}); choose another folder") from exc
     os.close(fd)
     tmp = Path(tmp_name)
     try:
         yield tmp
-        os.replace(tmp, path)
+        try:
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise OutputError(f"{path}: cannot write it ({exc.strerror}); choose another output name") from exc
     finally:
         if tmp.exists():
             tmp.unlink()
