@@ -127,12 +127,16 @@ def dump_stages(folder, img_a: np.ndarray, img_b: np.ndarray, pano) -> list:
     """
     from pathlib import Path
 
+    from .errors import OutputError
     from .imageio import write_image
     from .rig import image_to_working
 
     maps = pano.maps
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{folder}: cannot create the debug folder ({exc.strerror}); choose another --debug path") from exc
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
     pano_working = image_to_working(pano.image, maps.rig)
     pictures = {
