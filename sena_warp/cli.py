@@ -53,17 +53,22 @@ def cmd_match(args: argparse.Namespace) -> int:
 def cmd_image(args: argparse.Namespace) -> int:
     from .crop import largest_inner_rectangle
     from .debug import dump_stages
-    from .imageio import read_image, write_image
+    from .imageio import check_output_folder, check_output_path, read_image, write_image
     from .report import image_report, write_json
     from .stitch import stitch_images
 
     cfg = _config_from(args)
+    inputs = (args.image_a, args.image_b)
     _check_output_suffix(args.output, (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp"))
+    for path in filter(None, (args.output, args.report)):
+        check_output_path(path, inputs)  # before the stitch: a bad path must not leave a panorama behind
+    if args.debug:
+        check_output_folder(args.debug)
     img_a, img_b = read_image(args.image_a), read_image(args.image_b)
     pano = stitch_images(img_a, img_b, cfg, reference=args.reference)
     crop = largest_inner_rectangle(pano.image[:, :, 3]) if args.crop else None
     image = pano.image if crop is None else pano.image[crop[1]:crop[1] + crop[3], crop[0]:crop[0] + crop[2]]
-    write_image(args.output, image, inputs=(args.image_a, args.image_b))
+    write_image(args.output, image, inputs=inputs)
     if args.debug:
         dump_stages(args.debug, img_a, img_b, pano)
     report = image_report(pano, img_a, img_b, cfg, crop)

@@ -114,6 +114,21 @@ def check_output_path(path: str | os.PathLike, inputs: tuple[str | os.PathLike, 
     return path
 
 
+def check_output_folder(path: str | os.PathLike) -> Path:
+    """``path`` as a Path, or OutputError when it cannot be (or become) a writable folder.
+
+    Creates nothing: the nearest existing ancestor must be a writable folder, so a folder made later
+    (``--debug``) cannot fail after the real work is done.
+    """
+    path = Path(path)
+    existing = next(p for p in (path, *path.parents) if p.exists())
+    if not existing.is_dir():
+        raise OutputError(f"{path}: {existing} is not a folder; choose another folder")
+    if not os.access(existing, os.W_OK):
+        raise OutputError(f"{path}: folder {existing} is not writable")
+    return path
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike, inputs: tuple[str | os.PathLike, ...] = ()) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` only if the block succeeds.

@@ -279,8 +279,6 @@ def test_unwritable_report_or_debug_path_exit_6_one_line(option, pair, dirs, cap
     assert_one_line_error(err, str(blocker))
 
 
-@pytest.mark.xfail(strict=True, reason="cli.cmd_image checks --report/--debug only after writing the panorama; "
-                                       "see the issue-7 report for the cli.py change")
 @pytest.mark.parametrize("option", ["--report", "--debug"])
 def test_unwritable_report_or_debug_path_leaves_no_panorama(option, pair, dirs, capfd, warp_device):
     folder_in, folder_out = dirs
