@@ -30,6 +30,8 @@ from ..imageio import existing_file
 PIX_FMT = "yuv420p"
 _POLL_S = 0.1  # how often a blocked decoder thread re-checks whether it was asked to stop
 _END = object()  # queue marker: the decoder thread has finished
+# FFmpeg demuxers of single pictures; the others are all named "<format>_pipe" (png_pipe, jpeg_pipe, ...)
+STILL_IMAGE_DEMUXERS = ("image2",)
 
 
 @dataclass(frozen=True)
@@ -80,7 +82,12 @@ def open_input(path: str | os.PathLike) -> av.container.InputContainer:
     try:
         container = av.open(str(path), mode="r")
     except av.error.FFmpegError as exc:
-        raise InputError(f"{path}: not a readable media file ({exc.strerror})") from exc
+        raise InputError(
+            f"{path}: not a readable media file ({exc.strerror}); a video may be truncated or corrupt: copy it again"
+        ) from exc
+    if container.format.name in STILL_IMAGE_DEMUXERS or container.format.name.endswith("_pipe"):
+        container.close()  # FFmpeg reads a photo as a one-frame video: refuse it rather than "stitch" one frame
+        raise VideoError(f"{path}: is an image, not a video; give a video file (photos: sena-warp image)")
     if not container.streams.video:
         container.close()
         raise VideoError(f"{path}: has no video stream; give a video file")
