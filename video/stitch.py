@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import os
 import time
-from pathlib import Path
 
 import numpy as np
 
 from ..composite import Compositor
 from ..config import Config
-from ..errors import InputError, OutputError, StitchError
+from ..errors import InputError, StitchError
+from ..imageio import check_output_path
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import resolve_device
 from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
@@ -152,14 +152,6 @@ class SenaFrameCompositor:
         }
 
 
-def check_output(output: str | os.PathLike, inputs: tuple[str | os.PathLike, ...]) -> None:
-    """Refuse, before any work, an output path that is one of the inputs."""
-    out = Path(output).resolve()
-    for src in inputs:
-        if Path(src).resolve() == out:
-            raise OutputError(f"{output}: output would overwrite an input; choose another output name")
-
-
 def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike, cfg: Config,
                   options: VideoOptions, reference: str = "auto") -> dict:
     """Stitch two videos into ``output`` with SENA maps; return the run's report.
@@ -168,7 +160,7 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
     ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
     The report is :func:`loop.run_video`'s plus ``stitch`` (see :meth:`SenaFrameCompositor.report`).
     """
-    check_output(output, (left, right))
+    check_output_path(output, (left, right))  # before any decoding: an input, a folder, no writable folder
     if cfg.video_rig not in RIGS:
         raise InputError(f"rig {cfg.video_rig!r} unknown; use one of {', '.join(RIGS)}")
     if cfg.video_reestimate_s <= 0:
