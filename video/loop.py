@@ -167,7 +167,23 @@ def run_video(
             _encode_pairs(chain([first], pairs), compositor, writer, Progress(expected, show, sys.stderr), timing)
     timing["total"] = time.perf_counter() - t_run
     timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
+    notes += _input_notes(infos, {"left": reader_l, "right": reader_r}, stats)
     return _report(infos, (reader_l, reader_r), writer, stats, timing, notes, output, audio_side)
+
+
+def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], stats: PairingStats) -> list[str]:
+    """What the report's reader should know about the inputs: rates that differ, an input that ended early."""
+    notes = []
+    rate_l, rate_r = infos["left"].fps, infos["right"].fps
+    if rate_l != rate_r:
+        notes.append(f"frame rates differ (left {float(rate_l):g} fps, right {float(rate_r):g} fps): frames paired "
+                     f"by time at the left rate; {stats.dropped} right frames dropped, {stats.repeated} repeated")
+    for side, reader in readers.items():
+        declared = infos[side].frame_count
+        if declared and reader.decoded + reader.damaged < declared:
+            notes.append(f"{side} input ended after {reader.decoded + reader.damaged} of the {declared} frames "
+                         f"its header declares: truncated? Stitched up to where it ends")
+    return notes
 
 
 def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Progress, timing: dict) -> None:
