@@ -87,7 +87,11 @@ def cmd_video(args: argparse.Namespace) -> int:
     from sena_warp.video.loop import VideoOptions, write_report
     from sena_warp.video.stitch import stitch_videos
 
+    from .imageio import check_output_path
+
     _check_output_suffix(args.output, (".mp4", ".mov", ".mkv"))
+    for path in filter(None, (args.output, args.report)):
+        check_output_path(path, (args.left, args.right))  # before decoding: a bad --report must not leave a video
     if args.reestimate is not None and args.rig != "moving":
         raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
     cfg = _config_from(args).replace(video_rig=args.rig)

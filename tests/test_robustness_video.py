@@ -320,12 +320,7 @@ OUTPUT_CASES = {
     "report_is_a_folder": (lambda out: ["-o", out / "pano.mp4", "--report", (out / "r.json").mkdir() or out / "r.json"],
                            ("r.json", "is a folder")),
 }
-NEEDS_CLI_CHANGE = pytest.mark.xfail(
-    strict=True, reason="cmd_video checks --report only after the stitch; needs check_output_path on it first")
-
-
-@pytest.mark.parametrize("case", [
-    pytest.param(name, marks=NEEDS_CLI_CHANGE) if name.startswith("report") else name for name in OUTPUT_CASES])
+@pytest.mark.parametrize("case", list(OUTPUT_CASES))
 def test_bad_output_path_is_refused_before_decoding(case, clips, dirs, capfd, warp_device, no_input_opened):
     _, folder_out = dirs
     make_args, words = OUTPUT_CASES[case]
