@@ -29,6 +29,26 @@ from sena_warp.errors import InputError
 # (``config.quiet`` is deprecated in favour of this in Warp 1.19).
 wp.config.log_level = wp.LOG_WARNING
 
+
+def _init_without_driver_noise() -> None:
+    """``wp.init()`` with the native library's stderr silenced.
+
+    On a machine without a GPU, Warp's C++ core prints "Could not find or load the NVIDIA CUDA
+    driver" on every run: a second stderr line in front of the CLI's one-line messages. Whether
+    CUDA is there is decided by ``resolve_device``, which says so in its own words.
+    """
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 2)
+            wp.init()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
+_init_without_driver_noise()
+
 _pools: dict[int, ThreadPoolExecutor] = {}
 _pools_lock = threading.Lock()
 _loaded: set[tuple[str, str]] = set()
@@ -96,6 +116,30 @@ def launch_rows(kernel, height: int, width: int, inputs: list, device: str, thre
         return
     futures = [
         _pool(len(bands)).submit(wp.launch, kernel, (rows, width), [row0, *inputs], device=device)
+        for row0, rows in bands
+    ]
+    for future in futures:
+        future.result()
+
+
+def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str, threads: int = 0) -> None:
+    """Run ``kernel(row0, col_step, width, *inputs)`` over rows [0, height) and wait until it has finished.
+
+    For kernels whose thread (i, j) loops over columns ``j, j + col_step, ... < width`` of row
+    ``row0 + i``: on "cpu" one thread per row (``col_step`` 1), rows split into parallel bands as in
+    :func:`launch_rows`, which saves Warp's per-thread overhead on the hottest kernels; on "cuda" one
+    thread per pixel (``col_step`` = width).
+    """
+    if height <= 0 or width <= 0:
+        return
+    _ensure_loaded(kernel, device)
+    if device != "cpu":
+        wp.launch(kernel, dim=(height, width), inputs=[0, width, width, *inputs], device=device)
+        wp.synchronize_device(device)
+        return
+    bands = row_bands(height, cpu_threads(threads))
+    futures = [
+        _pool(len(bands)).submit(wp.launch, kernel, (rows, 1), [row0, 1, width, *inputs], device=device)
         for row0, rows in bands
     ]
     for future in futures:
