@@ -60,6 +60,6 @@ def test_warp_is_the_global_affine_where_the_gate_is_zero(shared_dir, cfg, name,
     # Both regions must be there, or the check says nothing: the source outside the overlap, the local warp in it.
     assert outside.mean() > 0.1 and inside.mean() > 0.1
     assert deviation_px[outside].max() < AFFINE_SHAPE_TOL_PX
-    # The local warp does move pixels inside the overlap (default: 0.3-0.7 px, tuned: 20-26 px measured).
+    # The local warp does move pixels inside the overlap (measured: 0.3-0.65 px default, 19.5-26 px tuned).
     assert deviation_px[inside].max() > MIN_LOCAL_MOVE_PX
     assert figures.sena[0] >= figures.affine[0]
