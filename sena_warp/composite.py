@@ -1,28 +1,47 @@
 """Apply the three canvas maps to a frame pair: the per-frame path of images and videos.
 
-``Compositor`` uploads the maps to the Warp device once and keeps input and output buffers per
-input shape, so a video's per-frame cost is two uploads, one kernel launch and one download
-(SENA.md "Maps, not images": cached warps, per-frame compositing).
+``Compositor`` uploads the maps to the Warp device once and turns them, once per input shape, into a
+fixed-point layout (tap offsets and bilinear weights with alpha folded in, see
+``kernels/composite.py``), so a video's per-frame cost is two uploads, one integer kernel launch and
+one download (SENA.md "Maps, not images": cached warps, per-frame compositing).
 """
 
 from __future__ import annotations
+
+from typing import Sequence
 
 import numpy as np
 import warp as wp
 
 from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import composite_kernel
+from sena_warp.kernels.composite import TAPS, composite_fixed_kernel, composite_layout_kernel
 from sena_warp.warp_map import as_channels
 
 
 class _Buffers:
-    """Warp arrays for one (src shape, tgt shape) pair: device inputs, host staging, outputs."""
+    """Warp arrays for one (src shape, tgt shape) pair: inputs, host staging, layout, outputs."""
 
     def __init__(self, shape_src: tuple, shape_tgt: tuple, canvas_shape: tuple[int, int], device: str):
+        channels = shape_src[2]
         self.src = wp.empty(shape_src, dtype=wp.uint8, device=device)
         self.tgt = wp.empty(shape_tgt, dtype=wp.uint8, device=device)
-        self.out = wp.empty((*canvas_shape, shape_src[2]), dtype=wp.uint8, device=device)
+        self.src_flat, self.tgt_flat = self.src.flatten(), self.tgt.flatten()  # views the frame kernel indexes
+        self.out = wp.empty((*canvas_shape, channels), dtype=wp.uint8, device=device)
         self.coverage = wp.empty(canvas_shape, dtype=wp.uint8, device=device)
+        self.fill = wp.zeros(channels, dtype=wp.uint8, device=device)
+        self.fill_value: tuple[int, ...] = (0,) * channels
+        self.tap_src = wp.empty(canvas_shape, dtype=wp.int32, device=device)
+        self.tap_tgt = wp.empty(canvas_shape, dtype=wp.int32, device=device)
+        self.weights = wp.empty((*canvas_shape, TAPS), dtype=wp.uint16, device=device)
+        self.layout_ready = False
+        # Flat views the frame kernel indexes (see composite_fixed_kernel).
+        self.frame_arrays = [self.tap_src.flatten(), self.tap_tgt.flatten(), self.weights.flatten(), self.fill,
+                             self.out.flatten(), self.coverage.flatten()]
+        # Neighbour taps in flat elements: C along x, W*C along y (0 on an axis of length 1).
+        self.steps = wp.vec4i(
+            channels * min(1, shape_src[1] - 1), channels * shape_src[1] * min(1, shape_src[0] - 1),
+            channels * min(1, shape_tgt[1] - 1), channels * shape_tgt[1] * min(1, shape_tgt[0] - 1),
+        )
         # On CPU the device arrays are host memory already; on CUDA copies go through pinned memory.
         on_cpu = device == "cpu"
         self.src_host = self.src if on_cpu else wp.empty(shape_src, dtype=wp.uint8, device="cpu", pinned=True)
@@ -35,7 +54,8 @@ class Compositor:
     ``map_src_canvas``, ``map_tgt_canvas``: (Hc, Wc, 2) float32 (x, y) sample positions in the
     source / target; ``alpha_canvas``: (Hc, Wc) float32 weight of the source. ``device`` is a
     resolved Warp device ("cpu" or "cuda", see ``runtime.resolve_device``); ``threads`` the CPU
-    row-band launch threads (0 = one per core).
+    row-band launch threads (0 = one per core). Results match the float rule of
+    ``kernels.composite.composite_kernel`` within 1 grey level (fixed-point weights of 14 bits).
     """
 
     def __init__(
@@ -56,28 +76,50 @@ class Compositor:
         self.alpha = wp.array(np.ascontiguousarray(alpha_canvas, dtype=np.float32), dtype=float, device=device)
         self._buffers: dict[tuple, _Buffers] = {}
 
+    def set_maps(self, map_src_canvas: np.ndarray | None = None, map_tgt_canvas: np.ndarray | None = None,
+                 alpha_canvas: np.ndarray | None = None) -> None:
+        """Upload new maps (same shapes) in place; the layouts are rebuilt on the next ``apply``."""
+        for array, values in ((self.map_src, map_src_canvas), (self.map_tgt, map_tgt_canvas),
+                              (self.alpha, alpha_canvas)):
+            if values is not None:
+                array.assign(np.ascontiguousarray(values, dtype=np.float32))
+        for buf in self._buffers.values():
+            buf.layout_ready = False
+
     def _buffers_for(self, shape_src: tuple, shape_tgt: tuple) -> _Buffers:
         key = (shape_src, shape_tgt)
         if key not in self._buffers:
             self._buffers[key] = _Buffers(shape_src, shape_tgt, self.canvas_shape, self.device)
-        return self._buffers[key]
+        buf = self._buffers[key]
+        if not buf.layout_ready:
+            inputs = [self.map_src, self.map_tgt, self.alpha, wp.vec3i(*shape_src), wp.vec3i(*shape_tgt),
+                      buf.tap_src, buf.tap_tgt, buf.weights]
+            runtime.launch_rows(composite_layout_kernel, *self.canvas_shape, inputs, self.device, self.threads)
+            buf.layout_ready = True
+        return buf
 
-    def apply(self, img_src: np.ndarray, img_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def apply(self, img_src: np.ndarray, img_tgt: np.ndarray,
+              fill: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Composite one pair of uint8 images (H, W, C) or planes (H, W), same C on both sides.
 
-        Returns (out uint8 (Hc, Wc, C), or (Hc, Wc) for planes; coverage uint8 (Hc, Wc), 255 where
-        at least one side was sampled, else 0). Both are fresh arrays the caller may keep.
+        ``fill``: the C values of pixels no side covers (default 0). Returns (out uint8 (Hc, Wc, C),
+        or (Hc, Wc) for planes; coverage uint8 (Hc, Wc), 255 where at least one side was sampled,
+        else 0). Both are fresh arrays the caller may keep.
         """
         src3, tgt3 = as_channels(img_src), as_channels(img_tgt)
         if src3.shape[2] != tgt3.shape[2]:
             raise ValueError(f"source has {src3.shape[2]} channels, target {tgt3.shape[2]}")
         buf = self._buffers_for(src3.shape, tgt3.shape)
+        fill_value = tuple(int(v) for v in fill) if fill is not None else (0,) * src3.shape[2]
+        if fill_value != buf.fill_value:
+            buf.fill.assign(np.asarray(fill_value, dtype=np.uint8))
+            buf.fill_value = fill_value
         np.copyto(buf.src_host.numpy(), src3)
         np.copyto(buf.tgt_host.numpy(), tgt3)
         if buf.src_host is not buf.src:
             wp.copy(buf.src, buf.src_host)
             wp.copy(buf.tgt, buf.tgt_host)
-        inputs = [buf.src, buf.tgt, self.map_src, self.map_tgt, self.alpha, buf.out, buf.coverage]
-        runtime.launch_rows(composite_kernel, *self.canvas_shape, inputs, self.device, self.threads)
+        inputs = [buf.src_flat, buf.tgt_flat, buf.steps, *buf.frame_arrays]
+        runtime.launch_row_loops(composite_fixed_kernel, *self.canvas_shape, inputs, self.device, self.threads)
         out = buf.out.numpy()
         return (out[:, :, 0] if np.ndim(img_src) == 2 else out).copy(), buf.coverage.numpy().copy()

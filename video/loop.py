@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from fractions import Fraction
@@ -29,6 +31,7 @@ from .writer import VideoWriter
 
 AUDIO_SOURCES = ("left", "right", "none")
 _PROGRESS_INTERVAL_S = 0.5  # redraw the progress line at most this often
+_POLL_S = 0.1  # how often a blocked producer re-checks that the encoder thread is still alive
 
 
 class FrameCompositor(Protocol):
@@ -36,7 +39,8 @@ class FrameCompositor(Protocol):
 
     ``output_size`` is ``(width, height)`` of the output in pixels. ``composite_yuv`` takes the left
     and right planes (``y (H, W)``, ``u, v (ceil(H/2), ceil(W/2))``, uint8, ``plane[row, col]``) and
-    returns the output's ``(y, u, v)`` planes of ``output_size`` (chroma halved, rounded up).
+    returns the output's ``(y, u, v)`` planes of ``output_size`` (chroma halved, rounded up), as
+    arrays it will not touch again: they are encoded on another thread while the next pair composites.
 
     Optionally it has ``update(frame_l, frame_r)``, called on the main thread before each pair is
     composited (e.g. to re-estimate its maps between frames); its time is reported as ``maps_update``.
@@ -164,7 +168,8 @@ def run_video(
                 writer.add_audio(side.path, side.start_time_s - offsets[audio_side] + first[0].time_s)
             show = sys.stderr.isatty() if options.progress is None else options.progress
             expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
-            _encode_pairs(chain([first], pairs), compositor, writer, Progress(expected, show, sys.stderr), timing)
+            _encode_pairs(chain([first], pairs), compositor, writer, Progress(expected, show, sys.stderr), timing,
+                          options.queue_frames)
     timing["total"] = time.perf_counter() - t_run
     timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
     notes += _input_notes(infos, {"left": reader_l, "right": reader_r}, stats)
@@ -186,30 +191,107 @@ def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], s
     return notes
 
 
-def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Progress, timing: dict) -> None:
-    """Composite and encode every ``(left, right)`` pair; the output pts follow the left frames' times."""
+class EncodeThread:
+    """Encodes frames on a thread of its own, fed through a bounded queue.
+
+    Compositing frame n+1 (Warp launches release the GIL) then overlaps encoding frame n (x264 runs
+    in FFmpeg's threads): the decode / composite / encode pipeline. The queue holds at most
+    ``queue_frames`` output frames, so memory does not grow with the video's length. ``seconds`` is
+    the time spent in the encoder; an encoder failure is re-raised in the producing thread.
+    """
+
+    def __init__(self, writer: VideoWriter, queue_frames: int):
+        self.writer = writer
+        self.seconds = 0.0
+        self._queue: queue.Queue = queue.Queue(maxsize=max(queue_frames, 1))
+        self._error: BaseException | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="encode", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                item = self._queue.get()
+                if item is None:
+                    return
+                planes, pts = item
+                t0 = time.perf_counter()
+                self.writer.write(*planes, pts=pts)
+                self.seconds += time.perf_counter() - t0
+        except BaseException as exc:  # handed to the producer, which re-raises it
+            self._error = exc
+
+    def _put(self, item) -> None:
+        while self._thread.is_alive():
+            try:
+                self._queue.put(item, timeout=_POLL_S)
+                return
+            except queue.Full:
+                continue
+        self._raise_error()
+
+    def _raise_error(self) -> None:
+        if self._error is not None:
+            raise self._error
+
+    def write(self, planes: tuple[np.ndarray, np.ndarray, np.ndarray], pts: int) -> None:
+        """Queue one frame's (y, u, v) planes (kept, not copied: pass fresh arrays) at ``pts``."""
+        self._raise_error()
+        self._put((planes, pts))
+
+    def finish(self) -> None:
+        """Wait until every queued frame is encoded, then flush the encoder."""
+        self._put(None)
+        self._thread.join()
+        self._raise_error()
+        t0 = time.perf_counter()
+        self.writer.finish()
+        self.seconds += time.perf_counter() - t0
+
+    def abandon(self) -> None:
+        """Stop after the frame being encoded, dropping the queue (a failed or interrupted run)."""
+        self._stop.set()
+        while self._thread.is_alive():
+            try:
+                self._queue.get_nowait()
+            except queue.Empty:
+                self._queue.put(None)
+            self._thread.join(_POLL_S)
+
+
+def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Progress, timing: dict,
+                  queue_frames: int) -> None:
+    """Composite every ``(left, right)`` pair and encode it on :class:`EncodeThread`.
+
+    The output pts follow the left frames' times. ``timing["composite"]`` is this thread's compositing
+    time, ``timing["encode"]`` the encoder thread's time (the two overlap).
+    """
     t_first, last_pts = None, -1
     update = getattr(compositor, "update", None)
     if update is not None:
         timing["maps_update"] = 0.0
-    for frame_l, frame_r in pairs:
-        if update is not None:
+    encoder = EncodeThread(writer, queue_frames)
+    try:
+        for frame_l, frame_r in pairs:
+            if update is not None:
+                t0 = time.perf_counter()
+                update(frame_l, frame_r)
+                timing["maps_update"] += time.perf_counter() - t0
             t0 = time.perf_counter()
-            update(frame_l, frame_r)
-            timing["maps_update"] += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        planes = compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
-        t1 = time.perf_counter()
-        t_first = frame_l.time_s if t_first is None else t_first
-        # The left frame's own time on the 1/fps grid; forced to increase should rounding collide.
-        last_pts = max(last_pts + 1, round((frame_l.time_s - t_first) * writer.rate))
-        writer.write(*planes, pts=last_pts)
-        timing["composite"] += t1 - t0
-        timing["encode"] += time.perf_counter() - t1
-        progress.update(writer.frames)
-    t0 = time.perf_counter()
-    writer.finish()
-    timing["encode"] += time.perf_counter() - t0
+            planes = compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
+            timing["composite"] += time.perf_counter() - t0
+            t_first = frame_l.time_s if t_first is None else t_first
+            # The left frame's own time on the 1/fps grid; forced to increase should rounding collide.
+            last_pts = max(last_pts + 1, round((frame_l.time_s - t_first) * writer.rate))
+            encoder.write(planes, last_pts)
+            progress.update(writer.frames)
+        encoder.finish()
+    except BaseException:
+        encoder.abandon()
+        raise
+    finally:
+        timing["encode"] += encoder.seconds
     progress.close(writer.frames)
 
 

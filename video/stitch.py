@@ -114,20 +114,16 @@ class SenaFrameCompositor:
         self._blend = None if done >= frames else (start, goal, done)
         t0 = time.perf_counter()
         # The target maps never change on the fixed canvas; only the source map and alpha move.
-        self.luma.map_src.assign(self.maps.map_src_luma)
-        self.luma.alpha.assign(self.maps.alpha_luma)
-        self.chroma.map_src.assign(self.maps.map_src_chroma)
-        self.chroma.alpha.assign(self.maps.alpha_chroma)
+        self.luma.set_maps(map_src_canvas=self.maps.map_src_luma, alpha_canvas=self.maps.alpha_luma)
+        self.chroma.set_maps(map_src_canvas=self.maps.map_src_chroma, alpha_canvas=self.maps.alpha_chroma)
         self.seconds["maps_upload"] += time.perf_counter() - t0
 
     def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Output (y, u, v) planes of ``output_size``; uncovered pixels are black (Y 16, U = V = 128)."""
         y_src, y_tgt = self.rig.pick(y_l, y_r)
         uv_src, uv_tgt = self.rig.pick(np.dstack((u_l, v_l)), np.dstack((u_r, v_r)))
-        y, covered_y = self.luma.apply(y_src, y_tgt)
-        uv, covered_uv = self.chroma.apply(uv_src, uv_tgt)
-        y[covered_y == 0] = BLACK_Y
-        uv[covered_uv == 0] = BLACK_UV
+        y, _ = self.luma.apply(y_src, y_tgt, fill=(BLACK_Y,))
+        uv, _ = self.chroma.apply(uv_src, uv_tgt, fill=(BLACK_UV, BLACK_UV))
         return y, uv[:, :, 0], uv[:, :, 1]
 
     def report(self) -> dict:
