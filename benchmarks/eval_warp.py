@@ -40,7 +40,6 @@ import cv2
 import numpy as np
 
 from sena_warp.config import Config
-from sena_warp.errors import StitchError
 from sena_warp.features import match_images
 from sena_warp.imageio import read_image
 from sena_warp.metrics import overlap_psnr_ssim
@@ -183,6 +182,7 @@ def evaluate_pair(pair: PairInputs, cfg: Config) -> tuple[Warp, PairFigures]:
 
 
 def pair_folders(data: Path) -> list[Path]:
+    """Sub-folders of ``data`` holding an ``a.*`` and a ``b.*`` image, sorted by name."""
     return sorted(p for p in data.iterdir() if p.is_dir() and any(p.glob("a.*")) and any(p.glob("b.*")))
 
 
@@ -192,18 +192,18 @@ def load_all(data: Path, cfg: Config) -> tuple[list[PairInputs], list[tuple[str,
     for folder in pair_folders(data):
         try:
             pairs.append(load_pair(folder, cfg))
-        except StitchError as exc:
+        except Exception as exc:  # a benchmark lists every failing pair instead of stopping at the first
             failures.append((folder.name, f"{type(exc).__name__}: {exc}"))
     return pairs, failures
 
 
 def evaluate_all(pairs: list[PairInputs], cfg: Config) -> tuple[list[PairFigures], list[tuple[str, str]]]:
-    """Figures per pair, and (name, message) of the pairs whose warp raised a StitchError."""
+    """Figures per pair, and (name, message) of the pairs whose warp or figures raised."""
     rows, failures = [], []
     for pair in pairs:
         try:
             rows.append(evaluate_pair(pair, cfg)[1])
-        except StitchError as exc:
+        except Exception as exc:  # a StitchError (e.g. too few inliers) or anything else: listed, not fatal
             failures.append((pair.name, f"{type(exc).__name__}: {exc}"))
     return rows, failures
 
