@@ -14,8 +14,11 @@ import numpy as np
 import warp as wp
 
 from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import TAPS, composite_fixed_kernel, composite_layout_kernel
+from sena_warp.kernels.composite import composite_fixed_kernel, composite_layout_kernel, vec4us
 from sena_warp.warp_map import as_channels
+
+
+MAX_CHANNELS = 4  # the frame kernel takes the fill values as one vec4i
 
 
 class _Buffers:
@@ -23,25 +26,22 @@ class _Buffers:
 
     def __init__(self, shape_src: tuple, shape_tgt: tuple, canvas_shape: tuple[int, int], device: str):
         channels = shape_src[2]
+        pixels = canvas_shape[0] * canvas_shape[1]
         self.src = wp.empty(shape_src, dtype=wp.uint8, device=device)
         self.tgt = wp.empty(shape_tgt, dtype=wp.uint8, device=device)
-        self.src_flat, self.tgt_flat = self.src.flatten(), self.tgt.flatten()  # views the frame kernel indexes
         self.out = wp.empty((*canvas_shape, channels), dtype=wp.uint8, device=device)
         self.coverage = wp.empty(canvas_shape, dtype=wp.uint8, device=device)
-        self.fill = wp.zeros(channels, dtype=wp.uint8, device=device)
-        self.fill_value: tuple[int, ...] = (0,) * channels
-        self.tap_src = wp.empty(canvas_shape, dtype=wp.int32, device=device)
-        self.tap_tgt = wp.empty(canvas_shape, dtype=wp.int32, device=device)
-        self.weights = wp.empty((*canvas_shape, TAPS), dtype=wp.uint16, device=device)
+        self.taps = wp.empty(pixels, dtype=wp.vec2i, device=device)
+        self.weights = wp.empty(2 * pixels, dtype=vec4us, device=device)
         self.layout_ready = False
-        # Flat views the frame kernel indexes (see composite_fixed_kernel).
-        self.frame_arrays = [self.tap_src.flatten(), self.tap_tgt.flatten(), self.weights.flatten(), self.fill,
-                             self.out.flatten(), self.coverage.flatten()]
         # Neighbour taps in flat elements: C along x, W*C along y (0 on an axis of length 1).
-        self.steps = wp.vec4i(
+        steps = wp.vec4i(
             channels * min(1, shape_src[1] - 1), channels * shape_src[1] * min(1, shape_src[0] - 1),
             channels * min(1, shape_tgt[1] - 1), channels * shape_tgt[1] * min(1, shape_tgt[0] - 1),
         )
+        # The frame kernel's inputs before (channels, fill, out); flat views of the (H, W, C) arrays.
+        self.frame_inputs = [self.src.flatten(), self.tgt.flatten(), steps, self.taps, self.weights]
+        self.out_flat = self.out.flatten()
         # On CPU the device arrays are host memory already; on CUDA copies go through pinned memory.
         on_cpu = device == "cpu"
         self.src_host = self.src if on_cpu else wp.empty(shape_src, dtype=wp.uint8, device="cpu", pinned=True)
@@ -93,7 +93,7 @@ class Compositor:
         buf = self._buffers[key]
         if not buf.layout_ready:
             inputs = [self.map_src, self.map_tgt, self.alpha, wp.vec3i(*shape_src), wp.vec3i(*shape_tgt),
-                      buf.tap_src, buf.tap_tgt, buf.weights]
+                      buf.taps, buf.weights, buf.coverage]
             runtime.launch_rows(composite_layout_kernel, *self.canvas_shape, inputs, self.device, self.threads)
             buf.layout_ready = True
         return buf
@@ -109,17 +109,20 @@ class Compositor:
         src3, tgt3 = as_channels(img_src), as_channels(img_tgt)
         if src3.shape[2] != tgt3.shape[2]:
             raise ValueError(f"source has {src3.shape[2]} channels, target {tgt3.shape[2]}")
+        channels = src3.shape[2]
+        if channels > MAX_CHANNELS:
+            raise ValueError(f"images have {channels} channels; at most {MAX_CHANNELS} are supported")
         buf = self._buffers_for(src3.shape, tgt3.shape)
-        fill_value = tuple(int(v) for v in fill) if fill is not None else (0,) * src3.shape[2]
-        if fill_value != buf.fill_value:
-            buf.fill.assign(np.asarray(fill_value, dtype=np.uint8))
-            buf.fill_value = fill_value
+        values = [int(v) for v in fill] if fill is not None else [0] * channels
+        if len(values) != channels:
+            raise ValueError(f"fill has {len(values)} values for {channels} channels")
+        fill_vec = wp.vec4i(*values, *[0] * (MAX_CHANNELS - channels))
         np.copyto(buf.src_host.numpy(), src3)
         np.copyto(buf.tgt_host.numpy(), tgt3)
         if buf.src_host is not buf.src:
             wp.copy(buf.src, buf.src_host)
             wp.copy(buf.tgt, buf.tgt_host)
-        inputs = [buf.src_flat, buf.tgt_flat, buf.steps, *buf.frame_arrays]
+        inputs = [*buf.frame_inputs, channels, fill_vec, buf.out_flat]
         runtime.launch_row_loops(composite_fixed_kernel, *self.canvas_shape, inputs, self.device, self.threads)
         out = buf.out.numpy()
         return (out[:, :, 0] if np.ndim(img_src) == 2 else out).copy(), buf.coverage.numpy().copy()

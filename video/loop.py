@@ -114,6 +114,7 @@ def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
         "path": str(info.path), "width": info.width, "height": info.height, "fps": float(info.fps),
         "pix_fmt": info.pix_fmt, "converted_from": reader.converted_from, "offset_s": float(reader.offset_s),
         "frames_decoded": reader.decoded, "damaged": reader.damaged, "decode_wait_s": round(reader.wait_s, 4),
+        "decode_s": round(reader.decode_s, 4),
     }
 
 

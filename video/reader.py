@@ -139,7 +139,8 @@ class FrameReader:
     Use as a context manager (``with FrameReader(...) as reader: for frame in reader: ...``);
     leaving the block stops and joins the thread even mid-file. Decode errors of single packets
     are skipped and counted in ``damaged``; any other failure is re-raised in the iterating thread.
-    ``wait_s`` accumulates the time the consumer spent blocked waiting for frames.
+    ``wait_s`` accumulates the time the consumer spent blocked waiting for frames; ``decode_s`` the
+    decoder thread's time decoding and copying planes out (not its waits on a full queue).
     """
 
     def __init__(self, path: str | os.PathLike, offset_s: Fraction = Fraction(0), queue_frames: int = 8):
@@ -149,6 +150,7 @@ class FrameReader:
         self.damaged = 0
         self.converted_from: str | None = None  # source pixel format when it was not yuv420p
         self.wait_s = 0.0
+        self.decode_s = 0.0
         self._container = open_input(self.path)
         self._queue: queue.Queue = queue.Queue(maxsize=queue_frames)
         self._stop = threading.Event()
@@ -202,11 +204,14 @@ class FrameReader:
             period_pts = 1 / (Fraction(stream.average_rate or stream.guessed_rate) * time_base)
             last_pts = None
             for packet in self._container.demux(stream):
+                t0 = time.perf_counter()
                 try:
                     frames = packet.decode()
                 except av.error.InvalidDataError:
                     self.damaged += 1
                     continue
+                finally:
+                    self.decode_s += time.perf_counter() - t0
                 for frame in frames:
                     if frame.is_corrupt:  # FFmpeg concealed errors in it: skip rather than stitch garbage
                         self.damaged += 1
@@ -215,7 +220,10 @@ class FrameReader:
                     if pts is None:  # rare (broken muxing): place it one frame after the previous one
                         pts = start_pts if last_pts is None else last_pts + period_pts
                     last_pts = pts
-                    if not self._put(self._to_yuv(frame, (pts - start_pts) * time_base + self.offset_s)):
+                    t0 = time.perf_counter()
+                    yuv = self._to_yuv(frame, (pts - start_pts) * time_base + self.offset_s)
+                    self.decode_s += time.perf_counter() - t0
+                    if not self._put(yuv):
                         return
         except av.error.FFmpegError as exc:
             self._put(VideoError(f"{self.path}: decoding failed after {self.decoded} frames ({exc.strerror})"))

@@ -1,0 +1,349 @@
+"""Frame-rate benchmark of the video path (issue 6): ``sena-warp bench``.
+
+From one real high-resolution pair (``pairs/rew_lawn_2160``, 2160x1440) it makes two-camera clips at
+720p, 1080p and 4K: a slow pan of both views together (a 16:9 crop window moving across each image,
+the same motion in both, resized to the clip size), encoded with libx264 into a work folder. Then,
+per size and in one run, it measures
+
+- a transcode-only baseline: decode both clips, place them side by side, encode with the stitcher's
+  encoder settings (the same decode threads, pipeline and writer as ``sena-warp video``);
+- ``sena-warp video`` end to end, in a child process (its report gives the fps and the time of each
+  stage; ``os.wait4`` gives its peak RSS);
+- the per-frame compositing (``SenaFrameCompositor.composite_yuv``) against a reference built from
+  OpenCV (``cv2.remap`` of both views with maps converted once by ``cv2.convertMaps``, then
+  ``cv2.blendLinear``, then the black fill) on the same YUV planes and maps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .config import Config
+from .errors import InputError, StitchError
+from .imageio import atomic_output, read_image
+
+SIZES = {"720p": (1280, 720), "1080p": (1920, 1080), "4k": (3840, 2160)}
+DATA_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+PAIR = "rew_lawn_2160"
+
+
+@dataclass(frozen=True)
+class BenchSettings:
+    """How the clips are made and the kernels timed (benchmark settings, not stitching tunables)."""
+
+    fps: int = 30  # frame rate of the made clips
+    clip_crf: int = 18  # libx264 quality of the made clips (they are inputs: keep them clean)
+    clip_preset: str = "ultrafast"  # libx264 preset of the made clips (fast to make)
+    crop_fraction: float = 0.85  # crop window side / the largest 16:9 window of the image
+    kernel_repeats: int = 15  # timed compositing calls per size (median reported)
+    kernel_warmup: int = 2  # untimed calls first (layout build, caches)
+
+
+def parse_size(text: str) -> tuple[str, tuple[int, int]]:
+    """``"1080p"`` / ``"4k"`` / ``"WxH"`` -> (label, (width, height)); even sides (yuv420p)."""
+    key = text.lower()
+    if key in SIZES:
+        return key, SIZES[key]
+    try:
+        width, height = (int(v) for v in key.split("x"))
+    except ValueError:
+        raise InputError(f"size {text!r} unknown; use {', '.join(SIZES)} or WIDTHxHEIGHT") from None
+    if width < 16 or height < 16 or width % 2 or height % 2:
+        raise InputError(f"size {text!r}: width and height must be even and at least 16")
+    return f"{width}x{height}", (width, height)
+
+
+def pair_paths(data_dir: Path) -> tuple[Path, Path]:
+    """The a/b images of the benchmark pair, or InputError saying the shared data is missing."""
+    paths = tuple(data_dir / "pairs" / PAIR / name for name in ("a.jpg", "b.jpg"))
+    missing = [str(p) for p in paths if not p.is_file()]
+    if missing:
+        raise InputError(f"benchmark pair not found ({', '.join(missing)}); the bench needs the shared data "
+                         f"set at {data_dir} (pass --data DIR)")
+    return paths
+
+
+def pan_window(image_shape: tuple[int, int], aspect: float, crop_fraction: float, t: float) -> tuple[int, int, int, int]:
+    """Crop window (x0, y0, width, height) in an image of ``image_shape`` (rows, cols) at pan time t in [0, 1].
+
+    The window has the clip's ``aspect`` (width / height) and ``crop_fraction`` of the largest such
+    window; it moves linearly from the top-left to the bottom-right free corner as t goes 0 -> 1.
+    """
+    rows, cols = image_shape
+    full_w = min(cols, rows * aspect)
+    width, height = int(full_w * crop_fraction), int(full_w * crop_fraction / aspect)
+    return int(round(t * (cols - width))), int(round(t * (rows - height))), width, height
+
+
+def make_clip_pair(pair: tuple[Path, Path], work: Path, size: tuple[int, int], seconds: float,
+                   settings: BenchSettings = BenchSettings()) -> tuple[Path, Path]:
+    """Encode the slow-pan clips of both views at ``size`` (W, H) for ``seconds``; reuse existing ones.
+
+    Returns (left, right) paths in ``work``: left shows image a, right image b, same window each frame.
+    """
+    from .video.writer import VideoWriter
+
+    width, height = size
+    frames = max(1, round(seconds * settings.fps))
+    images = [read_image(path) for path in pair]
+    outputs = []
+    for side, image in zip(("left", "right"), images):
+        path = work / f"{PAIR}_{width}x{height}_{frames}f_{side}.mp4"
+        outputs.append(path)
+        if path.is_file():
+            continue
+        with atomic_output(path) as tmp, VideoWriter(tmp, width, height, Fraction(settings.fps), "libx264",
+                                                     settings.clip_crf, settings.clip_preset) as writer:
+            for index in range(frames):
+                x0, y0, w, h = pan_window(image.shape[:2], width / height, settings.crop_fraction,
+                                          index / max(frames - 1, 1))
+                frame = cv2.resize(image[y0:y0 + h, x0:x0 + w], (width, height), interpolation=cv2.INTER_AREA)
+                i420 = cv2.cvtColor(frame, cv2.COLOR_BGR2YUV_I420)
+                u, v = i420[height:].reshape(2, height // 2, width // 2)
+                writer.write(i420[:height], u, v, pts=index)
+    return outputs[0], outputs[1]
+
+
+class SideBySide:
+    """Baseline frame compositor: left planes then right planes on one row (no stitching at all)."""
+
+    def __init__(self, first_l, first_r):
+        self.width_l = first_l.y.shape[1]
+        self.output_size = (first_l.y.shape[1] + first_r.y.shape[1], max(first_l.y.shape[0], first_r.y.shape[0]))
+
+    def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r):
+        return tuple(np.hstack((left, right)) for left, right in ((y_l, y_r), (u_l, u_r), (v_l, v_r)))
+
+
+def transcode_baseline(left: Path, right: Path, output: Path, cfg: Config) -> dict:
+    """Decode both, place side by side, encode with the stitcher's settings; frames, seconds, fps."""
+    from .video.loop import VideoOptions, run_video
+
+    report = run_video(left, right, output, SideBySide, VideoOptions.from_config(cfg, audio="none", progress=False))
+    seconds = report["timing_s"]["total"]
+    return {"frames": report["frames_out"], "seconds": seconds, "fps": report["frames_out"] / seconds,
+            "size": (report["output"]["width"], report["output"]["height"])}
+
+
+def stitch_in_child(left: Path, right: Path, output: Path, device: str) -> dict:
+    """``sena-warp video`` in a child process; its report plus ``max_rss_mib`` (peak RSS of the child)."""
+    report_path = output.with_suffix(".json")
+    cmd = [sys.executable, "-c", "import sys; from sena_warp.cli import main; sys.exit(main())", "video",
+           str(left), str(right), "-o", str(output), "--report", str(report_path), "--audio", "none",
+           "--device", device]
+    log_path = output.with_suffix(".log")
+    with open(log_path, "wb") as log:
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+        _, status, usage = os.wait4(proc.pid, 0)
+    if os.waitstatus_to_exitcode(status) != 0:
+        raise StitchError(f"sena-warp video failed on {left.name}: {log_path.read_text().strip()[-500:]}")
+    report = json.loads(report_path.read_text())
+    report["max_rss_mib"] = usage.ru_maxrss / 1024  # Linux reports KiB
+    return report
+
+
+class OpenCVReference:
+    """The compositing rule with OpenCV: remap both sides, alpha-blend, fill where nothing is sampled.
+
+    Maps as for :class:`~sena_warp.composite.Compositor` ((Hc, Wc, 2) float32 (x, y), NaN = none;
+    alpha (Hc, Wc) float32); ``shape_src`` / ``shape_tgt`` = (rows, cols) of the planes. Everything
+    that depends only on the maps (fixed-point maps, blend weights with validity folded in, the
+    uncovered pixels) is done once here, as the Warp path does once per map set.
+    """
+
+    def __init__(self, map_src, map_tgt, alpha, shape_src, shape_tgt, fill):
+        from .video.maps import sampled_mask
+
+        valid_src, valid_tgt = sampled_mask(map_src, shape_src), sampled_mask(map_tgt, shape_tgt)
+        a = np.where(valid_src, np.where(valid_tgt, np.clip(alpha, 0.0, 1.0), 1.0), 0.0)
+        self.weight_src = a.astype(np.float32)
+        self.weight_tgt = np.where(valid_tgt, 1.0 - a, 0.0).astype(np.float32)
+        self.maps_src = self._fixed_maps(map_src)
+        self.maps_tgt = self._fixed_maps(map_tgt)
+        self.uncovered = np.flatnonzero(~(valid_src | valid_tgt))
+        self.fill = np.asarray(fill, dtype=np.uint8)
+
+    @staticmethod
+    def _fixed_maps(map_canvas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        outside = np.where(np.isnan(map_canvas), -1.0, map_canvas).astype(np.float32)  # NaN: sample nothing
+        return cv2.convertMaps(outside[:, :, 0], outside[:, :, 1], cv2.CV_16SC2)
+
+    def apply(self, img_src: np.ndarray, img_tgt: np.ndarray) -> np.ndarray:
+        """uint8 (Hc, Wc[, C]) composite of two uint8 (H, W[, C]) images."""
+        sampled_src = cv2.remap(img_src, *self.maps_src, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+        sampled_tgt = cv2.remap(img_tgt, *self.maps_tgt, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+        out = cv2.blendLinear(sampled_src, sampled_tgt, self.weight_src, self.weight_tgt)
+        out.reshape(len(self.weight_src.ravel()), -1)[self.uncovered] = self.fill
+        return out
+
+
+def chroma_shape(shape_y: tuple[int, int]) -> tuple[int, int]:
+    """(rows, cols) of a 4:2:0 chroma plane for a Y plane of ``shape_y``."""
+    return (shape_y[0] + 1) // 2, (shape_y[1] + 1) // 2
+
+
+class OpenCVFrameReference:
+    """``SenaFrameCompositor.composite_yuv`` rebuilt on :class:`OpenCVReference` (same planes, same maps)."""
+
+    def __init__(self, compositor, shape_y_src: tuple[int, int], shape_y_tgt: tuple[int, int]):
+        from .video.maps import BLACK_UV, BLACK_Y
+
+        maps = compositor.maps
+        self.rig = compositor.rig
+        self.luma = OpenCVReference(maps.map_src_luma, maps.map_tgt_luma, maps.alpha_luma,
+                                    shape_y_src, shape_y_tgt, (BLACK_Y,))
+        self.chroma = OpenCVReference(maps.map_src_chroma, maps.map_tgt_chroma, maps.alpha_chroma,
+                                      chroma_shape(shape_y_src), chroma_shape(shape_y_tgt), (BLACK_UV, BLACK_UV))
+
+    def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r):
+        y_src, y_tgt = self.rig.pick(y_l, y_r)
+        uv_src, uv_tgt = self.rig.pick(np.dstack((u_l, v_l)), np.dstack((u_r, v_r)))
+        uv = self.chroma.apply(uv_src, uv_tgt)
+        return self.luma.apply(y_src, y_tgt), uv[:, :, 0], uv[:, :, 1]
+
+
+def _median_ms(call, repeats: int, warmup: int) -> float:
+    for _ in range(warmup):
+        call()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        call()
+        times.append(time.perf_counter() - t0)
+    return 1000.0 * float(np.median(times))
+
+
+def compare_compositing(left: Path, right: Path, cfg: Config, settings: BenchSettings = BenchSettings()) -> dict:
+    """Per-frame compositing time of the Warp path and of the OpenCV reference on the first frame pair.
+
+    Maps come from the same first estimate ``sena-warp video`` makes. Returns ``warp_ms``,
+    ``opencv_ms``, their ``ratio`` and ``max_diff`` (grey levels, over Y, U, V).
+    """
+    from .video.estimate import best_first_estimate
+    from .video.reader import FrameReader
+    from .video.stitch import SenaFrameCompositor
+
+    maps, pair, attempts = best_first_estimate(left, right, 0.0, cfg, "auto")
+    compositor = SenaFrameCompositor(maps, attempts, pair, cfg)
+    with FrameReader(left) as reader_l, FrameReader(right) as reader_r:
+        frame_l, frame_r = next(iter(reader_l)), next(iter(reader_r))
+    planes = (frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
+    shape_src, shape_tgt = (f.y.shape for f in compositor.rig.pick(frame_l, frame_r))
+    reference = OpenCVFrameReference(compositor, shape_src, shape_tgt)
+    warp_ms = _median_ms(lambda: compositor.composite_yuv(*planes), settings.kernel_repeats, settings.kernel_warmup)
+    opencv_ms = _median_ms(lambda: reference.composite_yuv(*planes), settings.kernel_repeats, settings.kernel_warmup)
+    diff = max(int(np.abs(a.astype(np.int16) - b).max())
+               for a, b in zip(compositor.composite_yuv(*planes), reference.composite_yuv(*planes)))
+    return {"warp_ms": warp_ms, "opencv_ms": opencv_ms, "ratio": warp_ms / opencv_ms, "max_diff": diff,
+            "canvas": compositor.output_size}
+
+
+def bench_size(label: str, size: tuple[int, int], seconds: float, work: Path, pair: tuple[Path, Path],
+               cfg: Config, settings: BenchSettings = BenchSettings()) -> dict:
+    """One table row: clips of ``size`` (W, H), baseline, end-to-end stitch, stages, compositing."""
+    left, right = make_clip_pair(pair, work, size, seconds, settings)
+    baseline = transcode_baseline(left, right, work / f"baseline_{label}.mp4", cfg)
+    stitch = stitch_in_child(left, right, work / f"stitch_{label}.mp4", cfg.device)
+    timing, frames = stitch["timing_s"], stitch["frames_out"]
+    # Steady-state rate: the first estimate (setup) happens once per video, whatever its length.
+    stitch_fps = frames / (timing["total"] - timing["compositor_setup"])
+    compositing = compare_compositing(left, right, cfg, settings)
+    decode_s = sum(stitch["inputs"][side]["decode_s"] for side in ("left", "right"))
+    return {
+        "size": label, "clip": f"{size[0]}x{size[1]}", "canvas": "{}x{}".format(*compositing["canvas"]),
+        "frames": frames, "baseline_fps": baseline["fps"], "stitch_fps": stitch_fps,
+        "fps_ratio": stitch_fps / baseline["fps"], "setup_s": timing["compositor_setup"],
+        "decode_ms": 1000 * decode_s / frames, "composite_ms": 1000 * timing["composite"] / frames,
+        "encode_ms": 1000 * timing["encode"] / frames, "warp_ms": compositing["warp_ms"],
+        "opencv_ms": compositing["opencv_ms"], "kernel_ratio": compositing["ratio"],
+        "max_diff": compositing["max_diff"], "rss_mib": stitch["max_rss_mib"],
+    }
+
+
+COLUMNS = (  # (key, header, format)
+    ("size", "size", "{}"), ("canvas", "stitched canvas", "{}"), ("frames", "frames", "{}"),
+    ("baseline_fps", "transcode fps", "{:.1f}"), ("stitch_fps", "stitch fps", "{:.1f}"),
+    ("fps_ratio", "stitch / transcode", "{:.2f}"), ("setup_s", "estimate s", "{:.1f}"),
+    ("decode_ms", "decode ms/frame", "{:.1f}"), ("composite_ms", "composite ms/frame", "{:.1f}"),
+    ("encode_ms", "encode ms/frame", "{:.1f}"), ("warp_ms", "Warp composite ms", "{:.1f}"),
+    ("opencv_ms", "OpenCV ref ms", "{:.1f}"), ("kernel_ratio", "Warp / OpenCV", "{:.2f}"),
+    ("max_diff", "max diff", "{}"), ("rss_mib", "peak RSS MiB", "{:.0f}"),
+)
+
+
+def format_table(rows: list[dict], markdown: bool = False) -> str:
+    """The rows as a Markdown table or as aligned plain text."""
+    cells = [[header for _, header, _ in COLUMNS]] + [[fmt.format(row[key]) for key, _, fmt in COLUMNS] for row in rows]
+    if markdown:
+        lines = ["| " + " | ".join(r) + " |" for r in cells]
+        lines.insert(1, "|" + "|".join("---" if i < 2 else "---:" for i in range(len(COLUMNS))) + "|")
+        return "\n".join(lines)
+    widths = [max(len(r[i]) for r in cells) for i in range(len(COLUMNS))]
+    return "\n".join("  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in cells)
+
+
+def run_bench(sizes: list[str], seconds: float, work: Path, device: str = Config.device,
+              data_dir: Path = DATA_DIR, settings: BenchSettings = BenchSettings()) -> list[dict]:
+    """Benchmark every size (labels as :func:`parse_size` takes); one row dict per size (keys: COLUMNS)."""
+    pair = pair_paths(data_dir)
+    work.mkdir(parents=True, exist_ok=True)
+    cfg = Config(device=device)
+    return [bench_size(*parse_size(size), seconds, work, pair, cfg, settings) for size in sizes]
+
+
+def machine_line() -> str:
+    """CPU count, load average and date: the conditions the figures were taken under."""
+    load = ", ".join(f"{v:.2f}" for v in os.getloadavg())
+    return f"{os.cpu_count()} CPUs, load average {load}, {time.strftime('%Y-%m-%d %H:%M %Z')}"
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    """``sena-warp bench``: print the table (and write it as Markdown with --markdown)."""
+    rows = run_bench(args.sizes, args.seconds, Path(args.work), args.device, Path(args.data))
+    rss_rows = [measure_rss(seconds, Path(args.work), args.device, Path(args.data)) for seconds in args.rss]
+    text = format_table(rows)
+    print(f"sena-warp bench: {machine_line()}\n{text}")
+    for rss in rss_rows:
+        print(f"peak RSS, 1080p {rss['seconds']:g} s ({rss['frames']} frames): {rss['rss_mib']:.0f} MiB")
+    if args.markdown:
+        with atomic_output(args.markdown) as tmp:
+            lines = [f"Machine: {machine_line()}", "", format_table(rows, markdown=True), ""]
+            lines += [f"- peak RSS of `sena-warp video`, 1080p {r['seconds']:g} s ({r['frames']} frames): "
+                      f"{r['rss_mib']:.0f} MiB" for r in rss_rows]
+            tmp.write_text("\n".join(lines) + "\n")
+    return 0
+
+
+def measure_rss(seconds: float, work: Path, device: str = Config.device, data_dir: Path = DATA_DIR) -> dict:
+    """Peak RSS (MiB) of ``sena-warp video`` on 1080p clips of ``seconds`` (child process)."""
+    left, right = make_clip_pair(pair_paths(data_dir), work, SIZES["1080p"], seconds)
+    report = stitch_in_child(left, right, work / f"rss_{seconds:g}s.mp4", device)
+    return {"seconds": seconds, "frames": report["frames_out"], "rss_mib": report["max_rss_mib"]}
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    """Add the ``bench`` subcommand to the ``sena-warp`` subparsers."""
+    p = subparsers.add_parser("bench", help="frame-rate benchmark: transcode baseline vs stitch, per stage, kernel")
+    p.add_argument("--sizes", nargs="+", default=list(SIZES), metavar="SIZE",
+                   help="clip sizes: 720p, 1080p, 4k or WIDTHxHEIGHT (default: all three)")
+    p.add_argument("--seconds", type=float, default=10.0, help="clip length in seconds (default: %(default)s)")
+    p.add_argument("--markdown", metavar="FILE", help="also write the table as Markdown")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default=Config.device,
+                   help="where the Warp kernels run (default: %(default)s)")
+    p.add_argument("--work", default="bench_work", help="folder for the clips and outputs (default: %(default)s)")
+    p.add_argument("--data", default=str(DATA_DIR), help="the shared data set (default: %(default)s)")
+    p.add_argument("--rss", type=float, nargs="*", default=[], metavar="S",
+                   help="also measure the peak RSS of 1080p stitches of these lengths in seconds (e.g. 10 60)")
+    p.set_defaults(run=cmd_bench)
+    return p
