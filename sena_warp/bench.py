@@ -213,22 +213,29 @@ class OpenCVFrameReference:
         return self.luma.apply(y_src, y_tgt), uv[:, :, 0], uv[:, :, 1]
 
 
-def _median_ms(call, repeats: int, warmup: int) -> float:
+def time_calls(call, repeats: int, warmup: int) -> tuple[float, float]:
+    """(median wall ms, mean process CPU ms) per call of ``call``.
+
+    CPU time counts every thread of this process (Warp bands, OpenCV workers) and not other
+    processes' load, so it is the steadier figure on a shared machine.
+    """
     for _ in range(warmup):
         call()
-    times = []
+    wall = []
+    cpu0 = time.process_time()
     for _ in range(repeats):
         t0 = time.perf_counter()
         call()
-        times.append(time.perf_counter() - t0)
-    return 1000.0 * float(np.median(times))
+        wall.append(time.perf_counter() - t0)
+    return 1000.0 * float(np.median(wall)), 1000.0 * (time.process_time() - cpu0) / repeats
 
 
 def compare_compositing(left: Path, right: Path, cfg: Config, settings: BenchSettings = BenchSettings()) -> dict:
     """Per-frame compositing time of the Warp path and of the OpenCV reference on the first frame pair.
 
     Maps come from the same first estimate ``sena-warp video`` makes. Returns ``warp_ms``,
-    ``opencv_ms``, their ``ratio`` and ``max_diff`` (grey levels, over Y, U, V).
+    ``opencv_ms`` (median wall), ``warp_cpu_ms``, ``opencv_cpu_ms`` (mean process CPU), ``ratio`` /
+    ``cpu_ratio`` (Warp / OpenCV) and ``max_diff`` (grey levels, over Y, U, V).
     """
     from .video.estimate import best_first_estimate
     from .video.reader import FrameReader
@@ -241,11 +248,14 @@ def compare_compositing(left: Path, right: Path, cfg: Config, settings: BenchSet
     planes = (frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
     shape_src, shape_tgt = (f.y.shape for f in compositor.rig.pick(frame_l, frame_r))
     reference = OpenCVFrameReference(compositor, shape_src, shape_tgt)
-    warp_ms = _median_ms(lambda: compositor.composite_yuv(*planes), settings.kernel_repeats, settings.kernel_warmup)
-    opencv_ms = _median_ms(lambda: reference.composite_yuv(*planes), settings.kernel_repeats, settings.kernel_warmup)
+    warp_ms, warp_cpu_ms = time_calls(lambda: compositor.composite_yuv(*planes), settings.kernel_repeats,
+                                      settings.kernel_warmup)
+    opencv_ms, opencv_cpu_ms = time_calls(lambda: reference.composite_yuv(*planes), settings.kernel_repeats,
+                                          settings.kernel_warmup)
     diff = max(int(np.abs(a.astype(np.int16) - b).max())
                for a, b in zip(compositor.composite_yuv(*planes), reference.composite_yuv(*planes)))
-    return {"warp_ms": warp_ms, "opencv_ms": opencv_ms, "ratio": warp_ms / opencv_ms, "max_diff": diff,
+    return {"warp_ms": warp_ms, "opencv_ms": opencv_ms, "ratio": warp_ms / opencv_ms, "warp_cpu_ms": warp_cpu_ms,
+            "opencv_cpu_ms": opencv_cpu_ms, "cpu_ratio": warp_cpu_ms / opencv_cpu_ms, "max_diff": diff,
             "canvas": compositor.output_size}
 
 
@@ -267,6 +277,8 @@ def bench_size(label: str, size: tuple[int, int], seconds: float, work: Path, pa
         "decode_ms": 1000 * decode_s / frames, "composite_ms": 1000 * timing["composite"] / frames,
         "encode_ms": 1000 * timing["encode"] / frames, "warp_ms": compositing["warp_ms"],
         "opencv_ms": compositing["opencv_ms"], "kernel_ratio": compositing["ratio"],
+        "warp_cpu_ms": compositing["warp_cpu_ms"], "opencv_cpu_ms": compositing["opencv_cpu_ms"],
+        "kernel_cpu_ratio": compositing["cpu_ratio"],
         "max_diff": compositing["max_diff"], "rss_mib": stitch["max_rss_mib"],
     }
 
@@ -278,6 +290,8 @@ COLUMNS = (  # (key, header, format)
     ("decode_ms", "decode ms/frame", "{:.1f}"), ("composite_ms", "composite ms/frame", "{:.1f}"),
     ("encode_ms", "encode ms/frame", "{:.1f}"), ("warp_ms", "Warp composite ms", "{:.1f}"),
     ("opencv_ms", "OpenCV ref ms", "{:.1f}"), ("kernel_ratio", "Warp / OpenCV", "{:.2f}"),
+    ("warp_cpu_ms", "Warp CPU ms", "{:.1f}"), ("opencv_cpu_ms", "OpenCV CPU ms", "{:.1f}"),
+    ("kernel_cpu_ratio", "Warp / OpenCV (CPU)", "{:.2f}"),
     ("max_diff", "max diff", "{}"), ("rss_mib", "peak RSS MiB", "{:.0f}"),
 )
 

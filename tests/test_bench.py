@@ -1,0 +1,121 @@
+"""Benchmark (issue 6): clip maker, a tiny bench run, and the fairness of the compositing comparison.
+
+The Warp compositor (fixed point) is checked against the float kernel it replaces on the per-frame
+path, and against the OpenCV reference the benchmark times it with, on the same real images and maps.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import warp as wp
+
+from sena_warp.bench import COLUMNS, OpenCVReference, make_clip_pair, pan_window, parse_size, run_bench
+from sena_warp.composite import Compositor
+from sena_warp.errors import InputError
+from sena_warp.kernels import runtime
+from sena_warp.kernels.composite import composite_kernel
+from sena_warp.video.reader import FrameReader, probe_video
+from test_kernels_remap import scene  # noqa: F401  (a fixture)
+
+INTER_STEPS = 32  # cv2.remap's sub-pixel resolution (INTER_BITS = 5)
+
+
+def float_composite(img_src, img_tgt, map_src, map_tgt, alpha):
+    """The float kernel (``composite_kernel``) on uint8 (H, W, C) images: (out (Hc, Wc, C), coverage)."""
+    hc, wc = alpha.shape
+    out = wp.zeros((hc, wc, img_src.shape[2]), dtype=wp.uint8, device="cpu")
+    coverage = wp.zeros((hc, wc), dtype=wp.uint8, device="cpu")
+    inputs = [wp.array(img_src, dtype=wp.uint8, device="cpu"), wp.array(img_tgt, dtype=wp.uint8, device="cpu"),
+              wp.array(map_src, dtype=wp.vec2, device="cpu"), wp.array(map_tgt, dtype=wp.vec2, device="cpu"),
+              wp.array(alpha, dtype=float, device="cpu"), out, coverage]
+    runtime.launch_rows(composite_kernel, hc, wc, inputs, "cpu", 2)
+    return out.numpy(), coverage.numpy()
+
+
+@pytest.fixture(scope="module")
+def pair(shared_dir):
+    return tuple(shared_dir / "pairs" / "rew_lawn_2160" / name for name in ("a.jpg", "b.jpg"))
+
+
+def test_clip_maker_makes_decodable_panning_clips(pair, tmp_path):
+    left, right = make_clip_pair(pair, tmp_path, (160, 96), 1.0)
+    for path in (left, right):
+        info = probe_video(path)
+        assert (info.width, info.height, info.fps) == (160, 96, 30)
+        with FrameReader(path) as reader:
+            frames = list(reader)
+        assert len(frames) == 30 and frames[0].y.shape == (96, 160)
+        # The window pans: the first and last frames show different parts of the view.
+        assert np.abs(frames[0].y.astype(int) - frames[-1].y).mean() > 5
+    with FrameReader(left) as reader_l, FrameReader(right) as reader_r:
+        first_l, first_r = next(iter(reader_l)), next(iter(reader_r))
+    assert np.abs(first_l.y.astype(int) - first_r.y).mean() > 5  # two different views
+    # A second call reuses the clips rather than re-encoding them.
+    stamp = left.stat().st_mtime_ns
+    assert make_clip_pair(pair, tmp_path, (160, 96), 1.0) == (left, right) and left.stat().st_mtime_ns == stamp
+
+
+def test_pan_window_stays_inside_and_moves():
+    start, end = pan_window((1440, 2160), 16 / 9, 0.85, 0.0), pan_window((1440, 2160), 16 / 9, 0.85, 1.0)
+    x0, y0, w, h = end
+    assert start[:2] == (0, 0) and start[2:] == end[2:]
+    assert x0 > 0 and y0 > 0 and x0 + w <= 2160 and y0 + h <= 1440
+    assert abs(w / h - 16 / 9) < 0.01
+
+
+def test_bench_tiny_run_fills_every_column(shared_dir, tmp_path):
+    rows = run_bench(["192x108"], 1.0, tmp_path, "cpu", shared_dir)
+    assert len(rows) == 1
+    row = rows[0]
+    assert set(key for key, _, _ in COLUMNS) <= set(row)
+    assert row["frames"] == 30 and row["clip"] == "192x108"
+    for key in ("baseline_fps", "stitch_fps", "warp_ms", "opencv_ms", "warp_cpu_ms", "rss_mib", "encode_ms"):
+        assert math.isfinite(row[key]) and row[key] > 0, key
+    # Both compositors ran on the same planes and maps: real maps are not on cv2's 1/32 px grid, so
+    # a few edge pixels may differ by more than 1, but never wildly.
+    assert row["max_diff"] <= 8
+
+
+def test_bench_sizes_and_missing_data(tmp_path):
+    assert parse_size("1080p") == ("1080p", (1920, 1080)) and parse_size("4K")[1] == (3840, 2160)
+    assert parse_size("320x180") == ("320x180", (320, 180))
+    with pytest.raises(InputError, match="size"):
+        parse_size("321x180")
+    with pytest.raises(InputError, match="shared data"):
+        run_bench(["320x180"], 1.0, tmp_path, "cpu", tmp_path / "nowhere")
+
+
+@pytest.mark.parametrize("channels", [1, 2])
+def test_opencv_reference_agrees_with_warp_compositor(scene, channels, warp_device):  # noqa: F811
+    """Fairness of the benchmark: both compositors compute the same thing (maps on cv2's 1/32 px grid)."""
+    img_src, img_tgt, map_src, map_tgt, alpha = scene
+    map_src = (np.round(map_src * INTER_STEPS) / INTER_STEPS).astype(np.float32)
+    map_src[:40, :40] = np.nan  # a NaN patch: nothing sampled from the source there
+    plane_src = np.ascontiguousarray(img_src[:, :, :channels])
+    plane_tgt = np.ascontiguousarray(img_tgt[:, :, :channels])
+    fill = (16, 128)[:channels]
+    reference = OpenCVReference(map_src, map_tgt, alpha, plane_src.shape[:2], plane_tgt.shape[:2], fill)
+    expected = reference.apply(plane_src, plane_tgt).reshape(*alpha.shape, channels)
+    out, coverage = Compositor(map_src, map_tgt, alpha, warp_device, threads=2).apply(plane_src, plane_tgt, fill)
+    out = out.reshape(*alpha.shape, channels)
+    assert (coverage == 0).any() and (coverage > 0).any()
+    assert np.abs(out.astype(int) - expected).max() <= 1
+    np.testing.assert_array_equal(out[coverage == 0], np.broadcast_to(fill, out[coverage == 0].shape))
+
+
+def test_fixed_point_matches_float_kernel(scene, warp_device):  # noqa: F811
+    """The per-frame fixed-point path against the float kernel, copy pixels, blends and edges included."""
+    img_src, img_tgt, map_src, map_tgt, alpha = scene
+    h, w = img_src.shape[:2]
+    map_src = map_src.copy()
+    map_src[0, :, 0], map_src[0, :, 1] = np.linspace(0, w - 1, map_src.shape[1]), h - 1  # bottom edge, exactly
+    map_src[1, :, 0], map_src[1, :, 1] = w - 1, np.linspace(0, h - 1, map_src.shape[1])  # right edge, exactly
+    expected, covered = float_composite(img_src, img_tgt, map_src, map_tgt, alpha)
+    out, coverage = Compositor(map_src, map_tgt, alpha, warp_device, threads=2).apply(img_src, img_tgt)
+    np.testing.assert_array_equal(coverage, covered)
+    assert np.abs(out.astype(int) - expected).max() <= 1
+    # The target map is an integer shift, so where alpha is 0 the output is an exact copy of the target.
+    assert (np.abs(out.astype(int) - expected) == 0).mean() > 0.9
