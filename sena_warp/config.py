@@ -31,14 +31,15 @@ class Config:
 
     # --- Step 2: overlap, canvas, cells c_j ---------------------------------------------------
     max_canvas_area_ratio: float = 4.0  # refuse a canvas larger than this x (area_src + area_tgt)
-    grid_x: int = 2  # G_x: cells across the overlap's bounding box
-    grid_y: int = 2  # G_y: cells down the overlap's bounding box
+    grid_x: int = 6  # G_x: cells across the overlap's bounding box (authors: 2; sweep in evaluation.md)
+    grid_y: int = 6  # G_y: cells down the overlap's bounding box
     min_global_det: float = 0.05  # |det A_glob| below this (or det < 0, a flip): implausible model
     min_overlap_area_px: float = 64.0  # overlap polygon smaller than this (px^2): no overlap
 
     # --- Step 3: local affines T_j ------------------------------------------------------------
+    local_match_px: float = 25.0  # matches within this of A_glob feed steps 3-5 (A_glob itself: ransac_reproj_px)
     alpha: float = 0.35  # alpha: sigma_j = alpha * diag(c_j), Gaussian weight of matches
-    lambda1: float = 0.05  # lambda_1: ridge pull of T_j toward A_glob (normalised coordinates)
+    lambda1: float = 0.005  # lambda_1: ridge pull of T_j toward A_glob (normalised coordinates)
     lambda2: float = 1.0  # lambda_2 > lambda_1: refit strength for unstable cells
     beta: float = 20.0  # beta: conf_j = clip(sum w / (beta * max w), k_min, k_max)
     conf_min: float = 0.2  # k_min
@@ -66,7 +67,7 @@ class Config:
     ramp_diag_ratio: float = 0.10
     sigma_d_ratio: float = 24.0 / 512.0  # sigma_d: density blur, as a fraction of the image's long side
     gamma_p: float = 1.2  # gamma_p: ramp steepness exponent
-    gamma_min: float = 0.30  # gamma_min: gate floor where matches are sparse
+    gamma_min: float = 0.9  # gamma_min: gate floor where matches are sparse (SENA.md: 0.30; sweep)
     sigma_g_px: float = 1.1  # sigma_g: blur of the guarded field
 
     # --- Step 6: warp map ---------------------------------------------------------------------

@@ -1,7 +1,12 @@
 """Step 5: the seam guard G and the guarded field (SENA.md step 5).
 
-G is 0 outside the overlap so the source keeps its global affine shape there, rises over a ramp
-of width b inside it, and is damped (floor gamma_min) where few inliers support the local model.
+G is 0 where the source is shown alone (outside the overlap), so the source keeps its global affine
+shape there; it rises over a ramp of width b from that region's border into the overlap, and is
+damped (floor gamma_min) where few matches support the local model. Only the border with the
+source-only region needs the ramp: across the overlap's other borders (where the source ends, or
+neither image continues) nothing of the source is shown beyond, so the gate simply carries on
+there; a ramp or a step to 0 at those borders would only keep the local alignment from the
+overlap's edge or fold the source where the field drops.
 """
 
 from __future__ import annotations
@@ -20,10 +25,16 @@ def ramp_width_px(diag_px: float, cfg: Config) -> float:
     return max(cfg.ramp_min_px, cfg.ramp_diag_ratio * diag_px)
 
 
-def inside_distance_px(overlap_mask_canvas: np.ndarray) -> np.ndarray:
-    """(H, W) float32 Euclidean distance to the nearest pixel outside the overlap; 0 outside."""
-    mask = np.asarray(overlap_mask_canvas, dtype=bool).astype(np.uint8)
-    return cv2.distanceTransform(mask, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+def open_border_distance_px(source_only_canvas: np.ndarray) -> np.ndarray:
+    """(H, W) float32 distance from each canvas pixel to the nearest source-only pixel (0 on them).
+
+    Without any source-only pixel (the source lies inside the target) every pixel gets the canvas
+    diagonal, so the ramp is 1 everywhere.
+    """
+    open_border = np.asarray(source_only_canvas, dtype=bool)
+    if not open_border.any():
+        return np.full(open_border.shape, float(np.hypot(*open_border.shape)), np.float32)
+    return cv2.distanceTransform((~open_border).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
 
 
 def inlier_density(shape: tuple[int, int], inliers_canvas: np.ndarray, sigma_px: float) -> np.ndarray:
@@ -38,7 +49,7 @@ def inlier_density(shape: tuple[int, int], inliers_canvas: np.ndarray, sigma_px:
 
 
 def gate_canvas(
-    overlap_mask_canvas: np.ndarray,
+    source_only_canvas: np.ndarray,
     inliers_canvas: np.ndarray,
     diag_px: float,
     long_side_px: float,
@@ -46,13 +57,14 @@ def gate_canvas(
 ) -> np.ndarray:
     """Gate G over the canvas: (H, W) float32 in [0, 1].
 
-    ``overlap_mask_canvas`` (H, W) bool; ``inliers_canvas`` (N, 2) float64 (x, y) inlier target
+    ``source_only_canvas`` (H, W) bool where the source is shown alone (``overlap.source_only_mask``);
+    ``inliers_canvas`` (N, 2) float64 (x, y) inlier target
     positions on the canvas; ``diag_px`` and ``long_side_px``: diagonal and long side of the input
     image, which set the ramp b and the density blur sigma_d = cfg.sigma_d_ratio * long side.
     """
-    shape = np.asarray(overlap_mask_canvas).shape
+    shape = np.asarray(source_only_canvas).shape
     device = runtime.resolve_device(cfg.device)
-    sdf = wp.array(inside_distance_px(overlap_mask_canvas), dtype=float, device=device)
+    sdf = wp.array(open_border_distance_px(source_only_canvas), dtype=float, device=device)
     density_np = inlier_density(shape, inliers_canvas, cfg.sigma_d_ratio * long_side_px)
     density = wp.array(density_np, dtype=float, device=device)
     gate = wp.zeros(shape, dtype=float, device=device)

@@ -123,3 +123,12 @@ def fit_global_affine(pts_src: np.ndarray, pts_tgt: np.ndarray, cfg: Config) -> 
         n_matches=n_matches,
         n_inliers=n_inliers,
     )
+
+
+def near_model(affine_src_to_tgt: np.ndarray, pts_src: np.ndarray, pts_tgt: np.ndarray, max_px: float) -> np.ndarray:
+    """(N,) bool: matches whose target point lies within ``max_px`` of where ``affine_src_to_tgt`` puts
+    their source point. With ``max_px`` above the RANSAC threshold this keeps the parallax matches
+    the local affines are there to follow (step 3), while A_glob itself stays a strict fit."""
+    residual = apply_affine(affine_src_to_tgt, pts_src) - np.asarray(pts_tgt, dtype=np.float64)
+    return np.hypot(residual[:, 0], residual[:, 1]) <= max_px
+

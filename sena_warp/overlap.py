@@ -192,3 +192,13 @@ def plan_overlap(
         mask_canvas=convex_polygon_mask(polygon_canvas, canvas.shape),
         corners_src_canvas=canvas.tgt_to_canvas(corners_src_tgt),
     )
+
+
+def source_only_mask(overlap: Overlap) -> np.ndarray:
+    """(H, W) bool canvas pixels covered by the globally placed source but not by the target.
+
+    There the source is shown alone with its global-affine shape, so the overlap's border with this
+    region is the only one across which the warp must stay continuous (the gate's ramp, step 5).
+    """
+    return convex_polygon_mask(overlap.corners_src_canvas, overlap.canvas.shape) & ~overlap.mask_canvas
+

@@ -23,9 +23,9 @@ from .config import Config
 from .features import Matches, match_images
 from .ffd import ffd_field_canvas
 from .gate import gate_canvas, guard_field
-from .global_affine import GlobalAffine, fit_global_affine
+from .global_affine import GlobalAffine, fit_global_affine, near_model
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
-from .overlap import Overlap, plan_overlap
+from .overlap import Overlap, plan_overlap, source_only_mask
 from .partition import SeamMaps, seam_maps
 from .rig import Rig, detect_rig, image_to_working, map_from_working, points_to_working
 from .warp_map import forward_points, source_map_canvas, warp_image
@@ -100,12 +100,14 @@ def estimate_warp(img_src: np.ndarray, img_tgt: np.ndarray, pts_src: np.ndarray,
     """SENA steps 1-6 ("Locally adaptive image warping") in the working frame."""
     glob = clock.run("global_affine", fit_global_affine, pts_src, pts_tgt, cfg)
     inl_src, inl_tgt = pts_src[glob.inliers], pts_tgt[glob.inliers]
+    near = near_model(glob.affine_src_to_tgt, pts_src, pts_tgt, cfg.local_match_px)
+    near_src, near_tgt = pts_src[near], pts_tgt[near]
     overlap = clock.run("overlap", plan_overlap, img_src.shape, img_tgt.shape, glob.affine_src_to_tgt, cfg)
     cells = clock.run("cells", grid_cells, overlap, cfg)
-    local = clock.run("local_affines", fit_local_affines, inl_src, inl_tgt, glob.affine_src_to_tgt, cells, cfg)
+    local = clock.run("local_affines", fit_local_affines, near_src, near_tgt, glob.affine_src_to_tgt, cells, cfg)
     field = clock.run("ffd", ffd_field_canvas, overlap.canvas, glob.affine_src_to_tgt, local.affines_src_to_tgt,
                       local.centres_tgt, local.conf, sigma_f(local, cfg), cfg)
-    gate = clock.run("gate", gate_canvas, overlap.mask_canvas, overlap.canvas.tgt_to_canvas(inl_tgt),
+    gate = clock.run("gate", gate_canvas, source_only_mask(overlap), overlap.canvas.tgt_to_canvas(near_tgt),
                      _diagonal_px(img_src, img_tgt), max(*img_src.shape[:2], *img_tgt.shape[:2]), cfg)
     map_src = clock.run("warp_map", source_map_canvas, overlap.canvas, glob.affine_src_to_tgt,
                         guard_field(field, gate, cfg))

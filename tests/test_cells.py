@@ -12,7 +12,7 @@ from sena_warp.config import Config
 from sena_warp.global_affine import fit_global_affine
 from sena_warp.overlap import Overlap, convex_polygon_mask, plan_overlap
 
-CFG = Config()
+CFG = Config(grid_x=2, grid_y=2)  # the hand-made cases below are laid out for a 2 x 2 grid
 
 
 def _overlap_from_polygon(polygon_tgt: np.ndarray, canvas: Canvas) -> Overlap:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sena_warp.config import Config
-from sena_warp.gate import gate_canvas, guard_field, inlier_density, inside_distance_px, ramp_width_px
+from sena_warp.gate import gate_canvas, guard_field, inlier_density, open_border_distance_px, ramp_width_px
 from test_kernels_maps import gate_reference, load_pair, scene_geometry, smooth_field
 
 
@@ -26,7 +26,7 @@ def setup(shared_dir):
     pick = rng.choice(np.flatnonzero(upper), size=300, replace=False)
     inliers_canvas = np.stack([xs[pick], ys[pick]], axis=1).astype(np.float64)
     diag, long_side = math.hypot(w, h), max(w, h)
-    gate = gate_canvas(mask, inliers_canvas, diag, long_side, Config())
+    gate = gate_canvas(geo["source_only_canvas"], inliers_canvas, diag, long_side, Config())
     return geo, mask, inliers_canvas, diag, long_side, gate
 
 
@@ -36,22 +36,38 @@ def test_ramp_width():
     assert ramp_width_px(1000.0, cfg) == pytest.approx(cfg.ramp_diag_ratio * 1000.0)
 
 
-def test_gate_matches_formula_and_is_zero_outside_overlap(setup):
+def test_gate_matches_formula_and_is_zero_where_the_source_is_alone(setup):
     geo, mask, inliers_canvas, diag, long_side, gate = setup
     cfg = Config()
+    source_only = geo["source_only_canvas"]
     assert gate.shape == mask.shape and gate.dtype == np.float32
-    sdf = inside_distance_px(mask)
+    sdf = open_border_distance_px(source_only)
     density = inlier_density(mask.shape, inliers_canvas, cfg.sigma_d_ratio * long_side)
     assert density.max() == pytest.approx(1.0)
     np.testing.assert_allclose(gate, gate_reference(sdf, density, ramp_width_px(diag, cfg), cfg), atol=1e-5)
-    assert gate[~mask].max() == 0.0
-    assert 0.0 <= gate.min() and gate.max() <= 1.0
+    assert gate[source_only].max() == 0.0
+    assert 0.0 <= gate.min() and gate.max() <= 1.0 + 1e-6  # float32 rounding of gamma_min + (1 - gamma_min)
+
+
+def test_ramp_starts_only_at_the_source_only_border(setup):
+    geo, mask, inliers_canvas, diag, long_side, gate = setup
+    cfg = Config()
+    sdf = open_border_distance_px(geo["source_only_canvas"])
+    # Overlap pixels on the overlap's right border (where the source ends, target continues) are far
+    # from the source-only region: the gate is not pulled to 0 there.
+    right_edge = mask & ~np.roll(mask, -1, axis=1)
+    far_edge = right_edge & (sdf > ramp_width_px(diag, cfg))
+    assert far_edge.any() and gate[far_edge].min() >= cfg.gamma_min * 0.99
+    # Next to the source-only region the gate is 0 and rises over the ramp.
+    near = mask & (sdf < 2.0)
+    assert gate[near].max() < 0.01
+    assert open_border_distance_px(np.zeros((5, 7), bool)).min() == pytest.approx(np.hypot(5, 7))
 
 
 def test_gate_is_high_where_supported_and_floored_where_sparse(setup):
     geo, mask, inliers_canvas, diag, long_side, gate = setup
     cfg = Config()
-    deep = inside_distance_px(mask) >= ramp_width_px(diag, cfg)
+    deep = mask & (open_border_distance_px(geo["source_only_canvas"]) >= ramp_width_px(diag, cfg))
     ys = np.nonzero(deep)[0]
     upper, lower = np.percentile(ys, 25), np.percentile(ys, 90)
     rows = np.arange(mask.shape[0])[:, None]

@@ -73,6 +73,7 @@ def scene_geometry(shape_src: tuple, shape_tgt: tuple, seed: int = 0) -> dict:
         "affine_src_to_tgt": affine_src_to_tgt,
         "canvas": canvas,
         "overlap_mask_canvas": overlap_mask,
+        "source_only_canvas": src_mask.astype(bool) & ~tgt_mask.astype(bool),
         "affines_src_to_tgt": local,
         "centres_tgt": canvas.canvas_to_tgt(centres_canvas),
         "conf": rng.uniform(0.2, 1.5, size=4),

@@ -12,7 +12,7 @@ from sena_warp.global_affine import apply_affine, fit_global_affine, invert_affi
 from sena_warp.local_affine import confidence, fit_local_affines, sigma_f
 from sena_warp.overlap import plan_overlap
 
-CFG = Config()
+CFG = Config(grid_x=2, grid_y=2)  # the hand-made cases below are laid out for a 2 x 2 grid
 IDENTITY = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 # One affine (tgt -> src, so the data are built from target positions) per quadrant of a
 # 1000 x 1000 target fully covered by the source; they differ by up to ~25 px.

@@ -29,7 +29,7 @@ def pipeline(shared_dir):
     pick = np.random.default_rng(2).choice(xs.size, size=400, replace=False)
     inliers_canvas = np.stack([xs[pick], ys[pick]], axis=1).astype(np.float64)
     h, w = img_tgt.shape[:2]
-    gate = gate_canvas(geo["overlap_mask_canvas"], inliers_canvas, math.hypot(w, h), max(w, h), cfg)
+    gate = gate_canvas(geo["source_only_canvas"], inliers_canvas, math.hypot(w, h), max(w, h), cfg)
     guarded = guard_field(field, gate, cfg)
     map_src = source_map_canvas(canvas, geo["affine_src_to_tgt"], guarded, cfg)
     return img_src, img_tgt, geo, gate, guarded, map_src
