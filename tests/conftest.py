@@ -36,3 +36,12 @@ def warp_device() -> str:
 
     runtime.prewarm("cpu")
     return "cpu"
+
+
+@pytest.fixture
+def dirs(tmp_path):
+    """(input folder, output folder), both empty: tests check that nothing is left in the output one."""
+    folder_in, folder_out = tmp_path / "in", tmp_path / "out"
+    folder_in.mkdir()
+    folder_out.mkdir()
+    return folder_in, folder_out

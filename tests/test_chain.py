@@ -100,7 +100,7 @@ def test_keypoint_chain_on_real_image_with_known_shift(shared_dir):
     anchors_src, anchors_tgt = keypoint_chain(zone, pts_src, pts_tgt, grey_src, grey_tgt, mask, Config())
     # edge extensions first and last, on the overlap's top and bottom rows
     assert anchors_tgt[0, 1] == 10.0 and anchors_tgt[-1, 1] == 499.0
-    inner_src, inner_tgt = anchors_src[1:-1], anchors_tgt[1:-1]
+    inner_tgt = anchors_tgt[1:-1]
     assert len(inner_tgt) >= 5
     assert np.all(np.diff(anchors_tgt[:, 1]) > 0)
     x_int = np.rint(inner_tgt[:, 0])

@@ -1,7 +1,6 @@
 import json
 
 import cv2
-import numpy as np
 import pytest
 
 from sena_warp.cli import main

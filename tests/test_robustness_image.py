@@ -23,6 +23,7 @@ from sena_warp.errors import GeometryError, InputError, MatchError, OutputError,
 from sena_warp.features import Matches
 from sena_warp.imageio import atomic_output, check_output_path, read_image, to_bgr8
 from sena_warp.stitch import stitch_images
+from helpers import run_cli
 
 ERROR_PREFIX = "sena-warp: error: "
 
@@ -36,22 +37,6 @@ def pair(bundled_dir):
 @pytest.fixture(scope="module")
 def img_a(pair):
     return cv2.imread(pair[0], cv2.IMREAD_COLOR)
-
-
-@pytest.fixture
-def dirs(tmp_path):
-    folder_in, folder_out = tmp_path / "in", tmp_path / "out"
-    folder_in.mkdir()
-    folder_out.mkdir()
-    return folder_in, folder_out
-
-
-def run_cli(argv, capfd, warp_device):
-    """(exit code, stderr lines, stdout) of ``sena-warp argv`` on the session's Warp device."""
-    capfd.readouterr()
-    rc = main([*argv, "--device", warp_device])
-    captured = capfd.readouterr()
-    return rc, captured.err.splitlines(), captured.out
 
 
 def assert_one_line_error(err_lines, *words):

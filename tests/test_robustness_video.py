@@ -24,10 +24,10 @@ import av
 import numpy as np
 import pytest
 
-from sena_warp.cli import main
 from sena_warp.errors import InputError, OutputError, VideoError
 from sena_warp.video import reader as video_reader
 from sena_warp.video.writer import VideoWriter
+from helpers import run_cli
 
 ERROR_PREFIX = "sena-warp: error: "
 CLIP_FRAMES = {"rooftop_left": 60, "rooftop_right": 63}  # 2.0 s and 2.1 s at 30 fps (see test_video_reader)
@@ -38,22 +38,6 @@ FAST = ["--audio", "none", "--crf", "35"]  # the cases are about failures and co
 def clips(bundled_dir):
     d = bundled_dir / "video"
     return d / "rooftop_left.mp4", d / "rooftop_right.mp4"
-
-
-@pytest.fixture
-def dirs(tmp_path):
-    folder_in, folder_out = tmp_path / "in", tmp_path / "out"
-    folder_in.mkdir()
-    folder_out.mkdir()
-    return folder_in, folder_out
-
-
-def run_cli(argv, capfd, warp_device):
-    """(exit code, stderr lines, stdout) of ``sena-warp video argv`` on the session's Warp device."""
-    capfd.readouterr()
-    rc = main(["video", *map(str, argv), "--device", warp_device])
-    captured = capfd.readouterr()
-    return rc, captured.err.splitlines(), captured.out
 
 
 def assert_one_line_error(err_lines, *words):
@@ -136,7 +120,7 @@ def decoded_count(path) -> int:
 def stitch_ok(argv, folder_out, capfd, warp_device):
     """Run a stitch that must succeed; return (report, output path)."""
     out, report_path = folder_out / "pano.mp4", folder_out / "report.json"
-    rc, err, _ = run_cli([*argv, "-o", out, "--report", report_path, *FAST], capfd, warp_device)
+    rc, err, _ = run_cli(["video", *argv, "-o", out, "--report", report_path, *FAST], capfd, warp_device)
     assert rc == 0, err
     assert err == []
     return json.loads(report_path.read_text()), out
@@ -152,7 +136,7 @@ def test_input_without_video_is_refused_in_one_line(case, clips, bundled_dir, di
         "png_image": lambda: bundled_dir / "graf_gt" / "a.png",
         "jpeg_image": lambda: bundled_dir / "udisd_test_000001" / "a.jpg",
     }[case]()
-    rc, err, _ = run_cli([clips[0], bad, "-o", folder_out / "pano.mp4"], capfd, warp_device)
+    rc, err, _ = run_cli(["video", clips[0], bad, "-o", folder_out / "pano.mp4"], capfd, warp_device)
     assert rc == VideoError.exit_code
     assert_one_line_error(err, str(bad), "give a video file")
     assert ("no video stream" if case == "audio_only_aac" else "is an image") in err[0]
@@ -198,7 +182,7 @@ def test_truncated_file_with_index_at_the_end_cannot_be_opened(clips, dirs, capf
     folder_in, folder_out = dirs
     assert top_level_box(clips[1].read_bytes(), b"mdat")[0] < clips[1].read_bytes().find(b"moov")
     cut = truncated(clips[1], folder_in / "cut.mp4")
-    rc, err, _ = run_cli([clips[0], cut, "-o", folder_out / "pano.mp4"], capfd, warp_device)
+    rc, err, _ = run_cli(["video", clips[0], cut, "-o", folder_out / "pano.mp4"], capfd, warp_device)
     assert rc == InputError.exit_code
     assert_one_line_error(err, str(cut), "not a readable media file", "may be truncated or corrupt")
     assert list(folder_out.iterdir()) == []
@@ -235,7 +219,7 @@ def test_much_shorter_input_stitches_the_overlap_in_time(short_side, clips, dirs
 @pytest.mark.parametrize("offset", ["5", "-2.5"])
 def test_inputs_that_do_not_overlap_in_time_are_refused(offset, clips, dirs, capfd, warp_device):
     _, folder_out = dirs
-    rc, err, _ = run_cli([*clips, "-o", folder_out / "pano.mp4", "--offset", offset], capfd, warp_device)
+    rc, err, _ = run_cli(["video", *clips, "-o", folder_out / "pano.mp4", "--offset", offset], capfd, warp_device)
     assert rc == VideoError.exit_code
     assert_one_line_error(err, "no frames overlap in time", f"offset {float(offset)} s", "--offset")
     assert list(folder_out.iterdir()) == []
@@ -283,7 +267,7 @@ def encoder_fails(monkeypatch):
 def test_ctrl_c_while_encoding_exits_130_and_leaves_nothing(clips, dirs, capfd, warp_device, encoder_fails):
     _, folder_out = dirs
     encoder_fails(KeyboardInterrupt)
-    rc, err, _ = run_cli([*clips, "-o", folder_out / "pano.mp4", "--report", folder_out / "r.json"],
+    rc, err, _ = run_cli(["video", *clips, "-o", folder_out / "pano.mp4", "--report", folder_out / "r.json"],
                          capfd, warp_device)
     assert rc == 130
     assert err == ["sena-warp: interrupted"]
@@ -295,7 +279,7 @@ def test_crash_while_encoding_propagates_and_leaves_nothing(clips, dirs, capfd, 
     _, folder_out = dirs
     encoder_fails(RuntimeError)
     with pytest.raises(RuntimeError, match="stopped while encoding"):  # a traceback, exit 1, as an uncaught error
-        run_cli([*clips, "-o", folder_out / "pano.mp4"], capfd, warp_device)
+        run_cli(["video", *clips, "-o", folder_out / "pano.mp4"], capfd, warp_device)
     assert list(folder_out.iterdir()) == []
     assert no_decoder_threads()
 
@@ -327,7 +311,7 @@ def test_bad_output_path_is_refused_before_decoding(case, clips, dirs, capfd, wa
     args = make_args(folder_out)
     before = sorted(p.name for p in folder_out.iterdir())
     inputs_before = [p.read_bytes() for p in clips]
-    rc, err, _ = run_cli([*clips, *args], capfd, warp_device)
+    rc, err, _ = run_cli(["video", *clips, *args], capfd, warp_device)
     assert rc == OutputError.exit_code
     assert_one_line_error(err, *words)
     assert sorted(p.name for p in folder_out.iterdir()) == before  # no video, no temp file

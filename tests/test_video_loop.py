@@ -19,8 +19,9 @@ import pytest
 from sena_warp.errors import InputError, VideoError
 from sena_warp.video.loop import VideoOptions, run_video, write_report
 from sena_warp.video.pairing import pair_times
-from sena_warp.video.reader import FrameReader, YuvFrame, probe_video
+from sena_warp.video.reader import YuvFrame, probe_video
 from sena_warp.video.writer import VideoWriter, choose_codec
+from helpers import decoded_frames, stream_spans
 
 
 class SideBySide:
@@ -67,28 +68,6 @@ QUIET = VideoOptions(progress=False)
 @pytest.fixture(scope="module")
 def clips(bundled_dir) -> Path:
     return bundled_dir / "video"
-
-
-def decoded_frames(path) -> list[YuvFrame]:
-    with FrameReader(path) as reader:
-        return list(reader)
-
-
-def stream_spans(path) -> dict:
-    """Per stream type: (number of video frames or audio packets, list of pts as exact seconds, end s)."""
-    spans = {}
-    with av.open(str(path)) as c:
-        for stream in c.streams:
-            times, end = [], Fraction(0)
-            for packet in c.demux(stream):
-                if packet.pts is None:
-                    continue
-                t = packet.pts * Fraction(stream.time_base)
-                times.append(t)
-                end = max(end, t + packet.duration * Fraction(stream.time_base))
-            spans[stream.type] = (len(times), sorted(times), end)
-            c.seek(0)
-    return spans
 
 
 def mean_abs_diff(a: np.ndarray, b: np.ndarray) -> float:

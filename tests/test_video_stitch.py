@@ -13,7 +13,6 @@ import math
 from fractions import Fraction
 from pathlib import Path
 
-import av
 import numpy as np
 import pytest
 
@@ -23,9 +22,10 @@ from sena_warp.video.loop import VideoOptions
 from sena_warp.video.estimate import rejection_reason
 from sena_warp.video.maps import PlaneMaps, chroma_positions, lerp_maps, map_change_px, seam_change_px, target_map
 from sena_warp.video.pairing import pair_times
-from sena_warp.video.reader import FrameReader, YuvFrame
+from sena_warp.video.reader import YuvFrame
 from sena_warp.video.stitch import stitch_videos
 from sena_warp.video.writer import VideoWriter
+from helpers import decoded_frames, stream_spans
 
 CFG = Config(device="cpu")
 FAST = CFG.replace(video_estimate_pairs=2)  # fewer first-pair tries where the test is not about them
@@ -35,28 +35,6 @@ AWAY_FROM_SEAM_PX = 8  # margin beyond the transition band where the output must
 @pytest.fixture(scope="module")
 def clips(bundled_dir) -> Path:
     return bundled_dir / "video"
-
-
-def decoded_frames(path) -> list[YuvFrame]:
-    with FrameReader(path) as reader:
-        return list(reader)
-
-
-def stream_spans(path) -> dict:
-    """Per stream type: (packet count, sorted pts as exact seconds, end in seconds)."""
-    spans = {}
-    with av.open(str(path)) as c:
-        for stream in c.streams:
-            times, end = [], Fraction(0)
-            for packet in c.demux(stream):
-                if packet.pts is None:
-                    continue
-                t = packet.pts * Fraction(stream.time_base)
-                times.append(t)
-                end = max(end, t + packet.duration * Fraction(stream.time_base))
-            spans[stream.type] = (len(times), sorted(times), end)
-            c.seek(0)
-    return spans
 
 
 def target_region_diff(out: YuvFrame, tgt: YuvFrame, report: dict, cfg: Config) -> float:

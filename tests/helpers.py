@@ -1,0 +1,40 @@
+"""Helpers shared by several test modules (imported as ``helpers``: pytest puts tests/ on sys.path)."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import av
+
+from sena_warp.cli import main
+from sena_warp.video.reader import FrameReader, YuvFrame
+
+
+def decoded_frames(path) -> list[YuvFrame]:
+    with FrameReader(path) as reader:
+        return list(reader)
+
+
+def stream_spans(path) -> dict:
+    """Per stream type: (packet count, sorted pts as exact seconds, end in seconds)."""
+    spans = {}
+    with av.open(str(path)) as c:
+        for stream in c.streams:
+            times, end = [], Fraction(0)
+            for packet in c.demux(stream):
+                if packet.pts is None:
+                    continue
+                t = packet.pts * Fraction(stream.time_base)
+                times.append(t)
+                end = max(end, t + packet.duration * Fraction(stream.time_base))
+            spans[stream.type] = (len(times), sorted(times), end)
+            c.seek(0)
+    return spans
+
+
+def run_cli(argv, capfd, warp_device):
+    """(exit code, stderr lines, stdout) of ``sena-warp argv`` on the session's Warp device."""
+    capfd.readouterr()
+    rc = main([*map(str, argv), "--device", warp_device])
+    captured = capfd.readouterr()
+    return rc, captured.err.splitlines(), captured.out
