@@ -8,7 +8,7 @@ per size and in one run, it measures
 - a transcode-only baseline: decode both clips, place them side by side, encode with the stitcher's
   encoder settings (the same decode threads, pipeline and writer as ``sena-warp video``);
 - ``sena-warp video`` end to end, in a child process (its report gives the fps and the time of each
-  stage; ``os.wait4`` gives its peak RSS);
+  stage; the child's VmHWM its peak RSS);
 - the per-frame compositing (``SenaFrameCompositor.composite_yuv``) against a reference built from
   OpenCV (``cv2.remap`` of both views with maps converted once by ``cv2.convertMaps``, then
   ``cv2.blendLinear``, then the black fill) on the same YUV planes and maps.
@@ -74,7 +74,8 @@ def pair_paths(data_dir: Path) -> tuple[Path, Path]:
     return paths
 
 
-def pan_window(image_shape: tuple[int, int], aspect: float, crop_fraction: float, t: float) -> tuple[int, int, int, int]:
+def pan_window(image_shape: tuple[int, int], aspect: float, crop_fraction: float,
+               t: float) -> tuple[int, int, int, int]:
     """Crop window (x0, y0, width, height) in an image of ``image_shape`` (rows, cols) at pan time t in [0, 1].
 
     The window has the clip's ``aspect`` (width / height) and ``crop_fraction`` of the largest such
@@ -136,20 +137,26 @@ def transcode_baseline(left: Path, right: Path, output: Path, cfg: Config) -> di
             "size": (report["output"]["width"], report["output"]["height"])}
 
 
+# The child runs the CLI, then prints its own peak RSS. VmHWM belongs to the child's address space;
+# getrusage/wait4's ru_maxrss would not do: Linux carries the parent's peak across fork and exec.
+_CHILD = """import sys
+from sena_warp.cli import main
+code = main(sys.argv[1:])
+print(next(line for line in open("/proc/self/status") if line.startswith("VmHWM:")).strip())
+sys.exit(code)"""
+
+
 def stitch_in_child(left: Path, right: Path, output: Path, device: str) -> dict:
-    """``sena-warp video`` in a child process; its report plus ``max_rss_mib`` (peak RSS of the child)."""
+    """``sena-warp video`` in a child process; its report plus ``max_rss_mib`` (the child's peak RSS)."""
     report_path = output.with_suffix(".json")
-    cmd = [sys.executable, "-c", "import sys; from sena_warp.cli import main; sys.exit(main())", "video",
-           str(left), str(right), "-o", str(output), "--report", str(report_path), "--audio", "none",
-           "--device", device]
-    log_path = output.with_suffix(".log")
-    with open(log_path, "wb") as log:
-        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
-        _, status, usage = os.wait4(proc.pid, 0)
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise StitchError(f"sena-warp video failed on {left.name}: {log_path.read_text().strip()[-500:]}")
+    cmd = [sys.executable, "-c", _CHILD, "video", str(left), str(right), "-o", str(output),
+           "--report", str(report_path), "--audio", "none", "--device", device]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise StitchError(f"sena-warp video failed on {left.name}: {(proc.stderr or proc.stdout).strip()[-500:]}")
+    hwm_kib = int(proc.stdout.strip().splitlines()[-1].split()[1])  # "VmHWM:  123456 kB"
     report = json.loads(report_path.read_text())
-    report["max_rss_mib"] = usage.ru_maxrss / 1024  # Linux reports KiB
+    report["max_rss_mib"] = hwm_kib / 1024
     return report
 
 
@@ -233,7 +240,8 @@ def time_calls(call, repeats: int, warmup: int) -> tuple[float, float]:
 def compare_compositing(left: Path, right: Path, cfg: Config, settings: BenchSettings = BenchSettings()) -> dict:
     """Per-frame compositing time of the Warp path and of the OpenCV reference on the first frame pair.
 
-    Maps come from the same first estimate ``sena-warp video`` makes. Returns ``warp_ms``,
+    Maps come from the estimate ``sena-warp video`` makes, on the first frame pair only (the others
+    it tries change the maps, not the per-frame work, and an estimate at 4K takes tens of seconds). Returns ``warp_ms``,
     ``opencv_ms`` (median wall), ``warp_cpu_ms``, ``opencv_cpu_ms`` (mean process CPU), ``ratio`` /
     ``cpu_ratio`` (Warp / OpenCV) and ``max_diff`` (grey levels, over Y, U, V).
     """
@@ -241,7 +249,7 @@ def compare_compositing(left: Path, right: Path, cfg: Config, settings: BenchSet
     from .video.reader import FrameReader
     from .video.stitch import SenaFrameCompositor
 
-    maps, pair, attempts = best_first_estimate(left, right, 0.0, cfg, "auto")
+    maps, pair, attempts = best_first_estimate(left, right, 0.0, cfg.replace(video_estimate_pairs=1), "auto")
     compositor = SenaFrameCompositor(maps, attempts, pair, cfg)
     with FrameReader(left) as reader_l, FrameReader(right) as reader_r:
         frame_l, frame_r = next(iter(reader_l)), next(iter(reader_r))
@@ -255,8 +263,7 @@ def compare_compositing(left: Path, right: Path, cfg: Config, settings: BenchSet
     diff = max(int(np.abs(a.astype(np.int16) - b).max())
                for a, b in zip(compositor.composite_yuv(*planes), reference.composite_yuv(*planes)))
     return {"warp_ms": warp_ms, "opencv_ms": opencv_ms, "ratio": warp_ms / opencv_ms, "warp_cpu_ms": warp_cpu_ms,
-            "opencv_cpu_ms": opencv_cpu_ms, "cpu_ratio": warp_cpu_ms / opencv_cpu_ms, "max_diff": diff,
-            "canvas": compositor.output_size}
+            "opencv_cpu_ms": opencv_cpu_ms, "cpu_ratio": warp_cpu_ms / opencv_cpu_ms, "max_diff": diff}
 
 
 def bench_size(label: str, size: tuple[int, int], seconds: float, work: Path, pair: tuple[Path, Path],
@@ -271,7 +278,8 @@ def bench_size(label: str, size: tuple[int, int], seconds: float, work: Path, pa
     compositing = compare_compositing(left, right, cfg, settings)
     decode_s = sum(stitch["inputs"][side]["decode_s"] for side in ("left", "right"))
     return {
-        "size": label, "clip": f"{size[0]}x{size[1]}", "canvas": "{}x{}".format(*compositing["canvas"]),
+        "size": label, "clip": f"{size[0]}x{size[1]}",
+        "canvas": f"{stitch['output']['width']}x{stitch['output']['height']}",
         "frames": frames, "baseline_fps": baseline["fps"], "stitch_fps": stitch_fps,
         "fps_ratio": stitch_fps / baseline["fps"], "setup_s": timing["compositor_setup"],
         "decode_ms": 1000 * decode_s / frames, "composite_ms": 1000 * timing["composite"] / frames,
