@@ -11,7 +11,7 @@ import json
 import sys
 import time
 
-from . import __version__
+from . import __version__, bench
 from .config import Config
 from .errors import InputError, NotImplementedYet, StitchError
 
@@ -179,8 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     p.set_defaults(run=cmd_video)
 
-    for name, text in (("bench", "frame-rate benchmark"),
-                       ("eval", "quality evaluation against baselines")):
+    bench.register(sub)
+
+    for name, text in (("eval", "quality evaluation against baselines"),):
         p = sub.add_parser(name, help=f"{text} (not implemented yet)")
         p.add_argument("rest", nargs=argparse.REMAINDER)
         p.set_defaults(run=_not_implemented(name))

@@ -19,6 +19,8 @@ from sena_warp.config import Config
 from sena_warp.kernels import runtime
 from sena_warp.kernels.gate import gate_kernel, gated_field_kernel
 
+DENSITY_CELLS_PER_SIGMA = 4.0  # coarse-grid cells per sigma_d of the density blur (see inlier_density)
+
 
 def ramp_width_px(diag_px: float, cfg: Config) -> float:
     """b = max(ramp_min_px, ramp_diag_ratio * image diagonal), in pixels."""
@@ -38,12 +40,30 @@ def open_border_distance_px(source_only_canvas: np.ndarray) -> np.ndarray:
 
 
 def inlier_density(shape: tuple[int, int], inliers_canvas: np.ndarray, sigma_px: float) -> np.ndarray:
-    """(H, W) float32 in [0, 1]: Gaussian-blurred splat of inlier (x, y) canvas positions, max = 1."""
-    splat = np.zeros(shape, dtype=np.float32)
-    pts = np.rint(np.asarray(inliers_canvas, dtype=np.float64).reshape(-1, 2)).astype(np.int64)
+    """(H, W) float32 in [0, 1]: Gaussian-blurred splat of inlier (x, y) canvas positions, max = 1.
+
+    The blur is wide (sigma_d is ~5 % of the long side: ~90 px at 1080p), so it runs on a grid
+    ``DENSITY_CELLS_PER_SIGMA`` times coarser than sigma and is resized up bilinearly: the same
+    density to about 1 % of its peak, in milliseconds instead of a second per estimate.
+    """
+    step = max(1, int(sigma_px / DENSITY_CELLS_PER_SIGMA))
+    coarse_shape = (-(-shape[0] // step) + 1, -(-shape[1] // step) + 1)  # one cell beyond the last pixel
+    splat = np.zeros(coarse_shape, dtype=np.float32)
+    pts = np.asarray(inliers_canvas, dtype=np.float64).reshape(-1, 2)
     keep = (pts[:, 0] >= 0) & (pts[:, 0] < shape[1]) & (pts[:, 1] >= 0) & (pts[:, 1] < shape[0])
-    np.add.at(splat, (pts[keep, 1], pts[keep, 0]), 1.0)
-    density = cv2.GaussianBlur(splat, (0, 0), sigma_px)
+    # Bilinear splat: each point spreads over its four nearest cells, so no point moves by rounding.
+    cell = pts[keep] / step
+    base = np.floor(cell).astype(np.int64)
+    frac = (cell - base).astype(np.float32)
+    for dy in (0, 1):
+        for dx in (0, 1):
+            weight = np.abs(1 - dx - frac[:, 0]) * np.abs(1 - dy - frac[:, 1])
+            np.add.at(splat, (base[:, 1] + dy, base[:, 0] + dx), weight)
+    coarse = cv2.GaussianBlur(splat, (0, 0), sigma_px / step, borderType=cv2.BORDER_CONSTANT)  # no points beyond
+    # Coarse cell k sits at pixel k * step: sample it at y / step, x / step.
+    grid_y = (np.arange(shape[0], dtype=np.float32) / step)[:, None].repeat(shape[1], axis=1)
+    grid_x = (np.arange(shape[1], dtype=np.float32) / step)[None, :].repeat(shape[0], axis=0)
+    density = cv2.remap(coarse, grid_x, grid_y, cv2.INTER_LINEAR)
     peak = float(density.max())
     return density / peak if peak > 0 else density
 

@@ -130,10 +130,15 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, warp: Warp, cfg: Con
     return Seam(zone, anchors_src, anchors_tgt, maps)
 
 
-def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto") -> StitchMaps:
-    """All of SENA on one image pair: the maps that stitch it (and every later frame of the same rig)."""
+def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
+                  matches: Matches | None = None) -> StitchMaps:
+    """All of SENA on one image pair: the maps that stitch it (and every later frame of the same rig).
+
+    ``matches`` of (img_a, img_b) found earlier (e.g. while screening video frames) skip step 0.
+    """
     clock = StageClock()
-    matches = clock.run("features", match_images, img_a, img_b, cfg)
+    if matches is None:
+        matches = clock.run("features", match_images, img_a, img_b, cfg)
     rig = detect_rig(matches.pts_a, matches.pts_b, reference)
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
     pts_src, pts_tgt = (points_to_working(pts, rig) for pts in rig.pick(matches.pts_a, matches.pts_b))

@@ -86,3 +86,16 @@ def test_guard_field_blurs_the_gated_product_and_vanishes_far_outside(setup):
     far = cv2.distanceTransform((gate == 0).astype(np.uint8), cv2.DIST_L2, 5) > 6 * cfg.sigma_g_px
     assert np.abs(guarded[far]).max() < 1e-3
     assert np.abs(guarded[mask]).max() > 5.0
+
+
+@pytest.mark.parametrize("sigma_px", [90.0, 24.0])
+def test_coarse_density_equals_the_full_resolution_blur(setup, sigma_px):
+    """The coarse-grid density is the full-resolution blur of the splat (no points beyond the canvas)."""
+    geo, mask, inliers_canvas, diag, long_side, gate = setup
+    splat = np.zeros(mask.shape, np.float32)
+    pts = np.rint(inliers_canvas).astype(int)
+    np.add.at(splat, (pts[:, 1], pts[:, 0]), 1.0)
+    full = cv2.GaussianBlur(splat, (0, 0), sigma_px, borderType=cv2.BORDER_CONSTANT)
+    density = inlier_density(mask.shape, inliers_canvas, sigma_px)
+    assert density.shape == mask.shape and density.dtype == np.float32
+    np.testing.assert_allclose(density, full / full.max(), atol=0.02)

@@ -19,7 +19,9 @@ import pytest
 from sena_warp.cli import main
 from sena_warp.config import Config
 from sena_warp.video.loop import VideoOptions
-from sena_warp.video.estimate import rejection_reason
+from sena_warp.errors import GeometryError
+from sena_warp.video import estimate
+from sena_warp.video.estimate import best_first_estimate, rejection_reason
 from sena_warp.video.maps import PlaneMaps, chroma_positions, lerp_maps, map_change_px, seam_change_px, target_map
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import YuvFrame
@@ -97,6 +99,27 @@ def test_rooftop_frames_are_real_stitches(clips, rooftop_static):
     assert len(rows) > 100
     assert abs(np.median(out_frames[30].y[rows, cols]) - 16) <= 2
     assert abs(np.median(out_frames[30].u[rows // 2, cols // 2]) - 128) <= 2
+
+
+def test_first_estimate_falls_back_to_the_next_best_pair_when_the_best_fails_later(clips, monkeypatch):
+    """Pairs are ranked by their step-1 inliers; a full estimate that fails moves on to the next one."""
+    left, right = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4"
+    full_estimates = []
+    real_estimate_pair = estimate.estimate_pair
+
+    def estimate_pair(frame_l, frame_r, cfg, reference, matches=None):
+        full_estimates.append(frame_l.time_s)
+        if len(full_estimates) == 1:
+            raise GeometryError("canvas too large (test)")
+        return real_estimate_pair(frame_l, frame_r, cfg, reference, matches)
+
+    monkeypatch.setattr(estimate, "estimate_pair", estimate_pair)
+    cfg = CFG.replace(video_estimate_pairs=3)
+    maps, chosen, attempts = best_first_estimate(left, right, 0.0, cfg, "auto")
+    assert len(attempts) == 3 and len(full_estimates) == 2  # screened all, fully estimated two
+    ranked = sorted(attempts, key=lambda a: (-a.inliers, a.pair))
+    assert ranked[0].error == "canvas too large (test)" and chosen == ranked[1].pair
+    assert maps.warp.glob.n_inliers > 0.8 * ranked[1].inliers  # the same pair's model, re-fitted
 
 
 def test_office_static_rig_seam_never_moves(clips, tmp_path):

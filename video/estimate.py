@@ -14,6 +14,9 @@ from operator import attrgetter
 
 from ..config import Config
 from ..errors import StitchError, VideoError
+from ..features import Matches, match_images
+from ..global_affine import fit_global_affine
+from ..rig import detect_rig, points_to_working
 from ..stitch import StitchMaps, estimate_maps
 from .maps import PlaneMaps, map_change_px
 from .pairing import pair_by_time
@@ -49,33 +52,48 @@ def first_pairs(left: str | os.PathLike, right: str | os.PathLike, offset_s: flo
         return [(i, fl, fr) for i, (fl, fr) in zip(range(span), pairs) if i % cfg.video_estimate_spacing == 0]
 
 
-def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str) -> StitchMaps:
+def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str,
+                  matches: Matches | None = None) -> StitchMaps:
     """SENA maps for one frame pair (left = input a); the BGR conversion happens only here, not per frame."""
-    return estimate_maps(frame_l.to_bgr(), frame_r.to_bgr(), cfg, reference)
+    return estimate_maps(frame_l.to_bgr(), frame_r.to_bgr(), cfg, reference, matches)
+
+
+def screen_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str) -> tuple[Matches, int]:
+    """Steps 0-1 only: the pair's matches and its global-affine inlier count (raises StitchError)."""
+    matches = match_images(frame_l.to_bgr(), frame_r.to_bgr(), cfg)
+    rig = detect_rig(matches.pts_a, matches.pts_b, reference)
+    pts_src, pts_tgt = (points_to_working(pts, rig) for pts in rig.pick(matches.pts_a, matches.pts_b))
+    return matches, fit_global_affine(pts_src, pts_tgt, cfg).n_inliers
 
 
 def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
                         reference: str) -> tuple[StitchMaps, int, list[Attempt]]:
     """The estimate with the most inliers among :func:`first_pairs`; (maps, its pair index, all attempts).
 
-    A pair whose estimation fails is skipped; when all fail, the last failure is raised.
+    Every pair is screened by steps 0-1 (the inlier count is what ranks them); the full estimate,
+    ten times dearer (the gate and the seam work over the whole canvas), runs on the best pair only,
+    or on the next best if that one fails later on. When all fail, the last failure is raised.
     """
-    best: tuple[StitchMaps, int] | None = None
     attempts: list[Attempt] = []
+    screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches]] = []
     last_error: StitchError | None = None
     for index, frame_l, frame_r in first_pairs(left, right, offset_s, cfg):
         try:
-            maps = estimate_pair(frame_l, frame_r, cfg, reference)
+            matches, inliers = screen_pair(frame_l, frame_r, cfg, reference)
         except StitchError as exc:
             last_error = exc
             attempts.append(Attempt(index, float(frame_l.time_s), None, str(exc)))
             continue
-        attempts.append(Attempt(index, float(frame_l.time_s), int(maps.warp.glob.n_inliers), None))
-        if best is None or maps.warp.glob.n_inliers > best[0].warp.glob.n_inliers:
-            best = (maps, index)
-    if best is None:
-        raise last_error or VideoError(f"{left} and {right}: no frame pair to estimate the stitch from")
-    return best[0], best[1], attempts
+        attempts.append(Attempt(index, float(frame_l.time_s), inliers, None))
+        screened.append((inliers, index, frame_l, frame_r, matches))
+    # Most inliers first; among equals the earliest pair.
+    for inliers, index, frame_l, frame_r, matches in sorted(screened, key=lambda s: (-s[0], s[1])):
+        try:
+            return estimate_pair(frame_l, frame_r, cfg, reference, matches), index, attempts
+        except StitchError as exc:
+            last_error = exc
+            attempts = [Attempt(a.pair, a.time_s, a.inliers, str(exc)) if a.pair == index else a for a in attempts]
+    raise last_error or VideoError(f"{left} and {right}: no frame pair to estimate the stitch from")
 
 
 def rejection_reason(candidate: PlaneMaps, current: PlaneMaps, first_inliers: int,
