@@ -18,19 +18,19 @@ from dataclasses import dataclass
 from fractions import Fraction
 from itertools import chain
 from operator import attrgetter
-from typing import Callable, Protocol, TextIO
+from typing import Callable, Protocol
 
 import numpy as np
 
 from ..config import Config
 from ..errors import InputError, VideoError
 from ..imageio import atomic_output
+from ..progress import Progress
 from .pairing import PairingStats, pair_by_time
 from .reader import FrameReader, VideoInfo, YuvFrame, probe_video
 from .writer import VideoWriter
 
 AUDIO_SOURCES = ("left", "right", "none")
-_PROGRESS_INTERVAL_S = 0.5  # redraw the progress line at most this often
 _POLL_S = 0.1  # how often a blocked producer re-checks that the encoder thread is still alive
 
 
@@ -80,33 +80,6 @@ class VideoOptions:
         base = dict(audio=cfg.video_audio, codec=cfg.video_codec, crf=cfg.video_crf,
                     preset=cfg.video_preset, queue_frames=cfg.video_queue_frames)
         return cls(**{**base, **changes})
-
-
-class Progress:
-    """A one-line ``frames / total, fps, ETA`` display on ``stream``, redrawn in place."""
-
-    def __init__(self, total: int, enabled: bool, stream: TextIO):
-        self.total, self.enabled, self.stream = total, enabled, stream
-        self._t0 = time.perf_counter()
-        self._last_draw = 0.0
-
-    def update(self, frames: int, force: bool = False) -> None:
-        now = time.perf_counter()
-        if not self.enabled or (now - self._last_draw < _PROGRESS_INTERVAL_S and not force):
-            return
-        self._last_draw = now
-        elapsed = now - self._t0
-        fps = frames / elapsed if elapsed > 0 else 0.0
-        eta = f"{max(self.total - frames, 0) / fps:.0f} s" if fps > 0 else "?"
-        self.stream.write(f"\rsena-warp video: {frames}/{self.total} frames  {fps:.1f} fps  ETA {eta} ")
-        self.stream.flush()
-
-    def close(self, frames: int) -> None:
-        """Draw the final count and end the line."""
-        self.update(frames, force=True)
-        if self.enabled:
-            self.stream.write("\n")
-            self.stream.flush()
 
 
 def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
@@ -169,8 +142,8 @@ def run_video(
                 writer.add_audio(side.path, side.start_time_s - offsets[audio_side] + first[0].time_s)
             show = sys.stderr.isatty() if options.progress is None else options.progress
             expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
-            _encode_pairs(chain([first], pairs), compositor, writer, Progress(expected, show, sys.stderr), timing,
-                          options.queue_frames)
+            progress = Progress(expected, show, sys.stderr, "sena-warp video", "frames", "fps")
+            _encode_pairs(chain([first], pairs), compositor, writer, progress, timing, options.queue_frames)
     timing["total"] = time.perf_counter() - t_run
     timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
     notes += _input_notes(infos, {"left": reader_l, "right": reader_r}, stats)
