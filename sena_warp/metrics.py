@@ -1,10 +1,14 @@
 """Quality figures of SENA.md "Measuring": overlap alignment (UDIS-D protocol) and shape.
 
-All images here are already on the canvas: the warped source and the placed target, each with a
-validity mask of the same (H, W) shape.
+Alignment: images already on one frame (the warped source and the placed target, each with a
+validity mask of the same (H, W) shape). Shape: a warp given as a *forward* function that takes
+(N, 2) float64 source (x, y) pixels to (N, 2) output (x, y) pixels (NaN where it is undefined), so
+that SENA, the global models and OpenCV's stitcher are measured the same way.
 """
 
 from __future__ import annotations
+
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -13,6 +17,12 @@ OVERLAP_ERODE_PX = 2  # UDIS-D protocol: both masks eroded by 2 px before compar
 SSIM_SIGMA_PX = 1.5  # Wang et al. 2004 Gaussian window
 SSIM_C1 = (0.01 * 255) ** 2
 SSIM_C2 = (0.03 * 255) ** 2
+JACOBIAN_STEP_PX = 2.0  # central-difference step of a forward warp's Jacobian
+LONG_LINE_FRACTION = 0.10  # a "long line": a detected segment at least this x the image's long side
+MAX_LINES = 30  # the longest this many long lines are measured
+LINE_SAMPLES = 33  # points per line mapped through a warp
+
+Forward = Callable[[np.ndarray], np.ndarray]
 
 
 def overlap_mask(valid_src_canvas: np.ndarray, valid_tgt_canvas: np.ndarray) -> np.ndarray:
@@ -74,6 +84,62 @@ def similarity_deviation(affines_src_to_tgt: np.ndarray) -> np.ndarray:
     """
     sv = np.linalg.svd(np.asarray(affines_src_to_tgt, np.float64)[:, :, :2], compute_uv=False)
     return sv[:, 0] / np.maximum(sv[:, 1], 1e-12) - 1.0
+
+
+def forward_jacobians(forward: Forward, pts_src: np.ndarray, step_px: float = JACOBIAN_STEP_PX) -> np.ndarray:
+    """(N, 2, 2) Jacobians d(output)/d(source) of ``forward`` at (N, 2) source points, central differences."""
+    pts_src = np.asarray(pts_src, np.float64).reshape(-1, 2)
+    columns = []
+    for axis in (0, 1):
+        delta = np.zeros(2)
+        delta[axis] = step_px
+        columns.append((forward(pts_src + delta) - forward(pts_src - delta)) / (2.0 * step_px))
+    return np.stack(columns, axis=2)
+
+
+def forward_anisotropy(forward: Forward, pts_src: np.ndarray, step_px: float = JACOBIAN_STEP_PX) -> np.ndarray:
+    """Per source point, how far the warp is locally from a similarity (``similarity_deviation`` of its
+    Jacobian): 0 for rotation + uniform scale, growing with shear and stretch; NaN where undefined."""
+    jac = forward_jacobians(forward, pts_src, step_px)
+    ok = np.all(np.isfinite(jac), axis=(1, 2))
+    out = np.full(len(jac), np.nan)
+    if ok.any():
+        out[ok] = similarity_deviation(np.concatenate([jac[ok], np.zeros((int(ok.sum()), 2, 1))], axis=2))
+    return out
+
+
+def long_segments(img: np.ndarray, min_fraction: float = LONG_LINE_FRACTION, max_count: int = MAX_LINES) -> np.ndarray:
+    """The longest straight segments of an image (LSD), at least ``min_fraction`` of its long side.
+
+    Returns (K, 2, 2) float64: K segments, each two (x, y) end points, longest first (K <= max_count).
+    """
+    found = cv2.createLineSegmentDetector().detect(_grey(img).astype(np.uint8))[0]
+    if found is None:
+        return np.zeros((0, 2, 2))
+    segments = found.reshape(-1, 2, 2).astype(np.float64)
+    lengths = np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1)
+    order = np.argsort(-lengths)
+    keep = order[lengths[order] >= min_fraction * max(img.shape[:2])][:max_count]
+    return segments[keep]
+
+
+def line_bend_pct(forward: Forward, segments_src: np.ndarray, samples: int = LINE_SAMPLES) -> np.ndarray:
+    """Per segment (K, 2, 2) of the source: how far its image under the warp is from straight.
+
+    The largest distance of a mapped point from the chord between the mapped end points, in percent
+    of the chord's length (scale-free, so warps of any output scale compare); 0 for any affine or
+    homography; NaN where the warp is undefined on the segment.
+    """
+    t = np.linspace(0.0, 1.0, samples)[None, :, None]
+    segments_src = np.asarray(segments_src, np.float64).reshape(-1, 2, 2)
+    pts = segments_src[:, :1] + t * (segments_src[:, 1:] - segments_src[:, :1])  # (K, samples, 2)
+    mapped = forward(pts.reshape(-1, 2)).reshape(pts.shape)
+    chord = mapped[:, -1] - mapped[:, 0]
+    length = np.linalg.norm(chord, axis=1)
+    rel = mapped - mapped[:, :1]
+    off_chord = np.abs(rel[:, :, 0] * chord[:, None, 1] - rel[:, :, 1] * chord[:, None, 0]) / length[:, None]
+    with np.errstate(invalid="ignore"):
+        return 100.0 * off_chord.max(axis=1) / length
 
 
 def _grey(img: np.ndarray) -> np.ndarray:

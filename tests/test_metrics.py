@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from sena_warp.imageio import read_image
-from sena_warp.metrics import overlap_mask, overlap_psnr_ssim, psnr, similarity_deviation, ssim
+from sena_warp.metrics import (forward_anisotropy, line_bend_pct, long_segments, overlap_mask, overlap_psnr_ssim, psnr,
+                                similarity_deviation, ssim)
 
 
 @pytest.fixture(scope="module")
@@ -54,3 +55,42 @@ def test_similarity_deviation():
     dev = similarity_deviation(np.concatenate([rot, shear]))
     assert dev[0] == pytest.approx(0.0, abs=1e-12)
     assert dev[1] > 0.5
+
+
+def affine_forward(matrix):
+    matrix = np.asarray(matrix, np.float64)
+    return lambda pts: pts @ matrix[:, :2].T + matrix[:, 2]
+
+
+def test_forward_anisotropy_is_zero_for_a_similarity_and_known_for_a_stretch():
+    pts = np.array([[10.0, 20.0], [300.0, 40.0], [55.0, 400.0]])
+    rotation = affine_forward([[np.cos(0.4) * 1.5, -np.sin(0.4) * 1.5, 7], [np.sin(0.4) * 1.5, np.cos(0.4) * 1.5, -3]])
+    np.testing.assert_allclose(forward_anisotropy(rotation, pts), 0.0, atol=1e-9)
+    np.testing.assert_allclose(forward_anisotropy(affine_forward([[2.0, 0, 0], [0, 1.0, 0]]), pts), 1.0, atol=1e-9)
+    undefined = forward_anisotropy(lambda p: np.where(p[:, :1] > 100, np.nan, p), pts)
+    assert undefined[0] == 0.0 and np.isnan(undefined[1]) and undefined[2] == 0.0  # x > 100: undefined
+
+
+def test_line_bend_is_zero_for_projective_maps_and_exact_for_a_parabola():
+    segments = np.array([[[100.0, 50.0], [300.0, 50.0]], [[20.0, 10.0], [40.0, 200.0]]])
+    homography = np.array([[1.0, 0.1, 3], [0.05, 1.0, 2], [1e-4, 2e-4, 1.0]])
+
+    def projective(pts):
+        q = np.c_[pts, np.ones(len(pts))] @ homography.T
+        return q[:, :2] / q[:, 2:]
+
+    np.testing.assert_allclose(line_bend_pct(projective, segments), 0.0, atol=1e-9)
+    k = 1e-3  # y += k (x - 200)^2 bends the first segment (x 100..300) by k * 100^2 = 10 px over 200 px: 5 %
+    bend = line_bend_pct(lambda p: np.c_[p[:, 0], p[:, 1] + k * (p[:, 0] - 200.0) ** 2], segments[:1])
+    assert bend[0] == pytest.approx(5.0, rel=1e-3)
+
+
+def test_long_segments_finds_a_drawn_line_longest_first():
+    img = np.full((200, 300, 3), 40, np.uint8)
+    cv2.line(img, (20, 30), (280, 60), (230, 230, 230), 3)
+    cv2.line(img, (50, 150), (120, 150), (230, 230, 230), 3)
+    found = long_segments(img, min_fraction=0.1)
+    lengths = np.linalg.norm(found[:, 1] - found[:, 0], axis=1)
+    assert len(found) >= 2 and np.all(np.diff(lengths) <= 0) and lengths[0] > 240
+    assert len(long_segments(img, min_fraction=0.5)) >= 1 and len(long_segments(img, min_fraction=0.95)) == 0
+    assert long_segments(np.zeros((50, 50, 3), np.uint8)).shape == (0, 2, 2)
