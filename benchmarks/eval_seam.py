@@ -37,19 +37,16 @@ import numpy as np
 from sena_warp.config import Config
 from sena_warp.errors import StitchError
 from sena_warp.imageio import read_image
-from sena_warp.partition import anchor_residuals_px, transition_mad
-from sena_warp.rig import image_to_working
+from sena_warp.evaluate import seam_figures
+from sena_warp.sheets import thumbnail, tile
 from sena_warp.stitch import Panorama, stitch_images
-from sena_warp.warp_map import warp_image
-from sena_warp.zone import overlap_x_extent
 
 REPO = Path(__file__).resolve().parents[1]
 ORDERS = ("ab", "ba")
 TARGET_RESIDUAL_PX = 1.5  # issue 4: median anchor residual at most this
 TARGET_SEAM_WINS = 14  # issue 4: seam MAD below feather MAD on at least this many pairs
-THUMB_W, THUMB_H, LABEL_H = 400, 260, 26  # contact-sheet cell: thumbnail box and label strip (px)
+THUMB_WH = (400, 260)  # contact-sheet thumbnail box (px)
 SHEET_COLUMNS = 4
-SHEET_BACKGROUND = 64  # grey behind transparent canvas pixels, so uncovered corners stay visible
 SHEET_JPEG_QUALITY = 82
 
 
@@ -77,40 +74,11 @@ class Row:
     is_bug: bool = False  # an exception outside the StitchError family
 
 
-def feather_mad(warped_src: np.ndarray, valid_src: np.ndarray, placed_tgt: np.ndarray, valid_tgt: np.ndarray,
-                overlap_mask_canvas: np.ndarray) -> float:
-    """Mean |src - tgt| over the blending region of a linear feather across the overlap's x-extent.
-
-    warped_src, placed_tgt: (H, W, C) uint8 canvas images; valid_*: (H, W) bool; overlap_mask_canvas:
-    (H, W) bool step-2 overlap. The feather's alpha ramps from 1 to 0 over [x0, x1) of the overlap,
-    so its band is that whole extent: ``transition_mad`` with the seam at its middle and width x1 - x0.
-    """
-    x0, x1 = overlap_x_extent(overlap_mask_canvas)
-    seam_x = np.full(valid_src.shape[0], 0.5 * (x0 + x1 - 1))
-    return transition_mad(warped_src, placed_tgt, valid_src & valid_tgt, seam_x, x1 - x0)
-
-
-def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> SeamFigures:
-    """The seam figures of a finished stitch of (img_a, img_b) (BGR uint8), see the module docstring."""
-    maps = pano.maps
-    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
-    warp, seam = maps.warp, maps.seam
-    placed_tgt, valid_tgt = warp_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
-    seam_src, valid_seam_src = warp_image(img_src, seam.maps.map_src_canvas, cfg)
-    step6_src, valid_step6_src = warp_image(img_src, warp.map_src_canvas, cfg)
-    residuals = anchor_residuals_px(warp.map_src_canvas, seam.maps.map_src_canvas,
-                                    seam.anchors_src_canvas, seam.anchors_tgt_canvas)
-    finite = residuals[np.isfinite(residuals)]
-    return SeamFigures(
-        zone_x0=seam.zone.x0,
-        zone_x1=seam.zone.x1,
-        fallback=seam.zone.fallback,
-        n_anchors=len(seam.anchors_tgt_canvas),
-        anchor_residual_px=float(np.median(finite)) if finite.size else math.nan,
-        seam_mad=transition_mad(seam_src, placed_tgt, valid_seam_src & valid_tgt, seam.maps.seam_x_canvas,
-                                cfg.transition_px),
-        feather_mad=feather_mad(step6_src, valid_step6_src, placed_tgt, valid_tgt, warp.overlap.mask_canvas),
-    )
+def figures_of(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> SeamFigures:
+    """The zone and the seam figures (``evaluate.seam_figures``) of a finished stitch of (img_a, img_b)."""
+    zone, f = pano.maps.seam.zone, seam_figures(img_a, img_b, pano, cfg)
+    return SeamFigures(zone.x0, zone.x1, zone.fallback, f["anchors"], f["anchor_residual_px"], f["seam_mad"],
+                       f["feather_mad"])
 
 
 def evaluate(pair: str, order: str, img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> tuple[Row, Panorama | None]:
@@ -118,7 +86,7 @@ def evaluate(pair: str, order: str, img_a: np.ndarray, img_b: np.ndarray, cfg: C
     first, second = (img_a, img_b) if order == "ab" else (img_b, img_a)
     try:
         pano = stitch_images(first, second, cfg)
-        return Row(pair, order, seam_figures(first, second, pano, cfg)), pano
+        return Row(pair, order, figures_of(first, second, pano, cfg)), pano
     except StitchError as err:
         return Row(pair, order, None, f"{type(err).__name__}: {err}"), None
     except Exception as err:  # noqa: BLE001 - a benchmark reports bugs instead of stopping at the first
@@ -158,27 +126,6 @@ def summary_lines(rows: list[Row]) -> list[str]:
     ]
 
 
-def thumbnail(image_bgra: np.ndarray, label: str) -> np.ndarray:
-    """A (THUMB_H + LABEL_H, THUMB_W, 3) uint8 cell: the panorama over grey, fitted, with its label."""
-    alpha = image_bgra[:, :, 3:4].astype(np.float32) / 255.0
-    flat = (image_bgra[:, :, :3] * alpha + SHEET_BACKGROUND * (1.0 - alpha)).astype(np.uint8)
-    scale = min(THUMB_W / flat.shape[1], THUMB_H / flat.shape[0])
-    small = cv2.resize(flat, (max(1, round(flat.shape[1] * scale)), max(1, round(flat.shape[0] * scale))),
-                       interpolation=cv2.INTER_AREA)
-    cell = np.zeros((THUMB_H + LABEL_H, THUMB_W, 3), np.uint8)
-    cell[LABEL_H:LABEL_H + small.shape[0], :small.shape[1]] = small
-    cv2.putText(cell, label, (4, LABEL_H - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1, cv2.LINE_AA)
-    return cell
-
-
-def contact_sheet(cells: list[np.ndarray]) -> np.ndarray:
-    """Cells of equal shape tiled ``SHEET_COLUMNS`` across, row-major; empty slots black."""
-    rows = math.ceil(len(cells) / SHEET_COLUMNS)
-    blank = np.zeros_like(cells[0])
-    padded = cells + [blank] * (rows * SHEET_COLUMNS - len(cells))
-    return np.vstack([np.hstack(padded[r * SHEET_COLUMNS:(r + 1) * SHEET_COLUMNS]) for r in range(rows)])
-
-
 def config_with(settings: list[str]) -> Config:
     """Default Config with ``NAME=VALUE`` overrides, each value parsed as the field's default type."""
     cfg = Config()
@@ -210,14 +157,13 @@ def main() -> None:
             lines.append(table_line(row))
             print(lines[-1], flush=True)
             if order == "ab":
-                failed = np.zeros((THUMB_H, THUMB_W, 4), np.uint8)
-                cells.append(thumbnail(pano.image if pano else failed, folder.name + ("" if pano else " FAILED")))
+                cells.append(thumbnail(pano.image if pano else None, folder.name + ("" if pano else " FAILED"), THUMB_WH))
     summary = summary_lines(rows)
     print("\n" + "\n".join(summary))
     if args.markdown:
         args.markdown.write_text("\n".join(lines) + "\n\n" + "\n".join(summary) + "\n")
     if args.sheet:
-        cv2.imwrite(str(args.sheet), contact_sheet(cells), [cv2.IMWRITE_JPEG_QUALITY, SHEET_JPEG_QUALITY])
+        cv2.imwrite(str(args.sheet), tile(cells, SHEET_COLUMNS), [cv2.IMWRITE_JPEG_QUALITY, SHEET_JPEG_QUALITY])
 
 
 if __name__ == "__main__":

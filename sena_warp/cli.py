@@ -7,13 +7,14 @@ Every expected failure is a :class:`~sena_warp.errors.StitchError`; it is printe
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 import time
 
-from . import __version__, bench
+from . import __version__
 from .config import Config
-from .errors import InputError, NotImplementedYet, StitchError
+from .errors import InputError, StitchError
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -123,12 +124,6 @@ def _check_output_suffix(path: str, allowed: tuple[str, ...]) -> None:
         raise OutputError(f"{path}: unsupported output type; use one of {', '.join(allowed)}")
 
 
-def _not_implemented(name: str):
-    def run(args: argparse.Namespace) -> int:
-        raise NotImplementedYet(f"'sena-warp {name}' is not implemented yet (see the README's status list)")
-    return run
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="sena-warp",
@@ -179,13 +174,34 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     p.set_defaults(run=cmd_video)
 
-    bench.register(sub)
+    p = sub.add_parser("bench", help="frame-rate benchmark: transcode baseline vs stitch, per stage, kernel")
+    p.add_argument("--sizes", nargs="+", metavar="SIZE",
+                   help="clip sizes: 720p, 1080p, 4k or WIDTHxHEIGHT (default: 720p 1080p 4k)")
+    p.add_argument("--seconds", type=float, default=10.0, help="clip length in seconds (default: %(default)s)")
+    p.add_argument("--markdown", metavar="FILE", help="also write the table as Markdown")
+    p.add_argument("--work", default="bench_work", help="folder for the clips and outputs (default: %(default)s)")
+    p.add_argument("--data", help="the shared data set holding pairs/rew_lawn_2160 (default: ../shared/data "
+                                  "beside the source tree)")
+    p.add_argument("--rss", type=float, nargs="*", default=[], metavar="S",
+                   help="also measure the peak RSS of 1080p stitches of these lengths in seconds (e.g. 10 60)")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default=Config.device,
+                   help="where the Warp kernels run (default: %(default)s)")
+    p.set_defaults(run=_lazy("bench", "cmd_bench"))
 
-    for name, text in (("eval", "quality evaluation against baselines"),):
-        p = sub.add_parser(name, help=f"{text} (not implemented yet)")
-        p.add_argument("rest", nargs=argparse.REMAINDER)
-        p.set_defaults(run=_not_implemented(name))
+    p = sub.add_parser("eval", help="quality evaluation: SENA vs global affine, homography, OpenCV's stitcher")
+    p.add_argument("data_dir", help="folder of pair folders, each holding a.* and b.* (or one pair folder)")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder for results.csv, summary.md and the sheets")
+    p.add_argument("--progress", action="store_true", help="show progress on stderr even when it is not a terminal")
+    _add_common(p)
+    p.set_defaults(run=_lazy("evaluate", "cmd_eval"))
     return parser
+
+
+def _lazy(module: str, function: str):
+    """A subcommand runner that imports its module only when run, so ``sena-warp --help`` stays quick."""
+    def run(args: argparse.Namespace) -> int:
+        return getattr(importlib.import_module(f"{__package__}.{module}"), function)(args)
+    return run
 
 
 def main(argv: list[str] | None = None) -> int:

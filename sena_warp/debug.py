@@ -125,18 +125,11 @@ def dump_stages(folder, img_a: np.ndarray, img_b: np.ndarray, pano) -> list:
 
     Pictures after the features are in the working frame (source left; transposed for a vertical rig).
     """
-    from pathlib import Path
-
-    from .errors import OutputError
-    from .imageio import write_image
+    from .imageio import make_folder, write_image
     from .rig import image_to_working
 
     maps = pano.maps
-    folder = Path(folder)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{folder}: cannot create the debug folder ({exc.strerror}); choose another --debug path") from exc
+    folder = make_folder(folder)
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
     pano_working = image_to_working(pano.image, maps.rig)
     pictures = {

@@ -41,9 +41,3 @@ class OutputError(StitchError):
     """The output cannot be written (path equals an input, folder not writable)."""
 
     exit_code = 6
-
-
-class NotImplementedYet(StitchError):
-    """A subcommand that is planned but not built yet."""
-
-    exit_code = 64

@@ -155,15 +155,29 @@ def atomic_output(path: str | os.PathLike, inputs: tuple[str | os.PathLike, ...]
             tmp.unlink()
 
 
-def write_image(path: str | os.PathLike, img: np.ndarray, inputs: tuple[str | os.PathLike, ...] = ()) -> None:
-    """Encode ``img`` (BGR or BGRA uint8) by the file extension and write it atomically."""
+def make_folder(path: str | os.PathLike) -> Path:
+    """Create folder ``path`` (and its parents) if needed; OutputError saying why when it cannot be."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{path}: cannot create this folder ({exc.strerror or exc}); choose another folder") from exc
+    return path
+
+
+def write_image(path: str | os.PathLike, img: np.ndarray, inputs: tuple[str | os.PathLike, ...] = (),
+                params: tuple[int, ...] = ()) -> None:
+    """Encode ``img`` (BGR or BGRA uint8) by the file extension and write it atomically.
+
+    ``params``: OpenCV encoder flags and values, e.g. ``(cv2.IMWRITE_JPEG_QUALITY, 80)``.
+    """
     path = Path(path)
     ext = path.suffix.lower()
     if ext not in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp"):
         raise OutputError(f"{path}: unknown image extension {ext!r}; use .png or .jpg")
     if img.ndim == 3 and img.shape[2] == 4 and ext in (".jpg", ".jpeg", ".bmp"):
         img = img[:, :, :3]
-    ok, buf = cv2.imencode(ext, img)
+    ok, buf = cv2.imencode(ext, img, list(params))
     if not ok:
         raise OutputError(f"{path}: image encoding failed")
     with atomic_output(path, inputs) as tmp:

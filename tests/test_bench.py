@@ -119,3 +119,12 @@ def test_fixed_point_matches_float_kernel(scene, warp_device):  # noqa: F811
     assert np.abs(out.astype(int) - expected).max() <= 1
     # The target map is an integer shift, so where alpha is 0 the output is an exact copy of the target.
     assert (np.abs(out.astype(int) - expected) == 0).mean() > 0.9
+
+
+def test_bench_without_the_shared_pair_is_one_line_error(tmp_path, capsys):
+    from sena_warp.cli import main
+
+    assert main(["bench", "--sizes", "192x108", "--data", str(tmp_path / "nowhere"), "--work", str(tmp_path / "w")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "benchmark pair not found" in err and "--data" in err
+    assert not (tmp_path / "w").exists()

@@ -66,8 +66,3 @@ def test_unknown_output_type_is_refused_before_work(pair, tmp_path, capsys):
     assert main(["image", *pair, "-o", str(tmp_path / "p.gif")]) == 6
     assert "unsupported output type" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
-
-
-def test_unbuilt_subcommands_say_so(capsys):
-    assert main(["bench"]) == 64
-    assert "not implemented yet" in capsys.readouterr().err

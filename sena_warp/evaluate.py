@@ -1,0 +1,431 @@
+"""``sena-warp eval DATA_DIR --out DIR``: SENA against four baselines on every pair, in numbers and pictures.
+
+For every pair folder of DATA_DIR (one holding ``a.*`` and ``b.*``) it runs
+
+- ``sena``: the whole SENA stitch (``stitch_images``);
+- ``affine``: SENA's own global affine ``A_glob`` alone (no local warp, no seam);
+- ``homography``: a global homography from SIFT matches and RANSAC (3 px);
+- ``opencv_panorama`` / ``opencv_scans``: OpenCV's stitcher (``cv2.Stitcher``) in its two modes,
+
+and records per method: success (or why not), time, overlap PSNR/SSIM (UDIS-D protocol of
+``metrics``), the shape figures (how far the warp is locally from a similarity; how far long lines
+bend) and, for SENA, the seam figures. SENA, affine and homography are compared with the target in
+the target frame (the source warped onto it); OpenCV's stitcher is compared in its own panorama
+frame, both views warped by the camera models it composed with, before its seams and blending.
+Shape figures cover both views of each method's panorama: SENA and the global models leave the
+target as it is; OpenCV's projection warps both.
+
+Writes ``results.csv`` (one row per pair and method), ``summary.md``, ``sheets/PAIR.png`` (inputs,
+SENA, both OpenCV modes) and ``overview.jpg`` (every pair, small). A pair or method that fails is
+recorded with its message and the run goes on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import sys
+import time
+import traceback
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .baselines import (OPENCV_MODES, affine_map_canvas, homography_forward, homography_to_target,
+                        map_in_target_frame, opencv_forward, opencv_stitch, opencv_views, sift_homography)
+from .config import Config
+from .errors import InputError, StitchError
+from .features import match_images
+from .imageio import atomic_output, check_output_folder, make_folder, read_image, write_image
+from .metrics import Forward, forward_anisotropy, line_bend_pct, long_segments, overlap_psnr_ssim
+from .partition import anchor_residuals_px, transition_mad
+from .progress import Progress
+from .rig import Rig, detect_rig, image_to_working
+from .sheets import thumbnail, tile
+from .stitch import Panorama, stitch_images
+from .warp_map import forward_points, warp_image
+from .zone import overlap_x_extent
+
+METHODS = ("sena", "affine", "homography", *OPENCV_MODES)
+SHEET_METHODS = ("sena", *OPENCV_MODES)  # the methods that make a panorama (the pictures show them)
+COLUMNS = 2 + len(SHEET_METHODS)  # a sheet row: both inputs, then those panoramas
+SHAPE_GRID = 12  # points per side of the grid over each view where the anisotropy is measured
+PAIR_THUMB_WH = (360, 240)  # per-pair sheet: thumbnail box (px)
+OVERVIEW_THUMB_WH = (200, 130)  # overview sheet: thumbnail box (px)
+OVERVIEW_JPEG_QUALITY = 80
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp")
+
+
+@dataclass
+class MethodResult:
+    """One method on one pair: the CSV row. NaN = not defined (failed, or not that method's figure)."""
+
+    pair: str
+    method: str
+    ok: bool = False
+    error: str = ""
+    seconds: float = math.nan  # to the panorama (sena, opencv_*) or to the model (affine, homography)
+    psnr_db: float = math.nan
+    ssim: float = math.nan
+    anisotropy: float = math.nan  # mean over both views of similarity_deviation of the local Jacobian
+    line_bend_pct: float = math.nan  # median over both views' long lines
+    line_bend_max_pct: float = math.nan
+    lines: int = 0
+    width: int = 0  # panorama size (methods that make one)
+    height: int = 0
+    anchors: int = 0  # SENA's seam figures (SENA.md "Measuring: Seam")
+    anchor_residual_px: float = math.nan
+    seam_mad: float = math.nan
+    feather_mad: float = math.nan
+    panorama: np.ndarray | None = field(default=None, repr=False)  # BGR(A) uint8; not written to the CSV
+
+
+CSV_FIELDS = tuple(f.name for f in fields(MethodResult) if f.name != "panorama")
+
+
+@dataclass(frozen=True)
+class PairImages:
+    """A pair in the input frame and in SENA's working frame (source left, vertical rigs transposed)."""
+
+    name: str
+    img_a: np.ndarray
+    img_b: np.ndarray
+    rig: Rig
+    img_src: np.ndarray
+    img_tgt: np.ndarray
+
+
+def pair_folders(data_dir: str | os.PathLike) -> list[Path]:
+    """The pair folders of ``data_dir`` (each with one ``a.*`` and one ``b.*`` image), sorted; the folder
+    itself when it is one. InputError when there is none."""
+    data_dir = Path(data_dir)
+    if not data_dir.is_dir():
+        raise InputError(f"{data_dir}: not a folder; give a folder of pair folders (each with a.* and b.*)")
+
+    def is_pair(folder: Path) -> bool:
+        return all(_image_named(folder, stem) is not None for stem in ("a", "b"))
+
+    if is_pair(data_dir):
+        return [data_dir]
+    folders = sorted(p for p in data_dir.iterdir() if p.is_dir() and is_pair(p))
+    if not folders:
+        raise InputError(f"{data_dir}: no pair folders (sub-folders holding an a.* and a b.* image)")
+    return folders
+
+
+def _image_named(folder: Path, stem: str) -> Path | None:
+    found = [p for p in folder.glob(f"{stem}.*") if p.suffix.lower() in IMAGE_SUFFIXES]
+    return found[0] if len(found) == 1 else None
+
+
+def shape_figures(views: list[tuple[np.ndarray, Forward]]) -> dict:
+    """Shape figures over the views (image, forward map into the method's output) of one panorama."""
+    anisotropy, bends = [], []
+    for img, forward in views:
+        height, width = img.shape[:2]
+        grid = np.stack(np.meshgrid(np.linspace(2, width - 3, SHAPE_GRID), np.linspace(2, height - 3, SHAPE_GRID)),
+                        axis=-1).reshape(-1, 2)
+        anisotropy.append(forward_anisotropy(forward, grid))
+        bends.append(line_bend_pct(forward, long_segments(img)))
+    anisotropy, bends = np.concatenate(anisotropy), np.concatenate(bends)
+    anisotropy, bends = anisotropy[np.isfinite(anisotropy)], bends[np.isfinite(bends)]
+    return {"anisotropy": float(anisotropy.mean()) if anisotropy.size else math.nan,
+            "line_bend_pct": float(np.median(bends)) if bends.size else math.nan,
+            "line_bend_max_pct": float(bends.max()) if bends.size else math.nan, "lines": int(bends.size)}
+
+
+def identity(pts: np.ndarray) -> np.ndarray:
+    """The forward map of a view pasted unwarped (SENA's and the global models' target)."""
+    return np.asarray(pts, np.float64)
+
+
+def in_target_frame(img_src: np.ndarray, map_src_tgt: np.ndarray, img_tgt: np.ndarray, cfg: Config
+                    ) -> tuple[float, float]:
+    """Overlap (PSNR dB, SSIM) of ``img_src`` warped by a target-frame (x, y) map against ``img_tgt``."""
+    warped, valid = warp_image(img_src, map_src_tgt, cfg)
+    return overlap_psnr_ssim(warped, valid, img_tgt, np.ones(valid.shape, bool))
+
+
+def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
+    """SENA's seam figures of a finished stitch of (img_a, img_b), in the working frame on the canvas.
+
+    ``anchors``: step-8 anchors (edge extensions included); ``anchor_residual_px``: median over them of
+    where the warped-source anchor lands after step 9 vs its target anchor (``anchor_residuals_px``);
+    ``seam_mad``: mean |src - tgt| (grey levels) of the seam-corrected source and the placed target
+    where both are valid within T/2 of the seam (T = ``transition_px``: where the alpha blends);
+    ``feather_mad``: the same for the step-6 source over the overlap's whole x-extent, the band a
+    plain linear feather across the overlap would blend in.
+    """
+    maps = pano.maps
+    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
+    warp, seam = maps.warp, maps.seam
+    placed_tgt, valid_tgt = warp_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
+    seam_src, valid_seam_src = warp_image(img_src, seam.maps.map_src_canvas, cfg)
+    step6_src, valid_step6_src = warp_image(img_src, warp.map_src_canvas, cfg)
+    residuals = anchor_residuals_px(warp.map_src_canvas, seam.maps.map_src_canvas,
+                                    seam.anchors_src_canvas, seam.anchors_tgt_canvas)
+    finite = residuals[np.isfinite(residuals)]
+    return {
+        "anchors": int(len(seam.anchors_tgt_canvas)),
+        "anchor_residual_px": float(np.median(finite)) if finite.size else math.nan,
+        "seam_mad": transition_mad(seam_src, placed_tgt, valid_seam_src & valid_tgt, seam.maps.seam_x_canvas,
+                                   cfg.transition_px),
+        "feather_mad": feather_mad(step6_src, valid_step6_src, placed_tgt, valid_tgt, warp.overlap.mask_canvas),
+    }
+
+
+def feather_mad(warped_src: np.ndarray, valid_src: np.ndarray, placed_tgt: np.ndarray, valid_tgt: np.ndarray,
+                overlap_mask_canvas: np.ndarray) -> float:
+    """Mean |src - tgt| over the blending region of a linear feather across the overlap's x-extent.
+
+    warped_src, placed_tgt: (H, W, C) uint8 canvas images; valid_*: (H, W) bool; overlap_mask_canvas:
+    (H, W) bool step-2 overlap. The feather's alpha ramps from 1 to 0 over [x0, x1) of the overlap,
+    so its band is that whole extent: ``transition_mad`` with the seam at its middle and width x1 - x0.
+    """
+    x0, x1 = overlap_x_extent(overlap_mask_canvas)
+    seam_x = np.full(valid_src.shape[0], 0.5 * (x0 + x1 - 1))
+    return transition_mad(warped_src, placed_tgt, valid_src & valid_tgt, seam_x, x1 - x0)
+
+
+def run_sena(pair: PairImages, pano: Panorama, seconds: float, cfg: Config) -> MethodResult:
+    """SENA's figures from its finished stitch ``pano`` of the pair (which took ``seconds``)."""
+    warp, seam = pano.maps.warp, pano.maps.seam
+    src, tgt = pair.img_src, pair.img_tgt
+    result = MethodResult(pair.name, "sena", True, seconds=seconds, panorama=pano.image,
+                          width=pano.image.shape[1], height=pano.image.shape[0])
+    result.psnr_db, result.ssim = in_target_frame(src, map_in_target_frame(warp.map_src_canvas, warp, tgt.shape), tgt,
+                                                  cfg)
+
+    def forward(pts: np.ndarray) -> np.ndarray:
+        return forward_points(seam.maps.map_src_canvas, warp.glob.affine_src_to_tgt, warp.overlap.canvas, pts, cfg)
+
+    _set(result, **shape_figures([(src, forward), (tgt, identity)]), **seam_figures(pair.img_a, pair.img_b, pano, cfg))
+    return result
+
+
+def run_affine(pair: PairImages, pano: Panorama, cfg: Config) -> MethodResult:
+    """SENA's own global affine ``A_glob`` alone (no local warp), from the same stitch."""
+    warp = pano.maps.warp
+    src, tgt = pair.img_src, pair.img_tgt
+    result = MethodResult(pair.name, "affine", True, seconds=pano.seconds["features"] + pano.seconds["global_affine"])
+    result.psnr_db, result.ssim = in_target_frame(
+        src, map_in_target_frame(affine_map_canvas(warp, cfg), warp, tgt.shape), tgt, cfg)
+    _set(result, **shape_figures([(src, homography_forward(warp.glob.affine_src_to_tgt)), (tgt, identity)]))
+    return result
+
+
+def run_homography(pair: PairImages, cfg: Config) -> MethodResult:
+    """The SIFT + RANSAC homography, source warped into the target frame."""
+    t0 = time.perf_counter()
+    homography = sift_homography(pair.img_src, pair.img_tgt, cfg)
+    result = MethodResult(pair.name, "homography", True, seconds=time.perf_counter() - t0)
+    warped, valid = homography_to_target(pair.img_src, homography, pair.img_tgt.shape)
+    result.psnr_db, result.ssim = overlap_psnr_ssim(warped, valid, pair.img_tgt, np.ones(valid.shape, bool))
+    _set(result, **shape_figures([(pair.img_src, homography_forward(homography)), (pair.img_tgt, identity)]))
+    return result
+
+
+def run_opencv(pair: PairImages, method: str) -> MethodResult:
+    """OpenCV's stitcher in ``method``'s mode; overlap figures in its panorama frame."""
+    stitch = opencv_stitch(pair.img_a, pair.img_b, method)
+    result = MethodResult(pair.name, method, True, seconds=stitch.seconds, panorama=stitch.panorama,
+                          width=stitch.panorama.shape[1], height=stitch.panorama.shape[0])
+    (view_a, valid_a), (view_b, valid_b) = opencv_views(stitch, (pair.img_a, pair.img_b))
+    result.psnr_db, result.ssim = overlap_psnr_ssim(view_a, valid_a, view_b, valid_b)
+    _set(result, **shape_figures([(pair.img_a, opencv_forward(stitch, 0)), (pair.img_b, opencv_forward(stitch, 1))]))
+    return result
+
+
+def _set(result: MethodResult, **values) -> None:
+    for name, value in values.items():
+        setattr(result, name, value)
+
+
+def failure_message(exc: BaseException) -> str:
+    """A StitchError's own message; anything else (a bug, or an error inside OpenCV) with its type."""
+    if isinstance(exc, StitchError):
+        return str(exc)
+    traceback.print_exc(file=sys.stderr)
+    return f"{type(exc).__name__}: {exc}".strip()
+
+
+def read_inputs(folder: Path) -> tuple[list[np.ndarray | None], str]:
+    """The pair's two images (None where unreadable) and the reading errors, joined."""
+    images, errors = [], []
+    for stem in ("a", "b"):
+        try:
+            images.append(read_image(_image_named(folder, stem)))
+        except StitchError as exc:
+            images.append(None)
+            errors.append(str(exc))
+    return images, "; ".join(errors)
+
+
+def evaluate_pair(folder: Path, img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> list[MethodResult]:
+    """Every method on one pair, in ``METHODS`` order; failures recorded, never raised."""
+    pano, sena_error = None, ""
+    t0 = time.perf_counter()
+    try:
+        pano = stitch_images(img_a, img_b, cfg)
+    except Exception as exc:  # noqa: BLE001 - recorded, the run goes on
+        sena_error = failure_message(exc)
+    seconds = time.perf_counter() - t0
+    # SENA's rig orients the global baselines (source = its left view); without it, SIFT's matches do.
+    rig = pano.maps.rig if pano is not None else _sift_rig(img_a, img_b, cfg)
+    img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
+    pair = PairImages(folder.name, img_a, img_b, rig, img_src, img_tgt)
+    runners = {"sena": lambda: run_sena(pair, pano, seconds, cfg), "affine": lambda: run_affine(pair, pano, cfg),
+               "homography": lambda: run_homography(pair, cfg)}
+    runners.update({method: (lambda method=method: run_opencv(pair, method)) for method in OPENCV_MODES})
+    results = []
+    for name in METHODS:
+        if pano is None and name in ("sena", "affine"):
+            results.append(MethodResult(folder.name, name, error=sena_error))
+            continue
+        try:
+            results.append(runners[name]())
+        except Exception as exc:  # noqa: BLE001 - recorded, the run goes on
+            results.append(MethodResult(folder.name, name, error=failure_message(exc)))
+    return results
+
+
+def _sift_rig(img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> Rig:
+    sift = match_images(img_a, img_b, cfg.replace(features="sift"))
+    return detect_rig(sift.pts_a, sift.pts_b)
+
+
+def input_cells(folder: Path, images: list[np.ndarray | None], box_wh: tuple[int, int]) -> list[np.ndarray]:
+    """Thumbnails of a pair's two inputs (an empty cell for an unreadable one)."""
+    return [thumbnail(img, f"{folder.name}: {stem}" + ("" if img is not None else " unreadable"), box_wh)
+            for stem, img in zip(("a", "b"), images)]
+
+
+def method_cells(results: list[MethodResult], box_wh: tuple[int, int]) -> list[np.ndarray]:
+    """Thumbnails of the panoramas of ``SHEET_METHODS``, labelled with PSNR and size, or FAILED."""
+    by_method = {r.method: r for r in results}
+    cells = []
+    for method in SHEET_METHODS:
+        r = by_method[method]
+        label = f"{method}: {r.psnr_db:.1f} dB, {r.width}x{r.height}" if r.ok else f"{method}: FAILED"
+        cells.append(thumbnail(r.panorama, label, box_wh))
+    return cells
+
+
+def _fmt(value, digits: int = 4) -> str:
+    if isinstance(value, float):
+        return "" if not math.isfinite(value) else f"{value:.{digits}f}"
+    return str(value)
+
+
+def write_csv(path: Path, rows: list[MethodResult]) -> None:
+    with atomic_output(path) as tmp, open(tmp, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(CSV_FIELDS)
+        for row in rows:
+            values = asdict(row)
+            writer.writerow([_fmt(values[name]) for name in CSV_FIELDS])
+
+
+def _mean(values) -> float:
+    values = np.asarray([v for v in values if math.isfinite(v)], np.float64)
+    return float(values.mean()) if values.size else math.nan
+
+
+def summary_markdown(rows: list[MethodResult], data_dir: Path, cfg: Config, seconds: float) -> str:
+    """``summary.md``: per method, per pair PSNR/SSIM, SENA's seam figures, the failures."""
+    pairs = sorted({r.pair for r in rows})
+    table = {(r.pair, r.method): r for r in rows}
+    common = [p for p in pairs if all(table[p, m].ok for m in METHODS)]
+    lines = [
+        "# sena-warp eval", "",
+        f"Data: `{data_dir}` ({len(pairs)} pairs); features {cfg.features}, device {cfg.device}; "
+        f"{time.strftime('%Y-%m-%d %H:%M %Z')}; {os.cpu_count()} CPUs; {seconds:.0f} s in all.", "",
+        "Overlap PSNR (dB) / SSIM, UDIS-D protocol: `sena`, `affine`, `homography` in the target frame (source "
+        "warped onto the target); `opencv_*` in OpenCV's panorama frame (both views warped by its cameras, before "
+        "its seams and blending). Time: to the panorama (`sena`, `opencv_*`, all stages) or to the model "
+        "(`affine`: XFeat matching and RANSAC; `homography`: SIFT matching and RANSAC). Anisotropy: mean over both "
+        "views of s_max / s_min - 1 of the warp's local Jacobian (0 = a similarity). Line bend: distance of a "
+        "long line's warped image from its chord, % of its length (median / max over both views' long lines).", "",
+        f"## Methods ({len(common)} pairs stitched by all five: the 'common' columns)", "",
+        "| method | stitched | mean time s | mean PSNR / SSIM | common PSNR / SSIM | anisotropy | line bend median / max % |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for method in METHODS:
+        own = [table[p, method] for p in pairs if table[p, method].ok]
+        shared = [table[p, method] for p in common]
+        lines.append(
+            f"| {method} | {len(own)}/{len(pairs)} | {_fmt(_mean(r.seconds for r in own), 2)} | "
+            f"{_fmt(_mean(r.psnr_db for r in own), 2)} / {_fmt(_mean(r.ssim for r in own), 3)} | "
+            f"{_fmt(_mean(r.psnr_db for r in shared), 2)} / {_fmt(_mean(r.ssim for r in shared), 3)} | "
+            f"{_fmt(_mean(r.anisotropy for r in own), 3)} | {_fmt(_mean(r.line_bend_pct for r in own), 3)} / "
+            f"{_fmt(max((r.line_bend_max_pct for r in own if math.isfinite(r.line_bend_max_pct)), default=math.nan), 2)} |")
+    lines += ["", "## Overlap PSNR / SSIM per pair", "",
+              "| pair | " + " | ".join(METHODS) + " |", "|---|" + "---:|" * len(METHODS)]
+    for p in pairs:
+        cells = [f"{table[p, m].psnr_db:.2f} / {table[p, m].ssim:.3f}" if table[p, m].ok else "failed" for m in METHODS]
+        lines.append(f"| {p} | " + " | ".join(cells) + " |")
+    lines += ["", "## SENA's seam per pair", "",
+              "| pair | anchors | median anchor residual px | seam MAD | feather MAD |", "|---|---:|---:|---:|---:|"]
+    for p in pairs:
+        r = table[p, "sena"]
+        if r.ok:
+            lines.append(f"| {p} | {r.anchors} | {r.anchor_residual_px:.3f} | {r.seam_mad:.2f} | {r.feather_mad:.2f} |")
+    failures = [r for r in rows if not r.ok]
+    lines += ["", "## Failures", ""]
+    lines += [f"- {r.pair}, {r.method}: {r.error}" for r in failures] or ["- none"]
+    return "\n".join(lines) + "\n"
+
+
+def pair_line(results: list[MethodResult]) -> str:
+    """One stdout line per pair: each method's PSNR or 'failed'."""
+    parts = [f"{r.method} {r.psnr_db:.2f} dB" if r.ok else f"{r.method} failed" for r in results]
+    return f"{results[0].pair}: " + ", ".join(parts)
+
+
+def run_eval(data_dir: str | os.PathLike, out_dir: str | os.PathLike, cfg: Config, progress: bool | None = None
+             ) -> list[MethodResult]:
+    """Evaluate every pair of ``data_dir`` into ``out_dir`` (see the module docstring); the rows of results.csv."""
+    t0 = time.perf_counter()
+    folders = pair_folders(data_dir)
+    out_dir = check_output_folder(out_dir)
+    sheets_dir = make_folder(Path(out_dir) / "sheets")
+    show = sys.stderr.isatty() if progress is None else progress
+    bar = Progress(len(folders), show, sys.stderr, "sena-warp eval", "pairs")
+    rows, overview = [], []
+    for done, folder in enumerate(folders):
+        bar.update(done, force=True)
+        images, read_error = read_inputs(folder)
+        if read_error:
+            results = [MethodResult(folder.name, name, error=read_error) for name in METHODS]
+        else:
+            results = evaluate_pair(folder, *images, cfg)
+        write_image(sheets_dir / f"{folder.name}.png",
+                    tile(input_cells(folder, images, PAIR_THUMB_WH) + method_cells(results, PAIR_THUMB_WH), COLUMNS))
+        overview += input_cells(folder, images, OVERVIEW_THUMB_WH) + method_cells(results, OVERVIEW_THUMB_WH)
+        for r in results:
+            r.panorama = None  # drawn; memory stays flat over many pairs
+        rows += results
+        if show:
+            sys.stderr.write("\r\x1b[K")  # clear the progress line before the pair's own line
+        print(pair_line(results), flush=True)
+    bar.close(len(folders))
+    write_csv(Path(out_dir) / "results.csv", rows)
+    write_image(Path(out_dir) / "overview.jpg", tile(overview, COLUMNS),
+                params=(cv2.IMWRITE_JPEG_QUALITY, OVERVIEW_JPEG_QUALITY))
+    with atomic_output(Path(out_dir) / "summary.md") as tmp:
+        tmp.write_text(summary_markdown(rows, Path(data_dir), cfg, time.perf_counter() - t0))
+    return rows
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    """``sena-warp eval``: evaluate, then print where the results are."""
+    cfg = Config(features=args.features, device=args.device)
+    rows = run_eval(args.data_dir, args.out, cfg, args.progress or None)
+    stitched = sum(r.ok for r in rows if r.method == "sena")
+    print(f"{args.out}: results.csv, summary.md, overview.jpg, sheets/ ({stitched}/{len(rows) // len(METHODS)} "
+          f"pairs stitched by SENA)")
+    return 0
