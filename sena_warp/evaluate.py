@@ -49,14 +49,16 @@ from .sheets import thumbnail, tile
 from .stitch import Panorama, stitch_images
 from .warp_map import forward_points, warp_image
 from .zone import overlap_x_extent
+from sena_warp.kernels.runtime import resolve_device
 
 METHODS = ("sena", "affine", "homography", *OPENCV_MODES)
-SHEET_METHODS = ("sena", *OPENCV_MODES)  # the methods that make a panorama (the pictures show them)
+# The methods that make a panorama (the pictures show them), with their names on the pictures.
+SHEET_METHODS = {"sena": "SENA", "opencv_panorama": "OpenCV PANORAMA", "opencv_scans": "OpenCV SCANS"}
 COLUMNS = 2 + len(SHEET_METHODS)  # a sheet row: both inputs, then those panoramas
 SHAPE_GRID = 12  # points per side of the grid over each view where the anisotropy is measured
 PAIR_THUMB_WH = (360, 240)  # per-pair sheet: thumbnail box (px)
-OVERVIEW_THUMB_WH = (200, 130)  # overview sheet: thumbnail box (px)
-OVERVIEW_JPEG_QUALITY = 80
+OVERVIEW_THUMB_WH = (180, 116)  # overview sheet: thumbnail box (px)
+OVERVIEW_JPEG_QUALITY = 72
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp")
 
 
@@ -72,7 +74,7 @@ class MethodResult:
     psnr_db: float = math.nan
     ssim: float = math.nan
     anisotropy: float = math.nan  # mean over both views of similarity_deviation of the local Jacobian
-    line_bend_pct: float = math.nan  # median over both views' long lines
+    line_bend_mean_pct: float = math.nan  # mean over both views' long lines
     line_bend_max_pct: float = math.nan
     lines: int = 0
     width: int = 0  # panorama size (methods that make one)
@@ -134,7 +136,7 @@ def shape_figures(views: list[tuple[np.ndarray, Forward]]) -> dict:
     anisotropy, bends = np.concatenate(anisotropy), np.concatenate(bends)
     anisotropy, bends = anisotropy[np.isfinite(anisotropy)], bends[np.isfinite(bends)]
     return {"anisotropy": float(anisotropy.mean()) if anisotropy.size else math.nan,
-            "line_bend_pct": float(np.median(bends)) if bends.size else math.nan,
+            "line_bend_mean_pct": float(bends.mean()) if bends.size else math.nan,
             "line_bend_max_pct": float(bends.max()) if bends.size else math.nan, "lines": int(bends.size)}
 
 
@@ -304,13 +306,14 @@ def input_cells(folder: Path, images: list[np.ndarray | None], box_wh: tuple[int
             for stem, img in zip(("a", "b"), images)]
 
 
-def method_cells(results: list[MethodResult], box_wh: tuple[int, int]) -> list[np.ndarray]:
-    """Thumbnails of the panoramas of ``SHEET_METHODS``, labelled with PSNR and size, or FAILED."""
+def method_cells(results: list[MethodResult], box_wh: tuple[int, int], with_size: bool) -> list[np.ndarray]:
+    """Thumbnails of the panoramas of ``SHEET_METHODS``, labelled with PSNR (and size), or FAILED."""
     by_method = {r.method: r for r in results}
     cells = []
-    for method in SHEET_METHODS:
+    for method, name in SHEET_METHODS.items():
         r = by_method[method]
-        label = f"{method}: {r.psnr_db:.1f} dB, {r.width}x{r.height}" if r.ok else f"{method}: FAILED"
+        size = f", {r.width}x{r.height}" if with_size else ""
+        label = f"{name}: {r.psnr_db:.1f} dB{size}" if r.ok else f"{name}: FAILED"
         cells.append(thumbnail(r.panorama, label, box_wh))
     return cells
 
@@ -330,9 +333,23 @@ def write_csv(path: Path, rows: list[MethodResult]) -> None:
             writer.writerow([_fmt(values[name]) for name in CSV_FIELDS])
 
 
+def _finite(values) -> np.ndarray:
+    return np.asarray([v for v in values if math.isfinite(v)], np.float64)
+
+
 def _mean(values) -> float:
-    values = np.asarray([v for v in values if math.isfinite(v)], np.float64)
+    values = _finite(values)
     return float(values.mean()) if values.size else math.nan
+
+
+def _median(values) -> float:
+    values = _finite(values)
+    return float(np.median(values)) if values.size else math.nan
+
+
+def _max(values) -> float:
+    values = _finite(values)
+    return float(values.max()) if values.size else math.nan
 
 
 def summary_markdown(rows: list[MethodResult], data_dir: Path, cfg: Config, seconds: float) -> str:
@@ -342,16 +359,18 @@ def summary_markdown(rows: list[MethodResult], data_dir: Path, cfg: Config, seco
     common = [p for p in pairs if all(table[p, m].ok for m in METHODS)]
     lines = [
         "# sena-warp eval", "",
-        f"Data: `{data_dir}` ({len(pairs)} pairs); features {cfg.features}, device {cfg.device}; "
+        f"Data: `{data_dir}` ({len(pairs)} pairs); features {cfg.features}, device {resolve_device(cfg.device)}; "
         f"{time.strftime('%Y-%m-%d %H:%M %Z')}; {os.cpu_count()} CPUs; {seconds:.0f} s in all.", "",
         "Overlap PSNR (dB) / SSIM, UDIS-D protocol: `sena`, `affine`, `homography` in the target frame (source "
         "warped onto the target); `opencv_*` in OpenCV's panorama frame (both views warped by its cameras, before "
         "its seams and blending). Time: to the panorama (`sena`, `opencv_*`, all stages) or to the model "
         "(`affine`: XFeat matching and RANSAC; `homography`: SIFT matching and RANSAC). Anisotropy: mean over both "
-        "views of s_max / s_min - 1 of the warp's local Jacobian (0 = a similarity). Line bend: distance of a "
-        "long line's warped image from its chord, % of its length (median / max over both views' long lines).", "",
+        "views of s_max / s_min - 1 of the warp's local Jacobian (0 = a similarity). Line bend: largest distance of "
+        "a long line's warped image from its chord, % of its length, mean / max over both views' long lines. PSNR, "
+        "SSIM, time: mean over pairs; anisotropy and mean line bend: median over pairs (a degenerate panorama "
+        "would swamp a mean); max line bend: over all pairs.", "",
         f"## Methods ({len(common)} pairs stitched by all five: the 'common' columns)", "",
-        "| method | stitched | mean time s | mean PSNR / SSIM | common PSNR / SSIM | anisotropy | line bend median / max % |",
+        "| method | stitched | mean time s | mean PSNR / SSIM | common PSNR / SSIM | anisotropy | line bend mean / max % |",
         "|---|---:|---:|---:|---:|---:|---:|",
     ]
     for method in METHODS:
@@ -361,8 +380,8 @@ def summary_markdown(rows: list[MethodResult], data_dir: Path, cfg: Config, seco
             f"| {method} | {len(own)}/{len(pairs)} | {_fmt(_mean(r.seconds for r in own), 2)} | "
             f"{_fmt(_mean(r.psnr_db for r in own), 2)} / {_fmt(_mean(r.ssim for r in own), 3)} | "
             f"{_fmt(_mean(r.psnr_db for r in shared), 2)} / {_fmt(_mean(r.ssim for r in shared), 3)} | "
-            f"{_fmt(_mean(r.anisotropy for r in own), 3)} | {_fmt(_mean(r.line_bend_pct for r in own), 3)} / "
-            f"{_fmt(max((r.line_bend_max_pct for r in own if math.isfinite(r.line_bend_max_pct)), default=math.nan), 2)} |")
+            f"{_fmt(_median(r.anisotropy for r in own), 3)} | {_fmt(_median(r.line_bend_mean_pct for r in own), 2)} / "
+            f"{_fmt(_max(r.line_bend_max_pct for r in own), 2)} |")
     lines += ["", "## Overlap PSNR / SSIM per pair", "",
               "| pair | " + " | ".join(METHODS) + " |", "|---|" + "---:|" * len(METHODS)]
     for p in pairs:
@@ -404,8 +423,8 @@ def run_eval(data_dir: str | os.PathLike, out_dir: str | os.PathLike, cfg: Confi
         else:
             results = evaluate_pair(folder, *images, cfg)
         write_image(sheets_dir / f"{folder.name}.png",
-                    tile(input_cells(folder, images, PAIR_THUMB_WH) + method_cells(results, PAIR_THUMB_WH), COLUMNS))
-        overview += input_cells(folder, images, OVERVIEW_THUMB_WH) + method_cells(results, OVERVIEW_THUMB_WH)
+                    tile(input_cells(folder, images, PAIR_THUMB_WH) + method_cells(results, PAIR_THUMB_WH, True), COLUMNS))
+        overview += input_cells(folder, images, OVERVIEW_THUMB_WH) + method_cells(results, OVERVIEW_THUMB_WH, False)
         for r in results:
             r.panorama = None  # drawn; memory stays flat over many pairs
         rows += results
