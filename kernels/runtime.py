@@ -147,9 +147,12 @@ def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str,
 
 
 def prewarm(device: str) -> None:
-    """Import every module of ``sena_warp.kernels`` and load (compile once, then cached) its kernels."""
+    """Import every module of ``sena_warp.kernels`` and load (compile once, then cached) its kernels:
+    those at module level and the variants a module builds with a factory and lists in a dict."""
     package = importlib.import_module("sena_warp.kernels")
     for info in pkgutil.iter_modules(package.__path__):
         module = importlib.import_module(f"sena_warp.kernels.{info.name}")
-        if any(isinstance(obj, wp.Kernel) for obj in vars(module).values()):
-            wp.load_module(module, device=device)
+        for obj in vars(module).values():
+            for kernel in obj.values() if isinstance(obj, dict) else (obj,):
+                if isinstance(kernel, wp.Kernel):
+                    _ensure_loaded(kernel, device)

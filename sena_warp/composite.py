@@ -1,8 +1,8 @@
 """Apply the three canvas maps to a frame pair: the per-frame path of images and videos.
 
 ``Compositor`` uploads the maps to the Warp device once and turns them, once per input shape, into a
-fixed-point layout (tap offsets and bilinear weights with alpha folded in, see
-``kernels/composite.py``), so a video's per-frame cost is two uploads, one integer kernel launch and
+fixed-point plan (per pixel: which side is shown, its tap offset and sub-pixel fractions; alpha
+where the two blend, see ``kernels/composite.py``), so a video's per-frame cost is two uploads, one integer kernel launch and
 one download (SENA.md "Maps, not images": cached warps, per-frame compositing).
 """
 
@@ -14,15 +14,13 @@ import numpy as np
 import warp as wp
 
 from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import composite_fixed_kernel, composite_layout_kernel, vec4us
+from sena_warp.kernels.composite import COMPOSITE_FIXED_KERNELS, MAX_CHANNELS, composite_plan_kernel
 from sena_warp.warp_map import as_channels
 
 
-MAX_CHANNELS = 4  # the frame kernel takes the fill values as one vec4i
-
 
 class _Buffers:
-    """Warp arrays for one (src shape, tgt shape) pair: inputs, host staging, layout, outputs."""
+    """Warp arrays for one (src shape, tgt shape) pair: inputs, host staging, plan, outputs."""
 
     def __init__(self, shape_src: tuple, shape_tgt: tuple, canvas_shape: tuple[int, int], device: str):
         channels = shape_src[2]
@@ -31,16 +29,17 @@ class _Buffers:
         self.tgt = wp.empty(shape_tgt, dtype=wp.uint8, device=device)
         self.out = wp.empty((*canvas_shape, channels), dtype=wp.uint8, device=device)
         self.coverage = wp.empty(canvas_shape, dtype=wp.uint8, device=device)
-        self.taps = wp.empty(pixels, dtype=wp.vec2i, device=device)
-        self.weights = wp.empty(2 * pixels, dtype=vec4us, device=device)
-        self.layout_ready = False
+        self.plan = wp.empty(pixels, dtype=wp.int64, device=device)
+        self.plan_tgt = wp.empty(pixels, dtype=wp.int64, device=device)  # read for blend pixels only
+        self.alpha = wp.empty(pixels, dtype=wp.uint16, device=device)  # likewise
+        self.plan_ready = False
         # Neighbour taps in flat elements: C along x, W*C along y (0 on an axis of length 1).
         steps = wp.vec4i(
             channels * min(1, shape_src[1] - 1), channels * shape_src[1] * min(1, shape_src[0] - 1),
             channels * min(1, shape_tgt[1] - 1), channels * shape_tgt[1] * min(1, shape_tgt[0] - 1),
         )
         # The frame kernel's inputs before (channels, fill, out); flat views of the (H, W, C) arrays.
-        self.frame_inputs = [self.src.flatten(), self.tgt.flatten(), steps, self.taps, self.weights]
+        self.frame_inputs = [self.src.flatten(), self.tgt.flatten(), steps, self.plan, self.plan_tgt, self.alpha]
         self.out_flat = self.out.flatten()
         # On CPU the device arrays are host memory already; on CUDA copies go through pinned memory.
         on_cpu = device == "cpu"
@@ -55,7 +54,7 @@ class Compositor:
     source / target; ``alpha_canvas``: (Hc, Wc) float32 weight of the source. ``device`` is a
     resolved Warp device ("cpu" or "cuda", see ``runtime.resolve_device``); ``threads`` the CPU
     row-band launch threads (0 = one per core). Results match the float rule of
-    ``kernels.composite.composite_kernel`` within 1 grey level (fixed-point weights of 14 bits).
+    ``kernels.composite.composite_kernel`` within 1 grey level (positions in 1/1024 px, alpha in 1/16384).
     """
 
     def __init__(
@@ -78,24 +77,24 @@ class Compositor:
 
     def set_maps(self, map_src_canvas: np.ndarray | None = None, map_tgt_canvas: np.ndarray | None = None,
                  alpha_canvas: np.ndarray | None = None) -> None:
-        """Upload new maps (same shapes) in place; the layouts are rebuilt on the next ``apply``."""
+        """Upload new maps (same shapes) in place; the plans are rebuilt on the next ``apply``."""
         for array, values in ((self.map_src, map_src_canvas), (self.map_tgt, map_tgt_canvas),
                               (self.alpha, alpha_canvas)):
             if values is not None:
                 array.assign(np.ascontiguousarray(values, dtype=np.float32))
         for buf in self._buffers.values():
-            buf.layout_ready = False
+            buf.plan_ready = False
 
     def _buffers_for(self, shape_src: tuple, shape_tgt: tuple) -> _Buffers:
         key = (shape_src, shape_tgt)
         if key not in self._buffers:
             self._buffers[key] = _Buffers(shape_src, shape_tgt, self.canvas_shape, self.device)
         buf = self._buffers[key]
-        if not buf.layout_ready:
+        if not buf.plan_ready:
             inputs = [self.map_src, self.map_tgt, self.alpha, wp.vec3i(*shape_src), wp.vec3i(*shape_tgt),
-                      buf.taps, buf.weights, buf.coverage]
-            runtime.launch_rows(composite_layout_kernel, *self.canvas_shape, inputs, self.device, self.threads)
-            buf.layout_ready = True
+                      buf.plan, buf.plan_tgt, buf.alpha, buf.coverage]
+            runtime.launch_rows(composite_plan_kernel, *self.canvas_shape, inputs, self.device, self.threads)
+            buf.plan_ready = True
         return buf
 
     def apply(self, img_src: np.ndarray, img_tgt: np.ndarray,
@@ -122,7 +121,8 @@ class Compositor:
         if buf.src_host is not buf.src:
             wp.copy(buf.src, buf.src_host)
             wp.copy(buf.tgt, buf.tgt_host)
-        inputs = [*buf.frame_inputs, channels, fill_vec, buf.out_flat]
-        runtime.launch_row_loops(composite_fixed_kernel, *self.canvas_shape, inputs, self.device, self.threads)
+        inputs = [*buf.frame_inputs, fill_vec, buf.out_flat]
+        runtime.launch_row_loops(COMPOSITE_FIXED_KERNELS[channels], *self.canvas_shape, inputs, self.device,
+                                 self.threads)
         out = buf.out.numpy()
         return (out[:, :, 0] if np.ndim(img_src) == 2 else out).copy(), buf.coverage.numpy().copy()
