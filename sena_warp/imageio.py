@@ -22,6 +22,16 @@ from .errors import InputError, OutputError
 MIN_SIDE_PX = 16
 
 
+def _process_umask() -> int:
+    """The process's umask (read once at import, before any thread: os.umask can only swap it)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _process_umask()
+
+
 def to_bgr8(img: np.ndarray, name: str = "image") -> np.ndarray:
     """Convert grey, BGRA or 16-bit images to 8-bit BGR ``(H, W, 3)``."""
     if img.dtype == np.uint16:
@@ -147,6 +157,7 @@ def atomic_output(path: str | os.PathLike, inputs: tuple[str | os.PathLike, ...]
     try:
         yield tmp
         try:
+            os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; the output gets a new file's usual mode
             os.replace(tmp, path)
         except OSError as exc:
             raise OutputError(f"{path}: cannot write it ({exc.strerror}); choose another output name") from exc

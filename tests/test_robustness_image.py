@@ -344,5 +344,12 @@ def test_atomic_output_rename_failure_is_output_error_and_removes_temp(tmp_path,
     assert list(tmp_path.iterdir()) == []
 
 
+def test_atomic_output_gives_the_file_the_umask_mode_not_mkstemps_0600(tmp_path, monkeypatch):
+    monkeypatch.setattr(imageio, "_UMASK", 0o027)  # as read at import by a process with that umask
+    with atomic_output(tmp_path / "x.png") as tmp:
+        tmp.write_bytes(b"data")
+    assert (tmp_path / "x.png").stat().st_mode & 0o777 == 0o640
+
+
 def test_check_output_path_accepts_a_new_file_in_a_writable_folder(tmp_path):
     assert check_output_path(tmp_path / "new.png") == tmp_path / "new.png"
