@@ -47,7 +47,7 @@ class BenchSettings:
     clip_preset: str = "ultrafast"  # libx264 preset of the made clips (fast to make)
     crop_fraction: float = 0.85  # crop window side / the largest 16:9 window of the image
     kernel_repeats: int = 15  # timed compositing calls per size (median reported)
-    kernel_warmup: int = 2  # untimed calls first (layout build, caches)
+    kernel_warmup: int = 2  # untimed calls first (plan build, caches)
 
 
 def parse_size(text: str) -> tuple[str, tuple[int, int]]:
