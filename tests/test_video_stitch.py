@@ -101,6 +101,26 @@ def test_rooftop_frames_are_real_stitches(clips, rooftop_static):
     assert abs(np.median(out_frames[30].u[rows // 2, cols // 2]) - 128) <= 2
 
 
+@pytest.mark.parametrize("pair, frames, rate", [(("rooftop_handheld", "left.mp4", "right.mp4"), 296, 30),
+                                                 (("office_static", "cam1.mp4", "cam2.mp4"), 385, 24)])
+def test_full_shared_videos_give_every_frame_at_the_input_rate_with_the_audio(shared_dir, tmp_path, pair, frames, rate):
+    """The whole shared recordings (not the bundled cuts): frames, pts grid, audio span as the input's."""
+    folder, left, right = pair
+    left, right = shared_dir / "videos" / folder / left, shared_dir / "videos" / folder / right
+    out = tmp_path / "full.mp4"
+    report = stitch_videos(left, right, out, FAST, VideoOptions.from_config(FAST, progress=False))
+    assert report["frames_out"] == frames and report["dropped"] == 0
+    assert len(decoded_frames(out)) == frames
+    spans = stream_spans(out)
+    n_video, t_video, _ = spans["video"]
+    assert n_video == frames and t_video[0] == 0 and set(np.diff(t_video)) == {Fraction(1, rate)}
+    assert ("audio" in spans) == ("audio" in stream_spans(left))
+    if "audio" in spans:  # rooftop: the left phone's audio, as long as it is in the input
+        _, t_in, end_in = stream_spans(left)["audio"]
+        _, t_out, end_out = spans["audio"]
+        assert abs(float(end_out - t_out[0]) - float(end_in - t_in[0])) < 0.1
+
+
 def test_first_estimate_falls_back_to_the_next_best_pair_when_the_best_fails_later(clips, monkeypatch):
     """Pairs are ranked by their step-1 inliers; a full estimate that fails moves on to the next one."""
     left, right = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4"
