@@ -41,11 +41,11 @@ import numpy as np
 
 from sena_warp.baselines import HOMOGRAPHY_RANSAC_PX, affine_map_canvas, homography_to_target, map_in_target_frame
 from sena_warp.config import Config
-from sena_warp.evaluate import in_target_frame
+from sena_warp.evaluate import in_target_frame, pair_folders
 from sena_warp.features import match_images
 from sena_warp.imageio import read_image
 from sena_warp.metrics import overlap_psnr_ssim
-from sena_warp.rig import Rig, detect_rig, image_to_working, points_to_working
+from sena_warp.rig import Rig, detect_rig, image_to_working, matches_to_working
 from sena_warp.stitch import StageClock, Warp, estimate_warp
 
 REPO = Path(__file__).resolve().parents[1]
@@ -98,8 +98,8 @@ def load_pair(folder: Path, cfg: Config) -> PairInputs:
     sift = match_images(img_a, img_b, cfg.replace(features="sift"))
     rig = detect_rig(matches.pts_a, matches.pts_b)
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
-    pts_src, pts_tgt = (points_to_working(pts, rig) for pts in rig.pick(matches.pts_a, matches.pts_b))
-    sift_src, sift_tgt = (points_to_working(pts, rig) for pts in rig.pick(sift.pts_a, sift.pts_b))
+    pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
+    sift_src, sift_tgt = matches_to_working(sift.pts_a, sift.pts_b, rig)
     return PairInputs(folder.name, rig, img_src, img_tgt, pts_src, pts_tgt, sift_src, sift_tgt)
 
 
@@ -151,11 +151,6 @@ def evaluate_pair(pair: PairInputs, cfg: Config) -> tuple[Warp, PairFigures]:
     figures = PairFigures(pair.name, len(pair.pts_src), warp.glob.n_inliers, sena, affine,
                           homography_figures(pair), stretch, folded)
     return warp, figures
-
-
-def pair_folders(data: Path) -> list[Path]:
-    """Sub-folders of ``data`` holding an ``a.*`` and a ``b.*`` image, sorted by name."""
-    return sorted(p for p in data.iterdir() if p.is_dir() and any(p.glob("a.*")) and any(p.glob("b.*")))
 
 
 def load_all(data: Path, cfg: Config) -> tuple[list[PairInputs], list[tuple[str, str]]]:

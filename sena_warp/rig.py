@@ -64,6 +64,12 @@ def points_to_working(pts: np.ndarray, rig: Rig) -> np.ndarray:
     return np.ascontiguousarray(pts[:, ::-1]) if rig.vertical else pts
 
 
+def matches_to_working(pts_a: np.ndarray, pts_b: np.ndarray, rig: Rig) -> tuple[np.ndarray, np.ndarray]:
+    """Matched (N, 2) xy points of inputs a and b as (pts_src, pts_tgt) in the working frame."""
+    pts_src, pts_tgt = rig.pick(pts_a, pts_b)
+    return points_to_working(pts_src, rig), points_to_working(pts_tgt, rig)
+
+
 def map_from_working(map_canvas: np.ndarray, rig: Rig) -> np.ndarray:
     """A working-frame canvas map, (H, W, 2) xy or (H, W) scalar, expressed in the input frame."""
     if not rig.vertical:

@@ -27,7 +27,7 @@ from .global_affine import GlobalAffine, fit_global_affine, near_model
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
 from .partition import SeamMaps, seam_maps
-from .rig import Rig, detect_rig, image_to_working, map_from_working, points_to_working
+from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .warp_map import forward_points, source_map_canvas, warp_image
 from .zone import Zone, adequate_zone
 from sena_warp.kernels.runtime import resolve_device
@@ -141,7 +141,7 @@ def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
         matches = clock.run("features", match_images, img_a, img_b, cfg)
     rig = detect_rig(matches.pts_a, matches.pts_b, reference)
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
-    pts_src, pts_tgt = (points_to_working(pts, rig) for pts in rig.pick(matches.pts_a, matches.pts_b))
+    pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
     warp = estimate_warp(img_src, img_tgt, pts_src, pts_tgt, cfg, clock)
     seam = estimate_seam(img_src, img_tgt, warp, cfg, clock)
     return StitchMaps(

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from sena_warp.errors import InputError
-from sena_warp.rig import detect_rig, image_to_working, map_from_working, points_to_working
+from sena_warp.rig import detect_rig, image_to_working, map_from_working, matches_to_working, points_to_working
 
 RNG = np.random.default_rng(7)
 
@@ -44,3 +44,13 @@ def test_working_frame_round_trip_for_vertical_rig():
     ys_in, xs_in = np.mgrid[0:30, 0:50].astype(np.float32)
     np.testing.assert_array_equal(map_from_working(ident_work, rig), np.dstack([xs_in, ys_in]))
     assert map_from_working(np.zeros((50, 30), np.float32), rig).shape == (30, 50)
+
+
+def test_matches_to_working_orders_by_role_and_transposes_a_vertical_rig():
+    pts_b = np.array([[10.0, 50.0], [30.0, 110.0]])
+    pts_a = pts_b + [0.0, 150.0]  # scene points lower in a than in b: a is the top view, the source
+    rig = detect_rig(pts_a, pts_b, reference="a")  # ... unless a is chosen as the unwarped reference
+    assert rig.vertical and rig.source == "b"
+    pts_src, pts_tgt = matches_to_working(pts_a, pts_b, rig)
+    np.testing.assert_array_equal(pts_src, pts_b[:, ::-1])
+    np.testing.assert_array_equal(pts_tgt, pts_a[:, ::-1])

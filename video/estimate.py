@@ -16,7 +16,7 @@ from ..config import Config
 from ..errors import StitchError, VideoError
 from ..features import Matches, match_images
 from ..global_affine import fit_global_affine
-from ..rig import detect_rig, points_to_working
+from ..rig import detect_rig, matches_to_working
 from ..stitch import StitchMaps, estimate_maps
 from .maps import PlaneMaps, map_change_px
 from .pairing import pair_by_time
@@ -62,7 +62,7 @@ def screen_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: st
     """Steps 0-1 only: the pair's matches and its global-affine inlier count (raises StitchError)."""
     matches = match_images(frame_l.to_bgr(), frame_r.to_bgr(), cfg)
     rig = detect_rig(matches.pts_a, matches.pts_b, reference)
-    pts_src, pts_tgt = (points_to_working(pts, rig) for pts in rig.pick(matches.pts_a, matches.pts_b))
+    pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
     return matches, fit_global_affine(pts_src, pts_tgt, cfg).n_inliers
 
 
