@@ -44,6 +44,7 @@ from sena_warp.config import Config
 from sena_warp.evaluate import in_target_frame, pair_folders
 from sena_warp.features import match_images
 from sena_warp.imageio import read_image
+from sena_warp.kernels.runtime import resolve_config
 from sena_warp.metrics import overlap_psnr_ssim
 from sena_warp.rig import Rig, detect_rig, image_to_working, matches_to_working
 from sena_warp.stitch import StageClock, Warp, estimate_warp
@@ -274,7 +275,7 @@ def main() -> None:
     parser.add_argument("--timing", metavar="PAIR", help="per-stage warp seconds on this pair")
     parser.add_argument("--runs", type=int, default=3, help="timed runs for --timing")
     args = parser.parse_args()
-    cfg = parse_setting(args.set, Config())
+    cfg = resolve_config(parse_setting(args.set, Config()))
 
     if args.timing:
         pair = load_pair(args.data / args.timing, cfg)

@@ -6,11 +6,13 @@ on one thread, so on CPU ``launch_rows`` cuts the image into horizontal bands an
 from a small persistent thread pool (a launch releases the GIL while it runs). On CUDA one launch
 covers the whole image.
 
-Typical use (other kernel modules, e.g. ``seam.py``, follow the same pattern)::
+The device is chosen once per run: the job (``stitch_images``, ``stitch_videos``, ``sena-warp eval``)
+calls :func:`resolve_config` and hands the result to every stage, which allocates on ``cfg.device``
+and launches with ``cfg.cpu_threads``::
 
     from sena_warp.kernels import runtime
-    device = runtime.resolve_device(cfg.device)
-    runtime.launch_rows(my_kernel, height, width, [arg1, arg2, out], device, cfg.cpu_threads)
+    out = wp.zeros((height, width), dtype=float, device=cfg.device)
+    runtime.launch_rows(my_kernel, height, width, [arg1, arg2, out], cfg.device, cfg.cpu_threads)
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import warp as wp
 
+from sena_warp.config import Config
 from sena_warp.errors import InputError
 
 # The init banner would go to stdout of every CLI run; Warp reads the level when it initialises
@@ -69,7 +72,13 @@ def resolve_device(name: str) -> str:
     return name
 
 
-def cpu_threads(threads: int = 0) -> int:
+def resolve_config(cfg: Config) -> Config:
+    """``cfg`` with its device resolved (:func:`resolve_device`): what a run computes once, at its start,
+    and passes to every stage, so that stages only ever see "cpu" or "cuda"."""
+    return cfg.replace(device=resolve_device(cfg.device))
+
+
+def cpu_threads(threads: int) -> int:
     """Number of CPU launch threads: ``threads`` when > 0, else one per core."""
     return threads if threads > 0 else (os.cpu_count() or 1)
 
@@ -97,11 +106,12 @@ def row_bands(height: int, bands: int) -> list[tuple[int, int]]:
     return [(edges[k], edges[k + 1] - edges[k]) for k in range(bands) if edges[k + 1] > edges[k]]
 
 
-def launch_rows(kernel, height: int, width: int, inputs: list, device: str, threads: int = 0) -> None:
+def launch_rows(kernel, height: int, width: int, inputs: list, device: str, threads: int) -> None:
     """Run ``kernel(row0, *inputs)`` over a (height, width) grid and wait until it has finished.
 
-    On "cpu" the rows are split into ``cpu_threads(threads)`` bands launched in parallel; on
-    "cuda" one launch of dim (height, width). Arrays in ``inputs`` must live on ``device``.
+    ``device``: a resolved Warp device ("cpu" or "cuda", :func:`resolve_device`). On "cpu" the rows
+    are split into ``cpu_threads(threads)`` bands launched in parallel; on "cuda" one launch of dim
+    (height, width). Arrays in ``inputs`` must live on ``device``.
     """
     if height <= 0 or width <= 0:
         return
@@ -122,7 +132,7 @@ def launch_rows(kernel, height: int, width: int, inputs: list, device: str, thre
         future.result()
 
 
-def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str, threads: int = 0) -> None:
+def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str, threads: int) -> None:
     """Run ``kernel(row0, col_step, width, *inputs)`` over rows [0, height) and wait until it has finished.
 
     For kernels whose thread (i, j) loops over columns ``j, j + col_step, ... < width`` of row
@@ -144,6 +154,11 @@ def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str,
     ]
     for future in futures:
         future.result()
+
+
+def loaded() -> frozenset[tuple[str, str]]:
+    """(kernel module name, device) of every kernel module loaded so far by this runtime."""
+    return frozenset(_loaded)
 
 
 def prewarm(device: str) -> None:

@@ -320,9 +320,11 @@ def format_table(rows: list[dict], markdown: bool = False) -> str:
 def run_bench(sizes: list[str], seconds: float, work: Path, device: str = Config.device,
               data_dir: Path = DATA_DIR, settings: BenchSettings = BenchSettings()) -> list[dict]:
     """Benchmark every size (labels as :func:`parse_size` takes); one row dict per size (keys: COLUMNS)."""
+    from sena_warp.kernels.runtime import resolve_config
+
     pair = pair_paths(data_dir)
     work.mkdir(parents=True, exist_ok=True)
-    cfg = Config(device=device)
+    cfg = resolve_config(Config(device=device))
     return [bench_size(*parse_size(size), seconds, work, pair, cfg, settings) for size in sizes]
 
 

@@ -55,10 +55,11 @@ def cmd_image(args: argparse.Namespace) -> int:
     from .crop import largest_inner_rectangle
     from .debug import dump_stages
     from .imageio import check_output_folder, check_output_path, read_image, write_image
+    from sena_warp.kernels.runtime import resolve_config
     from .report import image_report, write_json
     from .stitch import stitch_images
 
-    cfg = _config_from(args)
+    cfg = resolve_config(_config_from(args))  # once: the stitch, the debug pictures and the report share it
     inputs = (args.image_a, args.image_b)
     _check_output_suffix(args.output, (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp"))
     for path in filter(None, (args.output, args.report)):
@@ -71,7 +72,7 @@ def cmd_image(args: argparse.Namespace) -> int:
     image = pano.image if crop is None else pano.image[crop[1]:crop[1] + crop[3], crop[0]:crop[0] + crop[2]]
     write_image(args.output, image, inputs=inputs)
     if args.debug:
-        dump_stages(args.debug, img_a, img_b, pano)
+        dump_stages(args.debug, img_a, img_b, pano, cfg)
     report = image_report(pano, img_a, img_b, cfg, crop)
     if args.report:
         write_json(args.report, report)
@@ -84,7 +85,7 @@ def cmd_image(args: argparse.Namespace) -> int:
 
 
 def cmd_video(args: argparse.Namespace) -> int:
-    from sena_warp.kernels.runtime import resolve_device
+    from sena_warp.kernels.runtime import resolve_config
     from sena_warp.video.loop import VideoOptions, write_report
     from sena_warp.video.stitch import stitch_videos
 
@@ -95,11 +96,11 @@ def cmd_video(args: argparse.Namespace) -> int:
         check_output_path(path, (args.left, args.right))  # before decoding: a bad --report must not leave a video
     if args.reestimate is not None and args.rig != "moving":
         raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
-    cfg = _config_from(args).replace(video_rig=args.rig)
+    cfg = resolve_config(_config_from(args).replace(video_rig=args.rig))
     if args.reestimate is not None:
         cfg = cfg.replace(video_reestimate_s=args.reestimate)
     # NVENC only where the kernels run on a GPU too; the writer falls back to libx264 if it cannot open.
-    codec = args.codec or ("h264_nvenc" if resolve_device(cfg.device) == "cuda" else cfg.video_codec)
+    codec = args.codec or ("h264_nvenc" if cfg.device == "cuda" else cfg.video_codec)
     options = VideoOptions.from_config(cfg, offset_s=args.offset, audio=args.audio, codec=codec,
                                        crf=cfg.video_crf if args.crf is None else args.crf,
                                        preset=args.preset or cfg.video_preset, progress=args.progress or None)

@@ -13,10 +13,10 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
+from sena_warp.config import Config
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import COMPOSITE_FIXED_KERNELS, MAX_CHANNELS, composite_plan_kernel
 from sena_warp.warp_map import as_channels
-
 
 
 class _Buffers:
@@ -51,25 +51,18 @@ class Compositor:
     """out = alpha * src(map_src) + (1 - alpha) * tgt(map_tgt), bilinear, on the Warp device.
 
     ``map_src_canvas``, ``map_tgt_canvas``: (Hc, Wc, 2) float32 (x, y) sample positions in the
-    source / target; ``alpha_canvas``: (Hc, Wc) float32 weight of the source. ``device`` is a
-    resolved Warp device ("cpu" or "cuda", see ``runtime.resolve_device``); ``threads`` the CPU
-    row-band launch threads (0 = one per core). Results match the float rule of
-    ``kernels.composite.composite_kernel`` within 1 grey level (positions in 1/1024 px, alpha in 1/16384).
+    source / target; ``alpha_canvas``: (Hc, Wc) float32 weight of the source. Runs on ``cfg.device``
+    (resolved, ``runtime.resolve_config``) with ``cfg.cpu_threads`` row-band threads. Results match
+    the float rule of ``kernels.composite.composite_kernel`` within 1 grey level (positions in
+    1/1024 px, alpha in 1/16384).
     """
 
-    def __init__(
-        self,
-        map_src_canvas: np.ndarray,
-        map_tgt_canvas: np.ndarray,
-        alpha_canvas: np.ndarray,
-        device: str,
-        threads: int = 0,
-    ):
+    def __init__(self, map_src_canvas: np.ndarray, map_tgt_canvas: np.ndarray, alpha_canvas: np.ndarray, cfg: Config):
         self.canvas_shape = tuple(np.asarray(alpha_canvas).shape[:2])
         if map_src_canvas.shape[:2] != self.canvas_shape or map_tgt_canvas.shape[:2] != self.canvas_shape:
             raise ValueError("map_src_canvas, map_tgt_canvas and alpha_canvas must share one (Hc, Wc)")
-        self.device = device
-        self.threads = threads
+        self.device = device = cfg.device
+        self.threads = cfg.cpu_threads
         self.map_src = wp.array(np.ascontiguousarray(map_src_canvas, dtype=np.float32), dtype=wp.vec2, device=device)
         self.map_tgt = wp.array(np.ascontiguousarray(map_tgt_canvas, dtype=np.float32), dtype=wp.vec2, device=device)
         self.alpha = wp.array(np.ascontiguousarray(alpha_canvas, dtype=np.float32), dtype=float, device=device)

@@ -8,7 +8,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from .config import Config
 from .features import Matches
+from .imageio import make_folder, write_image
+from .rig import image_to_working
 
 # Drawing style only (not pipeline tunables): line and marker sizes in output pixels.
 LINE_THICKNESS = 1
@@ -93,11 +96,11 @@ def draw_field(field_canvas: np.ndarray) -> np.ndarray:
     return pic
 
 
-def draw_warped_over_target(img_src: np.ndarray, img_tgt: np.ndarray, warp) -> np.ndarray:
+def draw_warped_over_target(img_src: np.ndarray, img_tgt: np.ndarray, warp, cfg: Config) -> np.ndarray:
     """50/50 mix of the warped source and the placed target: misalignment shows as ghosting."""
-    from .warp_map import warp_image
+    from .warp_map import remap_image  # here, not at the top: ``sena-warp match`` draws without Warp
 
-    warped, valid = warp_image(img_src, warp.map_src_canvas)
+    warped, valid = remap_image(img_src, warp.map_src_canvas, cfg)
     placed = _placed_target(img_tgt, warp.overlap.canvas)
     mix = np.where(valid[:, :, None], warped, placed)
     both = valid & placed.any(axis=2)
@@ -120,14 +123,12 @@ def draw_seam(pano_working: np.ndarray, seam) -> np.ndarray:
     return pic
 
 
-def dump_stages(folder, img_a: np.ndarray, img_b: np.ndarray, pano) -> list:
+def dump_stages(folder, img_a: np.ndarray, img_b: np.ndarray, pano, cfg: Config) -> list:
     """Write one picture per stage into ``folder`` (created); returns the paths written.
 
     Pictures after the features are in the working frame (source left; transposed for a vertical rig).
+    ``cfg``: the stitch's settings (the warped source is remapped on its device).
     """
-    from .imageio import make_folder, write_image
-    from .rig import image_to_working
-
     maps = pano.maps
     folder = make_folder(folder)
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
@@ -137,7 +138,7 @@ def dump_stages(folder, img_a: np.ndarray, img_b: np.ndarray, pano) -> list:
         "02_overlap_cells.jpg": draw_overlap_cells(img_tgt, maps.warp),
         "03_ffd_field.jpg": draw_field(maps.warp.field_canvas),
         "04_gate.jpg": _heatmap(maps.warp.gate_canvas, 1.0),
-        "05_warped_over_target.jpg": draw_warped_over_target(img_src, img_tgt, maps.warp),
+        "05_warped_over_target.jpg": draw_warped_over_target(img_src, img_tgt, maps.warp, cfg),
         "06_zone_chain_seam.jpg": draw_seam(pano_working, maps.seam),
         "07_alpha.jpg": _heatmap(maps.seam.maps.alpha_canvas, 1.0),
     }

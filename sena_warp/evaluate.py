@@ -47,9 +47,9 @@ from .progress import Progress
 from .rig import Rig, detect_rig, image_to_working
 from .sheets import thumbnail, tile
 from .stitch import Panorama, stitch_images
-from .warp_map import forward_points, warp_image
+from .warp_map import forward_points, remap_image
 from .zone import overlap_x_extent
-from sena_warp.kernels.runtime import resolve_device
+from sena_warp.kernels.runtime import resolve_config
 
 METHODS = ("sena", "affine", "homography", *OPENCV_MODES)
 # The methods that make a panorama (the pictures show them), with their names on the pictures.
@@ -148,7 +148,7 @@ def identity(pts: np.ndarray) -> np.ndarray:
 def in_target_frame(img_src: np.ndarray, map_src_tgt: np.ndarray, img_tgt: np.ndarray, cfg: Config
                     ) -> tuple[float, float]:
     """Overlap (PSNR dB, SSIM) of ``img_src`` warped by a target-frame (x, y) map against ``img_tgt``."""
-    warped, valid = warp_image(img_src, map_src_tgt, cfg)
+    warped, valid = remap_image(img_src, map_src_tgt, cfg)
     return overlap_psnr_ssim(warped, valid, img_tgt, np.ones(valid.shape, bool))
 
 
@@ -165,9 +165,9 @@ def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Conf
     maps = pano.maps
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
     warp, seam = maps.warp, maps.seam
-    placed_tgt, valid_tgt = warp_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
-    seam_src, valid_seam_src = warp_image(img_src, seam.maps.map_src_canvas, cfg)
-    step6_src, valid_step6_src = warp_image(img_src, warp.map_src_canvas, cfg)
+    placed_tgt, valid_tgt = remap_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
+    seam_src, valid_seam_src = remap_image(img_src, seam.maps.map_src_canvas, cfg)
+    step6_src, valid_step6_src = remap_image(img_src, warp.map_src_canvas, cfg)
     residuals = anchor_residuals_px(warp.map_src_canvas, seam.maps.map_src_canvas,
                                     seam.anchors_src_canvas, seam.anchors_tgt_canvas)
     finite = residuals[np.isfinite(residuals)]
@@ -359,7 +359,7 @@ def summary_markdown(rows: list[MethodResult], data_dir: Path, cfg: Config, seco
     common = [p for p in pairs if all(table[p, m].ok for m in METHODS)]
     lines = [
         "# sena-warp eval", "",
-        f"Data: `{data_dir}` ({len(pairs)} pairs); features {cfg.features}, device {resolve_device(cfg.device)}; "
+        f"Data: `{data_dir}` ({len(pairs)} pairs); features {cfg.features}, device {cfg.device}; "
         f"{time.strftime('%Y-%m-%d %H:%M %Z')}; {os.cpu_count()} CPUs; {seconds:.0f} s in all.", "",
         "Overlap PSNR (dB) / SSIM, UDIS-D protocol: `sena`, `affine`, `homography` in the target frame (source "
         "warped onto the target); `opencv_*` in OpenCV's panorama frame (both views warped by its cameras, before "
@@ -407,8 +407,12 @@ def pair_line(results: list[MethodResult]) -> str:
 
 def run_eval(data_dir: str | os.PathLike, out_dir: str | os.PathLike, cfg: Config, progress: bool | None = None
              ) -> list[MethodResult]:
-    """Evaluate every pair of ``data_dir`` into ``out_dir`` (see the module docstring); the rows of results.csv."""
+    """Evaluate every pair of ``data_dir`` into ``out_dir`` (see the module docstring); the rows of results.csv.
+
+    The Warp device of ``cfg`` is resolved once, here, for every pair and method.
+    """
     t0 = time.perf_counter()
+    cfg = resolve_config(cfg)
     folders = pair_folders(data_dir)
     out_dir = check_output_folder(out_dir)
     sheets_dir = make_folder(Path(out_dir) / "sheets")

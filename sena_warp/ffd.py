@@ -31,8 +31,9 @@ def ffd_lattice(
     Node (r, c) sits at canvas ((c + 0.5) W / N_x - 0.5, (r + 0.5) H / N_y - 0.5), where cv2.resize
     samples. Returns (N_y, N_x, 2) float32 (dx, dy) in source pixels. ``centres_tgt`` (J, 2) are
     cell centres in target (x, y); ``conf`` (J,) their confidences; ``sigma_f`` in target pixels.
+    Runs on ``cfg.device`` (resolved, ``runtime.resolve_config``) with ``cfg.cpu_threads``.
     """
-    device = runtime.resolve_device(cfg.device)
+    device = cfg.device
     glob_tgt_to_src = invert_affine(affine_src_to_tgt)
     local_tgt_to_src = invert_affine(np.asarray(affines_src_to_tgt, dtype=np.float64).reshape(-1, 2, 3))
     node_step = wp.vec2d(canvas.width / cfg.lattice_nx, canvas.height / cfg.lattice_ny)

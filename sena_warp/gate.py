@@ -81,9 +81,10 @@ def gate_canvas(
     ``inliers_canvas`` (N, 2) float64 (x, y) inlier target
     positions on the canvas; ``diag_px`` and ``long_side_px``: diagonal and long side of the input
     image, which set the ramp b and the density blur sigma_d = cfg.sigma_d_ratio * long side.
+    Runs on ``cfg.device`` (resolved, ``runtime.resolve_config``) with ``cfg.cpu_threads``.
     """
     shape = np.asarray(source_only_canvas).shape
-    device = runtime.resolve_device(cfg.device)
+    device = cfg.device
     sdf = wp.array(open_border_distance_px(source_only_canvas), dtype=float, device=device)
     density_np = inlier_density(shape, inliers_canvas, cfg.sigma_d_ratio * long_side_px)
     density = wp.array(density_np, dtype=float, device=device)
@@ -96,7 +97,7 @@ def gate_canvas(
 def guard_field(field: np.ndarray, gate: np.ndarray, cfg: Config) -> np.ndarray:
     """D_guarded = GaussianBlur_{sigma_g}(G * D) on x and y: (H, W, 2) float32 from field (H, W, 2), gate (H, W)."""
     height, width = gate.shape
-    device = runtime.resolve_device(cfg.device)
+    device = cfg.device
     field_wp = wp.array(np.ascontiguousarray(field, dtype=np.float32), dtype=wp.vec2, device=device)
     gate_wp = wp.array(np.ascontiguousarray(gate, dtype=np.float32), dtype=float, device=device)
     gated = wp.zeros((height, width), dtype=wp.vec2, device=device)

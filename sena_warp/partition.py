@@ -84,13 +84,12 @@ def seam_maps(
     anchors_src_canvas: np.ndarray,
     anchors_tgt_canvas: np.ndarray,
     cfg: Config,
-    device: str,
 ) -> SeamMaps:
     """SENA step 9: source map, target map and alpha of the stitch (Warp kernel ``seam_maps_kernel``).
 
     map_src_canvas: (H, W, 2) float32 step-6 source sampling map; canvas: its size and target offset;
     anchors_*_canvas: (K, 2) float64 (x, y) from ``keypoint_chain`` (warped source / target
-    positions). device: a Warp device name ("cpu" or "cuda", see ``runtime.resolve_device``).
+    positions). Runs on ``cfg.device`` (resolved, ``runtime.resolve_config``) with ``cfg.cpu_threads``.
     """
     if map_src_canvas.shape != (canvas.height, canvas.width, 2):
         raise InputError(f"source map shape {map_src_canvas.shape} does not match the canvas {canvas.shape}")
@@ -98,6 +97,7 @@ def seam_maps(
         raise InputError("transition_px must be >= 1 and seam_fade_px > 0")
     rows = seam_rows(anchors_src_canvas, anchors_tgt_canvas, canvas.height)
     shape = canvas.shape
+    device = cfg.device
     map_src_out = wp.empty(shape, dtype=wp.vec2, device=device)
     map_tgt_out = wp.empty(shape, dtype=wp.vec2, device=device)
     alpha_out = wp.empty(shape, dtype=float, device=device)

@@ -8,8 +8,6 @@ import os
 
 import numpy as np
 
-from sena_warp.kernels.runtime import resolve_device
-
 from .config import Config
 from .imageio import atomic_output
 from .metrics import overlap_psnr_ssim, similarity_deviation
@@ -24,14 +22,15 @@ ROUND = 4
 def alignment_figures(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> dict:
     """Overlap PSNR/SSIM of the step-6 warp and the seam figures of the final maps.
 
-    Computed in the working frame, where the seam runs top to bottom and ``seam_x_canvas`` is per row.
+    Computed in the working frame, where the seam runs top to bottom and ``seam_x_canvas`` is per row;
+    ``cfg.device`` resolved.
     """
-    maps, device = pano.maps, resolve_device(cfg.device)
+    maps = pano.maps
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
     seam = maps.seam
-    warped, valid_src = remap_image(img_src, maps.warp.map_src_canvas, device)
-    placed, valid_tgt = remap_image(img_tgt, seam.maps.map_tgt_canvas, device)
-    seam_src, valid_seam = remap_image(img_src, seam.maps.map_src_canvas, device)
+    warped, valid_src = remap_image(img_src, maps.warp.map_src_canvas, cfg)
+    placed, valid_tgt = remap_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
+    seam_src, valid_seam = remap_image(img_src, seam.maps.map_src_canvas, cfg)
     psnr_db, ssim_val = overlap_psnr_ssim(warped, valid_src, placed, valid_tgt)
     residuals = anchor_residuals_px(maps.warp.map_src_canvas, seam.maps.map_src_canvas,
                                     seam.anchors_src_canvas, seam.anchors_tgt_canvas)

@@ -11,6 +11,8 @@ the final maps are expressed in the input frame so the compositor never transpos
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import cv2
@@ -28,22 +30,22 @@ from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
 from .partition import SeamMaps, seam_maps
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
-from .warp_map import forward_points, source_map_canvas, warp_image
+from .warp_map import forward_points, remap_image, source_map_canvas
 from .zone import Zone, adequate_zone
-from sena_warp.kernels.runtime import resolve_device
+from sena_warp.kernels import runtime
 
 
 class StageClock:
-    """Runs stages and keeps their wall-clock time in seconds, in call order."""
+    """Wall-clock seconds per stage, in the order the stages first ran: ``with clock("gate"): ...``."""
 
     def __init__(self) -> None:
         self.seconds: dict[str, float] = {}
 
-    def run(self, name, fn, *args, **kwargs):
+    @contextmanager
+    def __call__(self, name: str) -> Iterator[None]:
         t0 = time.perf_counter()
-        result = fn(*args, **kwargs)
+        yield
         self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
-        return result
 
 
 @dataclass(frozen=True)
@@ -97,36 +99,45 @@ class Panorama:
 
 def estimate_warp(img_src: np.ndarray, img_tgt: np.ndarray, pts_src: np.ndarray, pts_tgt: np.ndarray,
                   cfg: Config, clock: StageClock) -> Warp:
-    """SENA steps 1-6 ("Locally adaptive image warping") in the working frame."""
-    glob = clock.run("global_affine", fit_global_affine, pts_src, pts_tgt, cfg)
-    inl_src, inl_tgt = pts_src[glob.inliers], pts_tgt[glob.inliers]
-    near = near_model(glob.affine_src_to_tgt, pts_src, pts_tgt, cfg.local_match_px)
+    """SENA steps 1-6 ("Locally adaptive image warping") in the working frame; ``cfg.device`` resolved."""
+    with clock("global_affine"):
+        glob = fit_global_affine(pts_src, pts_tgt, cfg)
+    affine = glob.affine_src_to_tgt
+    near = near_model(affine, pts_src, pts_tgt, cfg.local_match_px)
     near_src, near_tgt = pts_src[near], pts_tgt[near]
-    overlap = clock.run("overlap", plan_overlap, img_src.shape, img_tgt.shape, glob.affine_src_to_tgt, cfg)
-    cells = clock.run("cells", grid_cells, overlap, cfg)
-    local = clock.run("local_affines", fit_local_affines, near_src, near_tgt, glob.affine_src_to_tgt, cells, cfg)
-    field = clock.run("ffd", ffd_field_canvas, overlap.canvas, glob.affine_src_to_tgt, local.affines_src_to_tgt,
-                      local.centres_tgt, local.conf, sigma_f(local, cfg), cfg)
-    gate = clock.run("gate", gate_canvas, source_only_mask(overlap), overlap.canvas.tgt_to_canvas(near_tgt),
-                     _diagonal_px(img_src, img_tgt), max(*img_src.shape[:2], *img_tgt.shape[:2]), cfg)
-    map_src = clock.run("warp_map", source_map_canvas, overlap.canvas, glob.affine_src_to_tgt,
-                        guard_field(field, gate, cfg))
-    return Warp(glob, overlap, local, inl_src, inl_tgt, field, gate, map_src)
+    with clock("overlap"):
+        overlap = plan_overlap(img_src.shape, img_tgt.shape, affine, cfg)
+    with clock("cells"):
+        cells = grid_cells(overlap, cfg)
+    with clock("local_affines"):
+        local = fit_local_affines(near_src, near_tgt, affine, cells, cfg)
+    with clock("ffd"):
+        field = ffd_field_canvas(overlap.canvas, affine, local.affines_src_to_tgt, local.centres_tgt, local.conf,
+                                 sigma_f(local, cfg), cfg)
+    with clock("gate"):
+        gate = gate_canvas(source_only_mask(overlap), overlap.canvas.tgt_to_canvas(near_tgt),
+                           _diagonal_px(img_src, img_tgt), _long_side_px(img_src, img_tgt), cfg)
+        field_guarded = guard_field(field, gate, cfg)
+    with clock("warp_map"):
+        map_src = source_map_canvas(overlap.canvas, affine, field_guarded, cfg)
+    return Warp(glob, overlap, local, pts_src[glob.inliers], pts_tgt[glob.inliers], field, gate, map_src)
 
 
 def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, warp: Warp, cfg: Config, clock: StageClock) -> Seam:
-    """SENA steps 7-9 ("Optimal stitching line", "Partitioning and Reconstruction") in the working frame."""
-    canvas = warp.overlap.canvas
-    pts_src_canvas = clock.run("forward_points", forward_points, warp.map_src_canvas,
-                               warp.glob.affine_src_to_tgt, canvas, warp.inliers_src)
-    pts_tgt_canvas = canvas.tgt_to_canvas(warp.inliers_tgt)
-    grey_src_canvas, grey_tgt_canvas = clock.run("grey_canvas", _grey_canvas, img_src, img_tgt, warp)
-    zone = clock.run("zone", adequate_zone, pts_src_canvas, pts_tgt_canvas, warp.overlap.mask_canvas,
-                     grey_src_canvas, grey_tgt_canvas, cfg)
-    anchors_src, anchors_tgt = clock.run("chain", keypoint_chain, zone, pts_src_canvas, pts_tgt_canvas,
-                                         grey_src_canvas, grey_tgt_canvas, warp.overlap.mask_canvas, cfg)
-    maps = clock.run("seam_maps", seam_maps, warp.map_src_canvas, canvas, anchors_src, anchors_tgt, cfg,
-                     resolve_device(cfg.device))
+    """SENA steps 7-9 ("Optimal stitching line", "Partitioning and Reconstruction") in the working frame;
+    ``cfg.device`` resolved."""
+    canvas, mask = warp.overlap.canvas, warp.overlap.mask_canvas
+    with clock("forward_points"):
+        pts_src = forward_points(warp.map_src_canvas, warp.glob.affine_src_to_tgt, canvas, warp.inliers_src, cfg)
+    pts_tgt = canvas.tgt_to_canvas(warp.inliers_tgt)
+    with clock("grey_canvas"):
+        grey_src, grey_tgt = _grey_canvas(img_src, img_tgt, warp, cfg)
+    with clock("zone"):
+        zone = adequate_zone(pts_src, pts_tgt, mask, grey_src, grey_tgt, cfg)
+    with clock("chain"):
+        anchors_src, anchors_tgt = keypoint_chain(zone, pts_src, pts_tgt, grey_src, grey_tgt, mask, cfg)
+    with clock("seam_maps"):
+        maps = seam_maps(warp.map_src_canvas, canvas, anchors_src, anchors_tgt, cfg)
     return Seam(zone, anchors_src, anchors_tgt, maps)
 
 
@@ -134,11 +145,14 @@ def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
                   matches: Matches | None = None) -> StitchMaps:
     """All of SENA on one image pair: the maps that stitch it (and every later frame of the same rig).
 
-    ``matches`` of (img_a, img_b) found earlier (e.g. while screening video frames) skip step 0.
+    ``cfg.device`` must be resolved (``runtime.resolve_config``: the job calling this, an image or a
+    video stitch, chooses the device once). ``matches`` of (img_a, img_b) found earlier (e.g. while
+    screening video frames) skip step 0.
     """
     clock = StageClock()
     if matches is None:
-        matches = clock.run("features", match_images, img_a, img_b, cfg)
+        with clock("features"):
+            matches = match_images(img_a, img_b, cfg)
     rig = detect_rig(matches.pts_a, matches.pts_b, reference)
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
@@ -157,14 +171,18 @@ def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
 
 
 def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto") -> Panorama:
-    """Stitch two BGR uint8 images; returns a BGRA panorama (alpha 0 where nothing was covered)."""
+    """Stitch two BGR uint8 images; returns a BGRA panorama (alpha 0 where nothing was covered).
+
+    The Warp device of ``cfg`` ("auto", "cpu" or "cuda") is resolved here, once for the whole stitch.
+    """
+    cfg = runtime.resolve_config(cfg)
     maps = estimate_maps(img_a, img_b, cfg, reference)
     clock = StageClock()
     clock.seconds.update(maps.seconds)
-    compositor = Compositor(maps.map_src_canvas, maps.map_tgt_canvas, maps.alpha_canvas,
-                            resolve_device(cfg.device), cfg.cpu_threads)
     img_src, img_tgt = maps.rig.pick(img_a, img_b)
-    out, coverage = clock.run("composite", compositor.apply, img_src, img_tgt)
+    with clock("composite"):
+        compositor = Compositor(maps.map_src_canvas, maps.map_tgt_canvas, maps.alpha_canvas, cfg)
+        out, coverage = compositor.apply(img_src, img_tgt)
     return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
 
 
@@ -173,10 +191,15 @@ def _diagonal_px(img_src: np.ndarray, img_tgt: np.ndarray) -> float:
     return float(max(np.hypot(*img_src.shape[:2]), np.hypot(*img_tgt.shape[:2])))
 
 
-def _grey_canvas(img_src: np.ndarray, img_tgt: np.ndarray, warp: Warp) -> tuple[np.ndarray, np.ndarray]:
+def _long_side_px(img_src: np.ndarray, img_tgt: np.ndarray) -> int:
+    """The longest image side, the scale of the gate's density blur sigma_d (SENA.md step 5)."""
+    return max(*img_src.shape[:2], *img_tgt.shape[:2])
+
+
+def _grey_canvas(img_src: np.ndarray, img_tgt: np.ndarray, warp: Warp, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
     """Warped-source and placed-target grey images on the canvas, float32, NaN where not covered."""
     canvas = warp.overlap.canvas
-    warped, valid = warp_image(cv2.cvtColor(img_src, cv2.COLOR_BGR2GRAY)[:, :, None], warp.map_src_canvas)
+    warped, valid = remap_image(cv2.cvtColor(img_src, cv2.COLOR_BGR2GRAY)[:, :, None], warp.map_src_canvas, cfg)
     grey_src = np.where(valid, warped[:, :, 0].astype(np.float32), np.nan)
     grey_tgt = np.full(canvas.shape, np.nan, np.float32)
     ox, oy = (int(round(v)) for v in canvas.offset_tgt)

@@ -18,15 +18,13 @@ from sena_warp.kernels.remap import remap_kernel
 from sena_warp.kernels.sampling import source_map_kernel
 
 
-def source_map_canvas(
-    canvas: Canvas, affine_src_to_tgt: np.ndarray, field_guarded: np.ndarray, cfg: Config | None = None
-) -> np.ndarray:
+def source_map_canvas(canvas: Canvas, affine_src_to_tgt: np.ndarray, field_guarded: np.ndarray, cfg: Config) -> np.ndarray:
     """M_s over the canvas: (H, W, 2) float32 source (x, y) per canvas pixel (x, y).
 
     ``field_guarded`` (H, W, 2) float32: guarded displacement in source pixels (``gate.guard_field``).
+    Runs on ``cfg.device`` (resolved, ``runtime.resolve_config``) with ``cfg.cpu_threads``.
     """
-    cfg = cfg or Config()
-    device = runtime.resolve_device(cfg.device)
+    device = cfg.device
     glob_tgt_to_src = invert_affine(affine_src_to_tgt)
     field = wp.array(np.ascontiguousarray(field_guarded, dtype=np.float32), dtype=wp.vec2, device=device)
     map_src = wp.zeros(canvas.shape, dtype=wp.vec2, device=device)
@@ -66,16 +64,15 @@ def forward_points(
     affine_src_to_tgt: np.ndarray,
     canvas: Canvas,
     pts_src: np.ndarray,
-    cfg: Config | None = None,
+    cfg: Config,
 ) -> np.ndarray:
     """Canvas positions (N, 2) float64 (x, y) where M_s takes the source points ``pts_src`` (N, 2).
 
     Solves M_s(u) = s by chord iterations u <- u + L (s - M_s(u)) from u = A s + o, L the linear
     part of A_glob (M_s's Jacobian is close to L^-1 because the guarded field is smooth), until
     |M_s(u) - s| < cfg.forward_tol_px. Points that do not converge on the canvas (outside it, or
-    where the map folds) come back as NaN.
+    where the map folds) come back as NaN; ``cfg.forward_max_iters`` caps the iterations.
     """
-    cfg = cfg or Config()
     affine = np.asarray(affine_src_to_tgt, dtype=np.float64)
     pts_src = np.asarray(pts_src, dtype=np.float64).reshape(-1, 2)
     pts_canvas = canvas.tgt_to_canvas(pts_src @ affine[:, :2].T + affine[:, 2])
@@ -104,24 +101,21 @@ def as_channels(img: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(img[:, :, None] if img.ndim == 2 else img)
 
 
-def remap_image(img: np.ndarray, map_canvas: np.ndarray, device: str, threads: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Bilinear remap of uint8 ``img`` (H, W, C) or (H, W) by ``map_canvas`` (Hc, Wc, 2) float32 (x, y).
+def remap_image(img: np.ndarray, map_canvas: np.ndarray, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
+    """Bilinear remap of uint8 ``img`` (H, W, C) or (H, W) by ``map_canvas`` (Hc, Wc, 2) float32 (x, y)
+    sample positions in ``img`` (e.g. M_s: the source warped onto the canvas).
 
     Returns (warped uint8 (Hc, Wc, C) or (Hc, Wc) like the input, valid bool (Hc, Wc)); a pixel is
-    valid when its sample position has all four taps inside img; invalid pixels are 0.
+    valid when its sample position has all four taps inside img; invalid pixels are 0. Runs on
+    ``cfg.device`` (resolved, ``runtime.resolve_config``) with ``cfg.cpu_threads``.
     """
     img3 = as_channels(img)
     height, width = map_canvas.shape[:2]
+    device = cfg.device
     img_wp = wp.array(img3, dtype=wp.uint8, device=device)
     map_wp = wp.array(np.ascontiguousarray(map_canvas, dtype=np.float32), dtype=wp.vec2, device=device)
     out = wp.zeros((height, width, img3.shape[2]), dtype=wp.uint8, device=device)
     valid = wp.zeros((height, width), dtype=wp.uint8, device=device)
-    runtime.launch_rows(remap_kernel, height, width, [img_wp, map_wp, out, valid], device, threads)
+    runtime.launch_rows(remap_kernel, height, width, [img_wp, map_wp, out, valid], device, cfg.cpu_threads)
     warped = out.numpy()
     return (warped[:, :, 0] if img.ndim == 2 else warped), valid.numpy().astype(bool)
-
-
-def warp_image(img_src: np.ndarray, map_src_canvas: np.ndarray, cfg: Config | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The source warped onto the canvas by M_s: (uint8 (Hc, Wc, C), valid bool (Hc, Wc))."""
-    cfg = cfg or Config()
-    return remap_image(img_src, map_src_canvas, runtime.resolve_device(cfg.device), cfg.cpu_threads)

@@ -14,6 +14,7 @@ import warp as wp
 
 from sena_warp.bench import COLUMNS, OpenCVReference, make_clip_pair, pan_window, parse_size, run_bench
 from sena_warp.composite import Compositor
+from sena_warp.config import Config
 from sena_warp.errors import InputError
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import composite_kernel
@@ -99,7 +100,8 @@ def test_opencv_reference_agrees_with_warp_compositor(scene, channels, warp_devi
     fill = (16, 128)[:channels]
     reference = OpenCVReference(map_src, map_tgt, alpha, plane_src.shape[:2], plane_tgt.shape[:2], fill)
     expected = reference.apply(plane_src, plane_tgt).reshape(*alpha.shape, channels)
-    out, coverage = Compositor(map_src, map_tgt, alpha, warp_device, threads=2).apply(plane_src, plane_tgt, fill)
+    out, coverage = Compositor(map_src, map_tgt, alpha, Config(device=warp_device, cpu_threads=2)).apply(
+        plane_src, plane_tgt, fill)
     out = out.reshape(*alpha.shape, channels)
     assert (coverage == 0).any() and (coverage > 0).any()
     assert np.abs(out.astype(int) - expected).max() <= 1
@@ -114,7 +116,7 @@ def test_fixed_point_matches_float_kernel(scene, warp_device):  # noqa: F811
     map_src[0, :, 0], map_src[0, :, 1] = np.linspace(0, w - 1, map_src.shape[1]), h - 1  # bottom edge, exactly
     map_src[1, :, 0], map_src[1, :, 1] = w - 1, np.linspace(0, h - 1, map_src.shape[1])  # right edge, exactly
     expected, covered = float_composite(img_src, img_tgt, map_src, map_tgt, alpha)
-    out, coverage = Compositor(map_src, map_tgt, alpha, warp_device, threads=2).apply(img_src, img_tgt)
+    out, coverage = Compositor(map_src, map_tgt, alpha, Config(device=warp_device, cpu_threads=2)).apply(img_src, img_tgt)
     np.testing.assert_array_equal(coverage, covered)
     assert np.abs(out.astype(int) - expected).max() <= 1
     # The target map is an integer shift, so where alpha is 0 the output is an exact copy of the target.

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from sena_warp.composite import Compositor
+from sena_warp.config import Config
 from test_kernels_maps import DEVICES
 from test_kernels_remap import composite_reference, scene  # noqa: F401  (scene is a fixture)
 
@@ -13,7 +14,7 @@ from test_kernels_remap import composite_reference, scene  # noqa: F401  (scene 
 @pytest.mark.parametrize("device", DEVICES)
 def test_compositor_matches_reference_and_reuses_buffers(scene, device, warp_device):  # noqa: F811
     img_src, img_tgt, map_src, map_tgt, alpha = scene
-    comp = Compositor(map_src, map_tgt, alpha, device, threads=2)
+    comp = Compositor(map_src, map_tgt, alpha, Config(device=device, cpu_threads=2))
     out, coverage = comp.apply(img_src, img_tgt)
     expected, covered = composite_reference(img_src, img_tgt, map_src, map_tgt, alpha)
     assert out.shape == (*alpha.shape, 3) and out.dtype == np.uint8
@@ -31,7 +32,7 @@ def test_compositor_matches_reference_and_reuses_buffers(scene, device, warp_dev
 @pytest.mark.parametrize("device", DEVICES)
 def test_compositor_planes(scene, device, warp_device):  # noqa: F811
     img_src, img_tgt, map_src, map_tgt, alpha = scene
-    comp = Compositor(map_src, map_tgt, alpha, device)
+    comp = Compositor(map_src, map_tgt, alpha, Config(device=device))
     plane_src, plane_tgt = np.ascontiguousarray(img_src[:, :, 0]), np.ascontiguousarray(img_tgt[:, :, 0])
     out, coverage = comp.apply(plane_src, plane_tgt)
     expected, covered = composite_reference(plane_src[:, :, None], plane_tgt[:, :, None], map_src, map_tgt, alpha)
@@ -43,7 +44,7 @@ def test_compositor_planes(scene, device, warp_device):  # noqa: F811
 def test_compositor_rejects_mismatched_inputs(scene, warp_device):  # noqa: F811
     img_src, img_tgt, map_src, map_tgt, alpha = scene
     with pytest.raises(ValueError, match="share one"):
-        Compositor(map_src[:-1], map_tgt, alpha, warp_device)
-    comp = Compositor(map_src, map_tgt, alpha, warp_device)
+        Compositor(map_src[:-1], map_tgt, alpha, Config(device=warp_device))
+    comp = Compositor(map_src, map_tgt, alpha, Config(device=warp_device))
     with pytest.raises(ValueError, match="channels"):
         comp.apply(img_src, np.ascontiguousarray(img_tgt[:, :, 0]))

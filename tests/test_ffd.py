@@ -9,6 +9,8 @@ from sena_warp.config import Config
 from sena_warp.ffd import ffd_field_canvas, invert_affine
 from test_kernels_maps import apply_affine, load_pair, scene_geometry
 
+CFG = Config(device="cpu")
+
 
 @pytest.fixture(scope="module")
 def geo(shared_dir):
@@ -16,7 +18,7 @@ def geo(shared_dir):
     return scene_geometry(img_src.shape, img_tgt.shape)
 
 
-def field_of(geo, affines, cfg=Config()):
+def field_of(geo, affines, cfg=CFG):
     return ffd_field_canvas(
         geo["canvas"], geo["affine_src_to_tgt"], affines, geo["centres_tgt"][: len(affines)], geo["conf"][: len(affines)],
         geo["sigma_f"], cfg,
@@ -53,7 +55,7 @@ def test_single_local_affine_reproduces_its_displacement(geo):
 def test_field_is_clipped_to_d_max(geo):
     affines = geo["affines_src_to_tgt"].copy()
     affines[:, :, 2] += 500.0
-    cfg = Config(d_max_px=25.0)
+    cfg = CFG.replace(d_max_px=25.0)
     field = field_of(geo, affines, cfg)
     assert np.abs(field).max() <= cfg.d_max_px + 1e-3
     assert np.abs(field).max() > cfg.d_max_px - 0.5

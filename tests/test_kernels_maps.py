@@ -150,7 +150,7 @@ def test_ffd_lattice_kernel_matches_numpy(geo, device, warp_device):
         d_max,
         out,
     ]
-    runtime.launch_rows(ffd_lattice_kernel, ny, nx, inputs, device, threads=2)
+    runtime.launch_rows(ffd_lattice_kernel, ny, nx, inputs, device, 2)
     expected = ffd_lattice_reference(geo, ny, nx, d_max)
     got = out.numpy().reshape(ny, nx, 2)
     assert np.abs(expected).max() > 1.0  # the local affines really move pixels

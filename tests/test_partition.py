@@ -12,7 +12,7 @@ from sena_warp.errors import GeometryError
 from sena_warp.imageio import read_image
 from sena_warp.partition import anchor_residuals_px, seam_maps, seam_rows, transition_mad
 
-DEVICE = "cpu"
+DEVICE = "cpu"  # the host modules below run their kernels on Config(device=DEVICE)
 
 
 def _affine_map(height, width):
@@ -37,8 +37,8 @@ def test_seam_rows_interpolate_anchors():
 def test_seam_maps_alpha_and_target_map():
     canvas = Canvas(width=120, height=100, offset_tgt=(30.0, 4.0))
     tgt = np.array([[50.0, 0.0], [70.0, 60.0], [60.0, 99.0]])
-    cfg = Config(transition_px=20, seam_smooth_sigma_px=0.0)
-    maps = seam_maps(_affine_map(100, 120), canvas, tgt, tgt, cfg, DEVICE)
+    cfg = Config(device=DEVICE, transition_px=20, seam_smooth_sigma_px=0.0)
+    maps = seam_maps(_affine_map(100, 120), canvas, tgt, tgt, cfg)
     np.testing.assert_allclose(maps.seam_x_canvas, np.interp(np.arange(100), tgt[:, 1], tgt[:, 0]), atol=1e-4)
     xs = np.arange(120)
     for y in (0, 30, 60, 80):
@@ -56,8 +56,8 @@ def test_seam_maps_alpha_and_target_map():
 def test_smoothing_only_near_the_ramp_ends():
     canvas = Canvas(width=120, height=10, offset_tgt=(0.0, 0.0))
     tgt = np.array([[60.0, 0.0], [60.0, 9.0]])
-    cfg = Config(transition_px=20, seam_smooth_sigma_px=1.5)
-    alpha = seam_maps(_affine_map(10, 120), canvas, tgt, tgt, cfg, DEVICE).alpha_canvas[5]
+    cfg = Config(device=DEVICE, transition_px=20, seam_smooth_sigma_px=1.5)
+    alpha = seam_maps(_affine_map(10, 120), canvas, tgt, tgt, cfg).alpha_canvas[5]
     plain = np.clip(0.5 - (np.arange(120) - 60.0) / 20, 0, 1)
     assert np.abs(alpha - plain).max() > 0.01  # the corners are rounded
     far = np.abs(np.abs(np.arange(120) - 60.0) - 10) > 6  # > 4 sigma from both ramp ends
@@ -73,8 +73,8 @@ def test_vertical_offset_anchors_meet_and_far_source_keeps_its_shape():
     map_before = _affine_map(height, width)
     tgt = np.array([[120.0, 5.0], [126.3, 40.2], [118.7, 90.6], [123.0, 150.0]])
     src = tgt + np.array([[0.5, 3.0], [0.8, 4.5], [-1.2, 2.5], [0.0, 3.5]])
-    cfg = Config(transition_px=24, seam_fade_px=40.0)
-    maps = seam_maps(map_before, canvas, src, tgt, cfg, DEVICE)
+    cfg = Config(device=DEVICE, transition_px=24, seam_fade_px=40.0)
+    maps = seam_maps(map_before, canvas, src, tgt, cfg)
     residual_before = anchor_residuals_px(map_before, map_before, src, tgt)
     residual_after = anchor_residuals_px(map_before, maps.map_src_canvas, src, tgt)
     assert residual_before.min() > 2.0
@@ -98,8 +98,8 @@ def test_real_image_shifted_source_meets_target_in_the_transition(shared_dir):
     map_identity = np.stack([xs, ys], -1)
     tgt = np.array([[250.0, 0.0], [262.0, 200.0], [245.0, 511.0]])
     src = tgt + [0.0, 3.0]
-    cfg = Config(transition_px=24)
-    maps = seam_maps(map_identity, Canvas(width, height, (0.0, 0.0)), src, tgt, cfg, DEVICE)
+    cfg = Config(device=DEVICE, transition_px=24)
+    maps = seam_maps(map_identity, Canvas(width, height, (0.0, 0.0)), src, tgt, cfg)
 
     def remap(img, m):
         return cv2.remap(img, m[..., 0], m[..., 1], cv2.INTER_LINEAR)

@@ -33,7 +33,7 @@ def _pair(folder: Path, order: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _check_seam(img_first: np.ndarray, img_second: np.ndarray) -> None:
-    cfg = Config()
+    cfg = Config(device="cpu")
     pano = stitch_images(img_first, img_second, cfg)
     coverage = pano.image[:, :, 3] > 0
     # the panorama holds both inputs: its covered area exceeds the larger input's

@@ -38,15 +38,16 @@ def test_target_is_pasted_unwarped_right_of_the_seam(pano, udis_pair):
     assert np.abs(region.astype(int) - expect).max() <= 1
 
 
-def test_anchors_meet_and_sena_warp_aligns_the_overlap(pano, udis_pair):
+def test_anchors_meet_and_sena_warp_aligns_the_overlap(pano, udis_pair, warp_device):
+    cfg = Config(device=warp_device)
     seam = pano.maps.seam
     assert len(seam.anchors_src_canvas) >= 5
     warp = pano.maps.warp
     img_src, img_tgt = pano.maps.rig.pick(*udis_pair)
-    from sena_warp.warp_map import source_map_canvas, warp_image
+    from sena_warp.warp_map import remap_image, source_map_canvas
 
     def overlap_psnr(map_src):
-        warped, valid = warp_image(img_src, map_src)
+        warped, valid = remap_image(img_src, map_src, cfg)
         placed = np.zeros_like(warped)
         valid_tgt = np.zeros(valid.shape, bool)
         ox, oy = (int(round(v)) for v in warp.overlap.canvas.offset_tgt)
@@ -55,7 +56,7 @@ def test_anchors_meet_and_sena_warp_aligns_the_overlap(pano, udis_pair):
         return overlap_psnr_ssim(warped, valid, placed, valid_tgt)[0]
 
     affine_only = source_map_canvas(warp.overlap.canvas, warp.glob.affine_src_to_tgt,
-                                    np.zeros_like(warp.field_canvas))
+                                    np.zeros_like(warp.field_canvas), cfg)
     assert overlap_psnr(warp.map_src_canvas) > overlap_psnr(affine_only)
 
 

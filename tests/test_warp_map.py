@@ -11,14 +11,16 @@ import pytest
 from sena_warp.config import Config
 from sena_warp.ffd import ffd_field_canvas
 from sena_warp.gate import gate_canvas, guard_field
-from sena_warp.warp_map import forward_points, sample_map_bilinear, source_map_canvas, warp_image
+from sena_warp.warp_map import forward_points, remap_image, sample_map_bilinear, source_map_canvas
 from test_kernels_maps import apply_affine, load_pair, scene_geometry, source_map_reference
+
+CFG = Config(device="cpu")
 
 
 @pytest.fixture(scope="module")
 def pipeline(shared_dir):
     """Steps 4-6 on the udisd pair's geometry with inliers spread over the overlap."""
-    cfg = Config()
+    cfg = CFG
     img_src, img_tgt = load_pair(shared_dir)
     geo = scene_geometry(img_src.shape, img_tgt.shape)
     canvas = geo["canvas"]
@@ -56,7 +58,7 @@ def test_forward_points_round_trip(pipeline):
     h, w = img_src.shape[:2]
     rng = np.random.default_rng(7)
     pts_src = rng.uniform([2, 2], [w - 3, h - 3], size=(500, 2))
-    pts_canvas = forward_points(map_src, geo["affine_src_to_tgt"], canvas, pts_src)
+    pts_canvas = forward_points(map_src, geo["affine_src_to_tgt"], canvas, pts_src, CFG)
     assert np.isfinite(pts_canvas).all()
     back_src = sample_map_bilinear(map_src, pts_canvas)
     assert np.abs(back_src - pts_src).max() < 0.05
@@ -67,22 +69,23 @@ def test_forward_points_round_trip(pipeline):
 
 def test_forward_points_off_canvas_are_nan(pipeline):
     img_src, _, geo, _, _, map_src = pipeline
-    pts_canvas = forward_points(map_src, geo["affine_src_to_tgt"], geo["canvas"], np.array([[-5000.0, 0.0], [10.0, 10.0]]))
+    pts_canvas = forward_points(map_src, geo["affine_src_to_tgt"], geo["canvas"], np.array([[-5000.0, 0.0], [10.0, 10.0]]),
+                                CFG)
     assert np.isnan(pts_canvas[0]).all() and np.isfinite(pts_canvas[1]).all()
 
 
-def test_warp_image_places_target_exactly_and_source_like_warp_affine(pipeline):
+def test_remap_image_places_target_exactly_and_source_like_warp_affine(pipeline):
     img_src, img_tgt, geo, _, guarded, _ = pipeline
     canvas = geo["canvas"]
     ox, oy = (int(v) for v in canvas.offset_tgt)
     u = np.stack(np.meshgrid(np.arange(canvas.width), np.arange(canvas.height)), axis=-1).astype(np.float32)
-    warped_tgt, valid_tgt = warp_image(img_tgt, u - np.asarray(canvas.offset_tgt, dtype=np.float32))
+    warped_tgt, valid_tgt = remap_image(img_tgt, u - np.asarray(canvas.offset_tgt, dtype=np.float32), CFG)
     h, w = img_tgt.shape[:2]
     np.testing.assert_array_equal(warped_tgt[oy : oy + h, ox : ox + w], img_tgt)
     assert valid_tgt.sum() == h * w
 
-    map_global = source_map_canvas(canvas, geo["affine_src_to_tgt"], np.zeros_like(guarded))
-    warped_src, valid_src = warp_image(img_src, map_global)
+    map_global = source_map_canvas(canvas, geo["affine_src_to_tgt"], np.zeros_like(guarded), CFG)
+    warped_src, valid_src = remap_image(img_src, map_global, CFG)
     affine_src_to_canvas = geo["affine_src_to_tgt"].copy()
     affine_src_to_canvas[:, 2] += canvas.offset_tgt
     expected = cv2.warpAffine(img_src, affine_src_to_canvas, (canvas.width, canvas.height), flags=cv2.INTER_LINEAR)

@@ -20,7 +20,7 @@ from ..config import Config
 from ..errors import InputError, StitchError
 from ..imageio import check_output_path
 from ..stitch import StitchMaps
-from sena_warp.kernels.runtime import resolve_device
+from sena_warp.kernels.runtime import resolve_config
 from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
 from .loop import VideoOptions, run_video
 from .maps import BLACK_UV, BLACK_Y, PlaneMaps, lerp_maps, map_change_px, plane_maps, seam_change_px, target_offset
@@ -49,11 +49,8 @@ class SenaFrameCompositor:
         self.offset_tgt = target_offset(first.map_tgt_canvas)
         self.maps = plane_maps(first, shape, self.offset_tgt)
         self.output_size = (shape[1], shape[0])
-        device = resolve_device(cfg.device)
-        self.luma = Compositor(self.maps.map_src_luma, self.maps.map_tgt_luma, self.maps.alpha_luma,
-                               device, cfg.cpu_threads)
-        self.chroma = Compositor(self.maps.map_src_chroma, self.maps.map_tgt_chroma, self.maps.alpha_chroma,
-                                 device, cfg.cpu_threads)
+        self.luma = Compositor(self.maps.map_src_luma, self.maps.map_tgt_luma, self.maps.alpha_luma, cfg)
+        self.chroma = Compositor(self.maps.map_src_chroma, self.maps.map_tgt_chroma, self.maps.alpha_chroma, cfg)
         self.first_inliers = self.maps.inliers
         self.first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                            "inliers": self.first_inliers, "seconds": round(sum(first.seconds.values()), 4)}
@@ -155,12 +152,14 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
     ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
     ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
     The report is :func:`loop.run_video`'s plus ``stitch`` (see :meth:`SenaFrameCompositor.report`).
+    The Warp device of ``cfg`` is resolved here, once for the whole video.
     """
     check_output_path(output, (left, right))  # before any decoding: an input, a folder, no writable folder
     if cfg.video_rig not in RIGS:
         raise InputError(f"rig {cfg.video_rig!r} unknown; use one of {', '.join(RIGS)}")
     if cfg.video_reestimate_s <= 0:
         raise InputError(f"re-estimation period {cfg.video_reestimate_s} s must be positive")
+    cfg = resolve_config(cfg)
     built: list[SenaFrameCompositor] = []
 
     def factory(first_l: YuvFrame, first_r: YuvFrame) -> SenaFrameCompositor:

@@ -1,0 +1,95 @@
+"""Every setting given at the top of a run reaches the stage that uses it (issue 12).
+
+A stage that fell back to ``Config()`` would run on the defaults whatever the caller asked for: with
+``forward_max_iters=0`` the step-7 inputs would come out as with the default 30 iterations, and the
+grey canvas, the source map and the compositor would launch on the default thread count.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sena_warp import stitch
+from sena_warp.config import Config
+from sena_warp.imageio import read_image
+from sena_warp.kernels import runtime
+from sena_warp.video.loop import VideoOptions
+from sena_warp.video.stitch import stitch_videos
+
+THREADS = 3  # not the default (0 = one per core), so a stage running on Config() shows
+
+
+class ZoneInputs(Exception):
+    """Raised by the spy in place of step 7: the stitch stops once its inputs are seen."""
+
+
+@pytest.fixture(scope="module")
+def udis_pair(bundled_dir):
+    folder = bundled_dir / "udisd_test_000001"
+    return read_image(folder / "a.jpg"), read_image(folder / "b.jpg")
+
+
+def zone_inputs(monkeypatch, img_a, img_b, cfg):
+    """(warped-source inlier points on the canvas, warped-source grey canvas) handed to step 7."""
+    def spy(pts_src_canvas, pts_tgt_canvas, overlap_mask_canvas, grey_src_canvas, grey_tgt_canvas, zone_cfg):
+        raise ZoneInputs(pts_src_canvas, grey_src_canvas)
+
+    monkeypatch.setattr(stitch, "adequate_zone", spy)
+    with pytest.raises(ZoneInputs) as seen:
+        stitch.estimate_maps(img_a, img_b, cfg)
+    return seen.value.args
+
+
+def launches(monkeypatch) -> list[tuple[str, str, int]]:
+    """Every row-band launch from now on, as (kernel key, device, threads)."""
+    seen = []
+    for name in ("launch_rows", "launch_row_loops"):
+        real = getattr(runtime, name)
+
+        def spy(kernel, height, width, inputs, device, threads, real=real):
+            seen.append((kernel.key, device, threads))
+            real(kernel, height, width, inputs, device, threads)
+
+        monkeypatch.setattr(runtime, name, spy)
+    return seen
+
+
+def test_forward_settings_reach_the_step_7_inputs(udis_pair, monkeypatch):
+    cfg = Config(device="cpu")
+    pts_default, grey_default = zone_inputs(monkeypatch, *udis_pair, cfg)
+    # Measured on this pair: all 606 inlier points converge with the default 30 iterations ...
+    assert np.isfinite(pts_default).all()
+    # ... and 605 of them without any iteration: u = A s + o does not solve M_s(u) = s to 0.01 px.
+    pts_none, grey_none = zone_inputs(monkeypatch, *udis_pair, cfg.replace(forward_max_iters=0))
+    assert np.isnan(pts_none[:, 0]).mean() > 0.99
+    # A loose tolerance stops the iterations early: the points move (measured: up to 0.43 px, median
+    # 0.03 px), and by less than the tolerance itself.
+    pts_loose, _ = zone_inputs(monkeypatch, *udis_pair, cfg.replace(forward_tol_px=2.0))
+    moved = np.linalg.norm(pts_loose - pts_default, axis=1)
+    assert 0.2 < moved.max() < 2.0
+    # The grey canvas follows M_s alone, which those settings do not touch.
+    np.testing.assert_array_equal(grey_none, grey_default)
+
+
+def test_device_and_threads_reach_every_launch_of_an_image_stitch(udis_pair, monkeypatch):
+    resolved = []
+    real_resolve = runtime.resolve_device
+    monkeypatch.setattr(runtime, "resolve_device", lambda name: resolved.append(name) or real_resolve(name))
+    seen = launches(monkeypatch)
+    stitch.stitch_images(*udis_pair, Config(device="auto", cpu_threads=THREADS))
+    assert resolved == ["auto"]  # the device is chosen once per run
+    kernels = {key for key, _, _ in seen}
+    # FFD lattice, gate, gated field, source map, the grey canvas's remap, seam maps, compositor.
+    assert len(kernels) >= 7 and any("remap" in key for key in kernels)
+    assert {(device, threads) for _, device, threads in seen} == {(real_resolve("auto"), THREADS)}
+
+
+def test_threads_reach_every_launch_of_a_video_stitch(bundled_dir, tmp_path, monkeypatch):
+    seen = launches(monkeypatch)
+    cfg = Config(device="cpu", cpu_threads=THREADS, video_estimate_pairs=1)
+    clips = bundled_dir / "video"
+    stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "o.mp4", cfg,
+                  VideoOptions.from_config(cfg, audio="none", progress=False))
+    assert len(seen) > 60  # the estimate's launches and two per frame (Y, then U and V)
+    assert {(device, threads) for _, device, threads in seen} == {("cpu", THREADS)}
