@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .affine import as_homogeneous
 from .config import Config
 from .errors import GeometryError, MatchError
 from .features import match_images
@@ -74,10 +75,8 @@ def homography_to_target(img_src: np.ndarray, homography: np.ndarray, shape_tgt:
 
 
 def homography_forward(homography: np.ndarray) -> Forward:
-    """The forward map of a 3x3 homography (an affine as its top two rows with [0, 0, 1] below)."""
-    matrix = np.asarray(homography, np.float64)
-    if matrix.shape == (2, 3):
-        matrix = np.vstack([matrix, [0.0, 0.0, 1.0]])
+    """The forward map of a 3x3 homography or a 2x3 affine (``affine.as_homogeneous``)."""
+    matrix = as_homogeneous(homography)
 
     def forward(pts: np.ndarray) -> np.ndarray:
         projected = np.c_[pts, np.ones(len(pts))] @ matrix.T

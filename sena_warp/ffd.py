@@ -12,7 +12,7 @@ import warp as wp
 
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
-from sena_warp.global_affine import invert_affine
+from sena_warp.affine import invert_affine
 from sena_warp.kernels import runtime
 from sena_warp.kernels.ffd import ffd_lattice_kernel
 

@@ -5,9 +5,8 @@ Two models are tried on the same matches, OpenCV's full affine (6 dof) and its p
 and a tie goes to the similarity, the more rigid model (SENA.md step 1). Only its inliers go on to
 the local models.
 
-Also the two small affine helpers every later stage uses: ``apply_affine`` and ``invert_affine``.
-Affines are ``(2, 3)`` float64 matrices mapping ``[x, y, 1]`` of the frame before ``_to_`` to the
-frame after it; points are float64 ``(N, 2)`` arrays of ``(x, y)`` pixels.
+Affines and points follow ``sena_warp.affine``: ``(2, 3)`` float64 matrices named by direction,
+float64 ``(N, 2)`` arrays of ``(x, y)`` pixels.
 """
 
 from __future__ import annotations
@@ -17,8 +16,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .affine import apply_affine
 from .config import Config
-from .errors import GeometryError, InputError, MatchError
+from .errors import InputError, MatchError
 
 MODEL_AFFINE = "affine"
 MODEL_SIMILARITY = "similarity"
@@ -37,29 +37,6 @@ class GlobalAffine:
     model: str
     n_matches: int
     n_inliers: int
-
-
-def apply_affine(affine: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Map ``(N, 2)`` ``(x, y)`` points through a ``(2, 3)`` affine; returns ``(N, 2)`` float64."""
-    affine = np.asarray(affine, dtype=np.float64)
-    pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
-    return pts @ affine[:, :2].T + affine[:, 2]
-
-
-def invert_affine(affine: np.ndarray) -> np.ndarray:
-    """Inverse of a ``(2, 3)`` affine, or of each in a ``(..., 2, 3)`` stack (``a_to_b`` -> ``b_to_a``), float64.
-
-    Raises ``GeometryError`` when a linear part is singular (the model collapses the image).
-    """
-    affine = np.asarray(affine, dtype=np.float64)
-    linear = affine[..., :2]
-    # Relative test: |det| against the squared size of the entries, so pixel scale does not matter.
-    scale_sq = np.maximum(1.0, np.abs(linear).max(axis=(-2, -1)) ** 2)
-    if np.any(np.abs(np.linalg.det(linear)) < np.finfo(np.float64).eps * scale_sq):
-        raise GeometryError("the affine model is singular (it collapses the image); check the matches")
-    linear_inv = np.linalg.inv(linear)
-    translation_inv = -np.einsum("...ij,...j->...i", linear_inv, affine[..., 2])
-    return np.concatenate([linear_inv, translation_inv[..., None]], axis=-1)
 
 
 def _validated_matches(pts_src: np.ndarray, pts_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

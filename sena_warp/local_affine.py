@@ -23,10 +23,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .affine import apply_affine, compose_affine, invert_affine, scaling_about
 from .cells import Cell
 from .config import Config
 from .errors import GeometryError, InputError
-from .global_affine import apply_affine, invert_affine
 
 
 @dataclass(frozen=True)
@@ -77,15 +77,6 @@ class _Diagnosis:
     score: float
 
 
-def _as_3x3(affine: np.ndarray) -> np.ndarray:
-    return np.vstack([affine, [0.0, 0.0, 1.0]])
-
-
-def _similarity_3x3(centre: np.ndarray, scale: float) -> np.ndarray:
-    """3x3 matrix of ``p -> (p - centre) * scale``."""
-    return np.array([[scale, 0.0, -scale * centre[0]], [0.0, scale, -scale * centre[1]], [0.0, 0.0, 1.0]])
-
-
 def _ridge_affine(
     pts_src: np.ndarray,
     pts_tgt: np.ndarray,
@@ -102,17 +93,16 @@ def _ridge_affine(
     """
     det_glob = abs(float(np.linalg.det(affine_src_to_tgt[:, :2])))
     centre_src = apply_affine(invert_affine(affine_src_to_tgt), centre_tgt[None])[0]
-    norm_tgt = _similarity_3x3(centre_tgt, 1.0 / sigma_px)
-    norm_src = _similarity_3x3(centre_src, np.sqrt(det_glob) / sigma_px)
-    prior = (norm_tgt @ _as_3x3(affine_src_to_tgt) @ np.linalg.inv(norm_src))[:2].T  # (3, 2)
-    design = np.hstack([apply_affine(norm_src[:2], pts_src), np.ones((len(pts_src), 1))])  # (N, 3)
-    response = apply_affine(norm_tgt[:2], pts_tgt)  # (N, 2)
+    norm_tgt = scaling_about(centre_tgt, 1.0 / sigma_px)  # target -> normalised target
+    norm_src = scaling_about(centre_src, np.sqrt(det_glob) / sigma_px)  # source -> normalised source
+    prior = compose_affine(compose_affine(norm_tgt, affine_src_to_tgt), invert_affine(norm_src)).T  # (3, 2)
+    design = np.hstack([apply_affine(norm_src, pts_src), np.ones((len(pts_src), 1))])  # (N, 3)
+    response = apply_affine(norm_tgt, pts_tgt)  # (N, 2)
     weights_norm = weights / weights.sum()
     gram = design.T @ (weights_norm[:, None] * design) + lam * np.eye(3)
     rhs = design.T @ (weights_norm[:, None] * response) + lam * prior
     theta = np.linalg.solve(gram, rhs)  # (3, 2): normalised affine, transposed
-    affine_norm = _as_3x3(theta.T)
-    return (np.linalg.inv(norm_tgt) @ affine_norm @ norm_src)[:2]
+    return compose_affine(compose_affine(invert_affine(norm_tgt), theta.T), norm_src)
 
 
 def _cell_grid_tgt(bbox_tgt: np.ndarray, n_grid: int) -> np.ndarray:

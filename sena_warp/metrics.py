@@ -13,6 +13,8 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from .affine import similarity_deviation
+
 OVERLAP_ERODE_PX = 2  # UDIS-D protocol: both masks eroded by 2 px before comparing
 SSIM_SIGMA_PX = 1.5  # Wang et al. 2004 Gaussian window
 SSIM_C1 = (0.01 * 255) ** 2
@@ -75,15 +77,6 @@ def overlap_psnr_ssim(
     """UDIS-D alignment figures: PSNR (dB) and SSIM of the two images over their eroded overlap."""
     mask = overlap_mask(valid_src_canvas, valid_tgt_canvas)
     return psnr(warped_src_canvas, placed_tgt_canvas, mask), ssim(warped_src_canvas, placed_tgt_canvas, mask)
-
-
-def similarity_deviation(affines_src_to_tgt: np.ndarray) -> np.ndarray:
-    """Per affine, how far its linear part is from a similarity: singular-value ratio s_max / s_min - 1.
-
-    0 for a rotation+uniform scale; grows with shear and anisotropic scale. Input (J, 2, 3).
-    """
-    sv = np.linalg.svd(np.asarray(affines_src_to_tgt, np.float64)[:, :, :2], compute_uv=False)
-    return sv[:, 0] / np.maximum(sv[:, 1], 1e-12) - 1.0
 
 
 def forward_jacobians(forward: Forward, pts_src: np.ndarray, step_px: float = JACOBIAN_STEP_PX) -> np.ndarray:

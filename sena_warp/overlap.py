@@ -20,7 +20,7 @@ import numpy as np
 from .canvas import Canvas
 from .config import Config
 from .errors import GeometryError
-from .global_affine import apply_affine
+from .affine import apply_affine
 
 # Pixel centres this close (px) to a polygon edge count as inside: intersection vertices carry
 # round-off, and a centre exactly on the target's border must stay in the overlap.

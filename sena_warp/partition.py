@@ -24,7 +24,7 @@ from sena_warp.config import Config
 from sena_warp.errors import GeometryError, InputError
 from sena_warp.kernels import runtime
 from sena_warp.kernels.seam import seam_maps_kernel
-from sena_warp.warp_map import sample_map_bilinear
+from sena_warp.bilinear import sample_bilinear
 
 NEWTON_STEPS = 5  # anchor_residuals_px: Newton steps to invert the map (converges in 2-3 on smooth maps)
 JACOBIAN_STEP_PX = 0.5  # half-step of the central differences of the map's Jacobian
@@ -42,11 +42,13 @@ class SeamRows:
 
 @dataclass
 class SeamMaps:
-    """The three per-pixel maps of the stitch and the anchors they were built from.
+    """The three per-pixel maps of the stitch and the anchors they were built from, in the working
+    frame (``stitch.StitchMaps`` holds them in the input frame).
 
-    map_src_canvas, map_tgt_canvas: (H, W, 2) float32 (x, y) sample positions in the source and
-    target images (map_tgt = u - o); alpha_canvas: (H, W) float32 weight of the source;
-    seam_x_canvas: (H,) float32 seam x per row; anchors_*_canvas: (K, 2) float64 (x, y).
+    map_src_canvas, map_tgt_canvas: (H, W, 2) float32 (x, y) sample positions in the working-frame
+    source and target images, per working-canvas pixel (map_tgt = u - o); alpha_canvas: (H, W)
+    float32 weight of the source; seam_x_canvas: (H,) float32 seam x per canvas row;
+    anchors_*_canvas: (K, 2) float64 (x, y) on the working canvas.
     """
 
     map_src_canvas: np.ndarray
@@ -140,14 +142,14 @@ def anchor_residuals_px(
     NaN where the maps are not defined, the Newton steps leave the canvas (anchors on its border),
     or the Jacobian is singular.
     """
-    p_src = sample_map_bilinear(map_src_canvas_before, np.asarray(anchors_src_canvas, np.float64))
+    p_src = sample_bilinear(map_src_canvas_before, np.asarray(anchors_src_canvas, np.float64))
     u = np.asarray(anchors_tgt_canvas, np.float64).copy()
     step = np.array([JACOBIAN_STEP_PX, 0.0]), np.array([0.0, JACOBIAN_STEP_PX])
     for _ in range(NEWTON_STEPS):
         jac = np.stack(
-            [sample_map_bilinear(map_src_canvas_after, u + h) - sample_map_bilinear(map_src_canvas_after, u - h) for h in step], axis=-1
+            [sample_bilinear(map_src_canvas_after, u + h) - sample_bilinear(map_src_canvas_after, u - h) for h in step], axis=-1
         ) / (2 * JACOBIAN_STEP_PX)
-        residual = sample_map_bilinear(map_src_canvas_after, u) - p_src
+        residual = sample_bilinear(map_src_canvas_after, u) - p_src
         ok = np.isfinite(jac).all(axis=(1, 2)) & np.isfinite(residual).all(axis=1)
         ok[ok] = np.linalg.matrix_rank(jac[ok]) == 2
         delta = np.full_like(u, np.nan)

@@ -10,7 +10,8 @@ import numpy as np
 
 from .config import Config
 from .imageio import atomic_output
-from .metrics import overlap_psnr_ssim, similarity_deviation
+from .affine import similarity_deviation
+from .metrics import overlap_psnr_ssim
 from .partition import anchor_residuals_px, transition_mad
 from .rig import image_to_working
 from .stitch import Panorama

@@ -4,8 +4,10 @@
 the source, where to sample the target, the alpha between them); ``stitch_images`` applies them once.
 The video path estimates maps the same way and applies them to every frame pair.
 
-Stages run in the *working frame* of :mod:`sena_warp.rig` (source left, vertical rigs transposed);
-the final maps are expressed in the input frame so the compositor never transposes frames.
+Stages run in the *working frame* of :mod:`sena_warp.rig` (source left, vertical rigs transposed):
+every ``*_canvas`` array here is on the working-frame canvas. The final maps are expressed once in
+the input frame (``*_input``: the same canvas, transposed back for a vertical rig) so the
+compositor never transposes frames.
 """
 
 from __future__ import annotations
@@ -50,7 +52,7 @@ class StageClock:
 
 @dataclass(frozen=True)
 class Warp:
-    """Steps 1-6 in the working frame: models, overlap, gate and the source sampling map."""
+    """Steps 1-6 in the working frame: models, overlap, gate and the source sampling map (working canvas)."""
 
     glob: GlobalAffine
     overlap: Overlap
@@ -59,12 +61,12 @@ class Warp:
     inliers_tgt: np.ndarray  # (N, 2) matching target points, target pixels
     field_canvas: np.ndarray  # (H, W, 2) float32 FFD displacement before the gate (source px)
     gate_canvas: np.ndarray  # (H, W) float32 G in [0, 1]
-    map_src_canvas: np.ndarray  # (H, W, 2) float32 M_s: source (x, y) per canvas pixel
+    map_src_canvas: np.ndarray  # (H, W, 2) float32 M_s: working-frame source (x, y) per working-canvas pixel
 
 
 @dataclass(frozen=True)
 class Seam:
-    """Steps 7-9 in the working frame."""
+    """Steps 7-9 in the working frame (positions and maps on the working canvas)."""
 
     zone: Zone
     anchors_src_canvas: np.ndarray  # (K, 2) warped-source anchor positions
@@ -76,14 +78,16 @@ class Seam:
 class StitchMaps:
     """What a stitch needs to be applied to any frame pair of the same two cameras.
 
-    Maps are in the input frame: ``map_src_canvas[y, x]`` is the (x, y) to sample in the source input
-    (``rig.source``), ``map_tgt_canvas`` likewise in the target input, ``alpha_canvas`` the source weight.
+    The three maps are in the INPUT frame (the panorama as written; ``warp`` and ``seam`` hold the
+    working-frame ones): ``map_src_input[y, x]`` (H, W, 2) float32 is the (x, y) to sample in the
+    source input image (``rig.source``), ``map_tgt_input`` likewise in the target input image,
+    ``alpha_input`` (H, W) float32 the source weight.
     """
 
     rig: Rig
-    map_src_canvas: np.ndarray
-    map_tgt_canvas: np.ndarray
-    alpha_canvas: np.ndarray
+    map_src_input: np.ndarray
+    map_tgt_input: np.ndarray
+    alpha_input: np.ndarray
     matches: Matches
     warp: Warp
     seam: Seam
@@ -160,9 +164,9 @@ def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     seam = estimate_seam(img_src, img_tgt, warp, cfg, clock)
     return StitchMaps(
         rig=rig,
-        map_src_canvas=map_from_working(seam.maps.map_src_canvas, rig),
-        map_tgt_canvas=map_from_working(seam.maps.map_tgt_canvas, rig),
-        alpha_canvas=map_from_working(seam.maps.alpha_canvas, rig),
+        map_src_input=map_from_working(seam.maps.map_src_canvas, rig),
+        map_tgt_input=map_from_working(seam.maps.map_tgt_canvas, rig),
+        alpha_input=map_from_working(seam.maps.alpha_canvas, rig),
         matches=matches,
         warp=warp,
         seam=seam,
@@ -181,7 +185,7 @@ def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     clock.seconds.update(maps.seconds)
     img_src, img_tgt = maps.rig.pick(img_a, img_b)
     with clock("composite"):
-        compositor = Compositor(maps.map_src_canvas, maps.map_tgt_canvas, maps.alpha_canvas, cfg)
+        compositor = Compositor(maps.map_src_input, maps.map_tgt_input, maps.alpha_input, cfg)
         out, coverage = compositor.apply(img_src, img_tgt)
     return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
 

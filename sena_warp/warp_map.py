@@ -12,7 +12,8 @@ import warp as wp
 
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
-from sena_warp.global_affine import invert_affine
+from sena_warp.affine import invert_affine
+from sena_warp.bilinear import sample_bilinear
 from sena_warp.kernels import runtime
 from sena_warp.kernels.remap import remap_kernel
 from sena_warp.kernels.sampling import source_map_kernel
@@ -39,26 +40,6 @@ def source_map_canvas(canvas: Canvas, affine_src_to_tgt: np.ndarray, field_guard
     return map_src.numpy().reshape(canvas.height, canvas.width, 2)
 
 
-def sample_map_bilinear(map_canvas: np.ndarray, pts_canvas: np.ndarray) -> np.ndarray:
-    """Bilinear sample of a (H, W, 2) float32 canvas map at (N, 2) float64 (x, y) canvas points.
-
-    Returns (N, 2) float64; NaN for points outside [0, W-1] x [0, H-1] (no silent clamping).
-    """
-    height, width = map_canvas.shape[:2]
-    x, y = pts_canvas[:, 0], pts_canvas[:, 1]
-    inside = (x >= 0) & (x <= width - 1) & (y >= 0) & (y <= height - 1)
-    x0 = np.clip(np.floor(np.where(inside, x, 0)).astype(np.int64), 0, max(width - 2, 0))
-    y0 = np.clip(np.floor(np.where(inside, y, 0)).astype(np.int64), 0, max(height - 2, 0))
-    x1 = np.minimum(x0 + 1, width - 1)
-    y1 = np.minimum(y0 + 1, height - 1)
-    fx = (x - x0)[:, None]
-    fy = (y - y0)[:, None]
-    m = map_canvas.astype(np.float64)
-    top = (1 - fx) * m[y0, x0] + fx * m[y0, x1]
-    bottom = (1 - fx) * m[y1, x0] + fx * m[y1, x1]
-    return np.where(inside[:, None], (1 - fy) * top + fy * bottom, np.nan)
-
-
 def forward_points(
     map_src_canvas: np.ndarray,
     affine_src_to_tgt: np.ndarray,
@@ -79,11 +60,11 @@ def forward_points(
     border = np.array([canvas.width - 1.0, canvas.height - 1.0])
     for _ in range(cfg.forward_max_iters):
         # Clamped to the canvas while iterating, so a point that steps outside can come back.
-        residual_src = pts_src - sample_map_bilinear(map_src_canvas, np.clip(pts_canvas, 0.0, border))
+        residual_src = pts_src - sample_bilinear(map_src_canvas, np.clip(pts_canvas, 0.0, border))
         if np.all(np.abs(residual_src) < cfg.forward_tol_px):
             break
         pts_canvas = pts_canvas + residual_src @ affine[:, :2].T
-    residual_src = pts_src - sample_map_bilinear(map_src_canvas, np.clip(pts_canvas, 0.0, border))
+    residual_src = pts_src - sample_bilinear(map_src_canvas, np.clip(pts_canvas, 0.0, border))
     height, width = canvas.shape
     on_canvas = (
         (pts_canvas[:, 0] >= 0) & (pts_canvas[:, 0] <= width - 1) & (pts_canvas[:, 1] >= 0) & (pts_canvas[:, 1] <= height - 1)

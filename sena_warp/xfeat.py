@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 import onnxruntime as ort
 
+from .bilinear import sample_bilinear
 from .config import Config
 from .errors import InputError
 
@@ -96,12 +97,10 @@ def nms_peaks(heatmap: np.ndarray, size: int, threshold: float) -> np.ndarray:
     return np.stack([xs, ys], axis=1).astype(np.int64)
 
 
-def _taps(coord: np.ndarray, mode: str) -> tuple[np.ndarray, np.ndarray]:
-    """Integer tap positions and weights along one axis: (N, K) each; K = 2 bilinear, 4 bicubic."""
+def _cubic_taps(coord: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Integer tap positions and bicubic weights along one axis: (N, 4) each."""
     base = np.floor(coord)
     t = (coord - base)[:, None]
-    if mode == "bilinear":
-        return base[:, None].astype(np.int64) + np.arange(2), np.hstack([1.0 - t, t])
 
     def near(d):  # |d| <= 1
         return ((CUBIC_A + 2.0) * d - (CUBIC_A + 3.0)) * d * d + 1.0
@@ -125,9 +124,14 @@ def sample_map(feature_map: np.ndarray, pts_work: np.ndarray, shape_work_hw: tup
     work_h, work_w = shape_work_hw
     u = pts_work[:, 0] * (w / (work_w - 1)) - 0.5
     v = pts_work[:, 1] * (h / (work_h - 1)) - 0.5
-    cols, wx = _taps(u, mode)
-    rows, wy = _taps(v, mode)
-    pad = 2  # the widest kernel reaches 2 cells outside the map; padding with zeros as grid_sample
+    if mode == "bilinear":
+        # One cell of zeros around the map puts every footprint (u, v in [-0.5, size - 0.5]) inside it,
+        # so the package's one bilinear rule reads grid_sample's zeros outside.
+        padded = np.pad(feature_map, ((0, 0), (1, 1), (1, 1))).transpose(1, 2, 0)
+        return sample_bilinear(padded, np.stack([u + 1.0, v + 1.0], axis=1)).astype(np.float32)
+    cols, wx = _cubic_taps(u)
+    rows, wy = _cubic_taps(v)
+    pad = 2  # the bicubic kernel reaches 2 cells outside the map; padding with zeros as grid_sample
     padded = np.pad(feature_map, ((0, 0), (pad, pad), (pad, pad)))
     cols = np.clip(cols + pad, 0, w + 2 * pad - 1)
     rows = np.clip(rows + pad, 0, h + 2 * pad - 1)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from sena_warp.affine import apply_affine, invert_affine
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.imageio import read_image
@@ -30,15 +31,6 @@ def load_pair(shared_dir, name: str = "udisd_test_000001") -> tuple[np.ndarray, 
     """(img_src, img_tgt) uint8 BGR of a shared pair."""
     folder = shared_dir / "pairs" / name
     return read_image(next(folder.glob("a.*"))), read_image(next(folder.glob("b.*")))
-
-
-def to_homogeneous(affine: np.ndarray) -> np.ndarray:
-    return np.vstack([affine, [0.0, 0.0, 1.0]])
-
-
-def apply_affine(affine: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Apply a 2x3 affine to (..., 2) points."""
-    return pts @ affine[:, :2].T + affine[:, 2]
 
 
 def scene_geometry(shape_src: tuple, shape_tgt: tuple, seed: int = 0) -> dict:
@@ -88,11 +80,11 @@ def ffd_lattice_reference(geo: dict, ny: int, nx: int, d_max: float) -> np.ndarr
     rows = (np.arange(ny) + 0.5) * canvas.height / ny - 0.5
     u = np.stack(np.meshgrid(cols, rows), axis=-1)
     p_tgt = u - np.asarray(canvas.offset_tgt)
-    p_base = apply_affine(np.linalg.inv(to_homogeneous(geo["affine_src_to_tgt"]))[:2], p_tgt)
+    p_base = apply_affine(invert_affine(geo["affine_src_to_tgt"]), p_tgt).reshape(p_tgt.shape)
     d_sum = np.zeros_like(p_tgt)
     w_sum = np.zeros(p_tgt.shape[:2])
     for affine, centre, conf in zip(geo["affines_src_to_tgt"], geo["centres_tgt"], geo["conf"]):
-        p_j = apply_affine(np.linalg.inv(to_homogeneous(affine))[:2], p_tgt)
+        p_j = apply_affine(invert_affine(affine), p_tgt).reshape(p_tgt.shape)
         w = conf * np.exp(-np.sum((p_tgt - centre) ** 2, axis=-1) / (2 * geo["sigma_f"] ** 2))
         d_sum += w[..., None] * (p_j - p_base)
         w_sum += w
@@ -112,8 +104,7 @@ def gate_reference(sdf: np.ndarray, density: np.ndarray, ramp_px: float, cfg: Co
 def source_map_reference(canvas: Canvas, affine_src_to_tgt: np.ndarray, field: np.ndarray) -> np.ndarray:
     """M_s(u) = A^-1 (u - o) + D(u) in float64, (H, W, 2)."""
     u = np.stack(np.meshgrid(np.arange(canvas.width, dtype=np.float64), np.arange(canvas.height, dtype=np.float64)), axis=-1)
-    tgt_to_src = np.linalg.inv(to_homogeneous(affine_src_to_tgt))[:2]
-    return apply_affine(tgt_to_src, u - np.asarray(canvas.offset_tgt)) + field
+    return apply_affine(invert_affine(affine_src_to_tgt), u - np.asarray(canvas.offset_tgt)).reshape(u.shape) + field
 
 
 def smooth_field(shape: tuple[int, int], amplitude_px: float, seed: int = 1) -> np.ndarray:
@@ -131,8 +122,6 @@ def geo(shared_dir):
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_ffd_lattice_kernel_matches_numpy(geo, device, warp_device):
-    from sena_warp.global_affine import invert_affine
-
     ny, nx, d_max = 48, 40, 60.0
     glob = invert_affine(geo["affine_src_to_tgt"])
     local = invert_affine(geo["affines_src_to_tgt"])
@@ -181,8 +170,6 @@ def test_gate_kernels_match_numpy(geo, device, warp_device):
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_source_map_kernel_matches_numpy(geo, device, warp_device):
-    from sena_warp.global_affine import invert_affine
-
     canvas = geo["canvas"]
     field = smooth_field(canvas.shape, 15.0)
     tgt_to_src = invert_affine(geo["affine_src_to_tgt"])

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import warp as wp
 
+from sena_warp.bilinear import sample_bilinear
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import composite_kernel
 from sena_warp.kernels.remap import remap_kernel
@@ -13,24 +14,11 @@ from test_kernels_maps import DEVICES, load_pair, scene_geometry, smooth_field, 
 
 
 def remap_reference(img: np.ndarray, map_canvas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Float64 bilinear sample of uint8 (H, W, C) img at float32 (x, y) positions; (values, valid)."""
-    h, w = img.shape[:2]
-    x = map_canvas[..., 0].astype(np.float64)
-    y = map_canvas[..., 1].astype(np.float64)
-    valid = (x >= 0) & (y >= 0) & (x <= w - 1) & (y <= h - 1)
-    x = np.where(valid, x, 0.0)
-    y = np.where(valid, y, 0.0)
-    x0 = np.minimum(np.floor(x).astype(int), w - 1)
-    y0 = np.minimum(np.floor(y).astype(int), h - 1)
-    x1 = np.minimum(x0 + 1, w - 1)
-    y1 = np.minimum(y0 + 1, h - 1)
-    fx = (x - x0)[..., None]
-    fy = (y - y0)[..., None]
-    f = img.astype(np.float64)
-    top = (1 - fx) * f[y0, x0] + fx * f[y0, x1]
-    bottom = (1 - fx) * f[y1, x0] + fx * f[y1, x1]
-    values = np.where(valid[..., None], (1 - fy) * top + fy * bottom, 0.0)
-    return values, valid
+    """Float64 bilinear sample (the host rule, ``sena_warp.bilinear``) of uint8 (H, W, C) img at float32
+    (x, y) positions (Hc, Wc, 2); (values (Hc, Wc, C), 0 where invalid; valid (Hc, Wc) bool)."""
+    values = sample_bilinear(img, map_canvas.reshape(-1, 2)).reshape(*map_canvas.shape[:2], img.shape[2])
+    valid = np.isfinite(values[..., 0])
+    return np.where(valid[..., None], values, 0.0), valid
 
 
 def composite_reference(img_src, img_tgt, map_src, map_tgt, alpha):

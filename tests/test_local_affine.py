@@ -8,7 +8,8 @@ from test_global_affine import load_pair, sift_matches
 
 from sena_warp.cells import grid_cells
 from sena_warp.config import Config
-from sena_warp.global_affine import apply_affine, fit_global_affine, invert_affine
+from sena_warp.affine import apply_affine, invert_affine
+from sena_warp.global_affine import fit_global_affine
 from sena_warp.local_affine import confidence, fit_local_affines, sigma_f
 from sena_warp.overlap import plan_overlap
 

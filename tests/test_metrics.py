@@ -2,9 +2,9 @@ import cv2
 import numpy as np
 import pytest
 
+from sena_warp.affine import apply_affine
 from sena_warp.imageio import read_image
-from sena_warp.metrics import (forward_anisotropy, line_bend_pct, long_segments, overlap_mask, overlap_psnr_ssim, psnr,
-                                similarity_deviation, ssim)
+from sena_warp.metrics import forward_anisotropy, line_bend_pct, long_segments, overlap_mask, overlap_psnr_ssim, psnr, ssim
 
 
 @pytest.fixture(scope="module")
@@ -49,17 +49,8 @@ def test_overlap_mask_erodes_both_sides():
     assert m[:, 10].all()
 
 
-def test_similarity_deviation():
-    rot = np.array([[[np.cos(0.3) * 2, -np.sin(0.3) * 2, 5], [np.sin(0.3) * 2, np.cos(0.3) * 2, 1]]])
-    shear = np.array([[[1.0, 0.5, 0], [0.0, 1.0, 0]]])
-    dev = similarity_deviation(np.concatenate([rot, shear]))
-    assert dev[0] == pytest.approx(0.0, abs=1e-12)
-    assert dev[1] > 0.5
-
-
 def affine_forward(matrix):
-    matrix = np.asarray(matrix, np.float64)
-    return lambda pts: pts @ matrix[:, :2].T + matrix[:, 2]
+    return lambda pts: apply_affine(matrix, pts)
 
 
 def test_forward_anisotropy_is_zero_for_a_similarity_and_known_for_a_stretch():

@@ -102,10 +102,10 @@ def plane_maps(maps: StitchMaps, shape: tuple[int, int], offset_fixed: np.ndarra
     map is the fixed canvas's own (the target is never warped, so it is the same for every estimate).
     Chroma maps are derived once here so frames only sample.
     """
-    shift_xy = target_offset(maps.map_tgt_canvas) - offset_fixed
-    map_src = shift_onto(maps.map_src_canvas.astype(np.float32), shift_xy, shape, np.nan)
+    shift_xy = target_offset(maps.map_tgt_input) - offset_fixed
+    map_src = shift_onto(maps.map_src_input.astype(np.float32), shift_xy, shape, np.nan)
     map_tgt = target_map(shape, offset_fixed)
-    alpha = shift_onto(maps.alpha_canvas.astype(np.float32), shift_xy, shape, 0.0)
+    alpha = shift_onto(maps.alpha_input.astype(np.float32), shift_xy, shape, 0.0)
     return PlaneMaps(
         map_src_luma=map_src, map_tgt_luma=map_tgt, alpha_luma=alpha,
         map_src_chroma=chroma_positions(map_src), map_tgt_chroma=chroma_positions(map_tgt),

@@ -44,9 +44,9 @@ class SenaFrameCompositor:
         self.cfg = cfg
         self.rig = first.rig
         self.reestimate_s = cfg.video_reestimate_s if cfg.video_rig == "moving" else None
-        width, height = even_size(first.alpha_canvas.shape[1], first.alpha_canvas.shape[0])  # yuv420p: even sides
+        width, height = even_size(first.alpha_input.shape[1], first.alpha_input.shape[0])  # yuv420p: even sides
         shape = (height, width)
-        self.offset_tgt = target_offset(first.map_tgt_canvas)
+        self.offset_tgt = target_offset(first.map_tgt_input)
         self.maps = plane_maps(first, shape, self.offset_tgt)
         self.output_size = (shape[1], shape[0])
         self.luma = Compositor(self.maps.map_src_luma, self.maps.map_tgt_luma, self.maps.alpha_luma, cfg)
