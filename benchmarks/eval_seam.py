@@ -6,7 +6,7 @@ For each pair folder (``a.*``, ``b.*``) and each input order (a, b) and (b, a), 
 * zone: the adequate zone's canvas x-range [x0, x1) and whether it fell back to the whole overlap;
 * anchors: number of keypoint-chain anchors (edge extensions included) and the median over them of
   the canvas distance between where the warped-source anchor lands after the step-9 reconstruction
-  and its target anchor (``partition.anchor_residuals_px``);
+  and its target anchor (``evaluation.metrics.anchor_residuals_px``);
 * seam MAD: mean |src - tgt| (grey levels, averaged over B, G, R) between the seam-corrected warped
   source and the placed target over the pixels where both are valid and |x - seam_x(y)| <= T/2
   (T = ``cfg.transition_px``), i.e. where the step-9 alpha blends;
@@ -36,9 +36,11 @@ import numpy as np
 
 from sena_warp.config import Config
 from sena_warp.errors import StitchError
+from sena_warp.evaluation.alignment import parse_setting
+from sena_warp.evaluation.figures import seam_figures
+from sena_warp.evaluation.sheets import thumbnail, tile
 from sena_warp.imageio import read_image
-from sena_warp.evaluate import seam_figures
-from sena_warp.sheets import thumbnail, tile
+from sena_warp.kernels.runtime import resolve_config
 from sena_warp.stitch import Panorama, stitch_images
 
 REPO = Path(__file__).resolve().parents[1]
@@ -75,7 +77,7 @@ class Row:
 
 
 def figures_of(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> SeamFigures:
-    """The zone and the seam figures (``evaluate.seam_figures``) of a finished stitch of (img_a, img_b)."""
+    """The zone and the seam figures (``evaluation.figures.seam_figures``) of a finished stitch of (img_a, img_b)."""
     zone, f = pano.maps.seam.zone, seam_figures(img_a, img_b, pano, cfg)
     return SeamFigures(zone.x0, zone.x1, zone.fallback, f["anchors"], f["anchor_residual_px"], f["seam_mad"],
                        f["feather_mad"])
@@ -126,16 +128,6 @@ def summary_lines(rows: list[Row]) -> list[str]:
     ]
 
 
-def config_with(settings: list[str]) -> Config:
-    """Default Config with ``NAME=VALUE`` overrides, each value parsed as the field's default type."""
-    cfg = Config()
-    changes = {}
-    for setting in settings:
-        name, _, value = setting.partition("=")
-        changes[name] = type(getattr(cfg, name))(value)
-    return cfg.replace(**changes)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
@@ -144,7 +136,7 @@ def main() -> None:
     parser.add_argument("--orders", nargs="+", choices=ORDERS, default=list(ORDERS), help="input orders to run")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override a Config field")
     args = parser.parse_args()
-    cfg = config_with(args.set)
+    cfg = resolve_config(parse_setting(",".join(args.set) or "default", Config()))
     lines = ["| pair | order | result | zone x (canvas) | anchors | median anchor residual px | "
              "seam MAD / feather MAD | seam wins |", "|---|---|---|---|---:|---:|---:|---|"]
     print("\n".join(lines), flush=True)

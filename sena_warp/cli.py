@@ -52,10 +52,12 @@ def cmd_match(args: argparse.Namespace) -> int:
 
 
 def cmd_image(args: argparse.Namespace) -> int:
+    from sena_warp.evaluation.figures import report_figures
+    from sena_warp.kernels.runtime import resolve_config
+
     from .crop import largest_inner_rectangle
     from .debug import dump_stages
     from .imageio import check_output_folder, check_output_path, read_image, write_image
-    from sena_warp.kernels.runtime import resolve_config
     from .report import image_report, write_json
     from .stitch import stitch_images
 
@@ -73,7 +75,8 @@ def cmd_image(args: argparse.Namespace) -> int:
     write_image(args.output, image, inputs=inputs)
     if args.debug:
         dump_stages(args.debug, img_a, img_b, pano, cfg)
-    report = image_report(pano, img_a, img_b, cfg, crop)
+    # The front end measures the stitch for its report; the pipeline itself never imports the evaluation.
+    report = image_report(pano, img_a, img_b, report_figures(img_a, img_b, pano, cfg), crop)
     if args.report:
         write_json(args.report, report)
     m = report["metrics"]
@@ -187,14 +190,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also measure the peak RSS of 1080p stitches of these lengths in seconds (e.g. 10 60)")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default=Config.device,
                    help="where the Warp kernels run (default: %(default)s)")
-    p.set_defaults(run=_lazy("bench", "cmd_bench"))
+    p.set_defaults(run=_lazy("evaluation.bench", "cmd_bench"))
 
     p = sub.add_parser("eval", help="quality evaluation: SENA vs global affine, homography, OpenCV's stitcher")
     p.add_argument("data_dir", help="folder of pair folders, each holding a.* and b.* (or one pair folder)")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for results.csv, summary.md and the sheets")
     p.add_argument("--progress", action="store_true", help="show progress on stderr even when it is not a terminal")
     _add_common(p)
-    p.set_defaults(run=_lazy("evaluate", "cmd_eval"))
+    p.set_defaults(run=_lazy("evaluation.evaluate", "cmd_eval"))
     return parser
 
 

@@ -24,11 +24,6 @@ from sena_warp.config import Config
 from sena_warp.errors import GeometryError, InputError
 from sena_warp.kernels import runtime
 from sena_warp.kernels.seam import seam_maps_kernel
-from sena_warp.bilinear import sample_bilinear
-
-NEWTON_STEPS = 5  # anchor_residuals_px: Newton steps to invert the map (converges in 2-3 on smooth maps)
-JACOBIAN_STEP_PX = 0.5  # half-step of the central differences of the map's Jacobian
-
 
 @dataclass(frozen=True)
 class SeamRows:
@@ -125,50 +120,3 @@ def seam_maps(
         anchors_src_canvas=np.asarray(anchors_src_canvas, np.float64),
         anchors_tgt_canvas=np.asarray(anchors_tgt_canvas, np.float64),
     )
-
-
-def anchor_residuals_px(
-    map_src_canvas_before: np.ndarray,
-    map_src_canvas_after: np.ndarray,
-    anchors_src_canvas: np.ndarray,
-    anchors_tgt_canvas: np.ndarray,
-) -> np.ndarray:
-    """(K,) float64 canvas distance between where each source anchor lands after reconstruction and
-    its target anchor.
-
-    The source anchor's scene point is ``p = before(anchor_src)`` (a source-image position); where it
-    lands is the canvas point u with ``after(u) = p``, found by Newton steps from the target anchor
-    with a central-difference Jacobian of ``after`` (SENA.md step 6: invert maps numerically).
-    NaN where the maps are not defined, the Newton steps leave the canvas (anchors on its border),
-    or the Jacobian is singular.
-    """
-    p_src = sample_bilinear(map_src_canvas_before, np.asarray(anchors_src_canvas, np.float64))
-    u = np.asarray(anchors_tgt_canvas, np.float64).copy()
-    step = np.array([JACOBIAN_STEP_PX, 0.0]), np.array([0.0, JACOBIAN_STEP_PX])
-    for _ in range(NEWTON_STEPS):
-        jac = np.stack(
-            [sample_bilinear(map_src_canvas_after, u + h) - sample_bilinear(map_src_canvas_after, u - h) for h in step], axis=-1
-        ) / (2 * JACOBIAN_STEP_PX)
-        residual = sample_bilinear(map_src_canvas_after, u) - p_src
-        ok = np.isfinite(jac).all(axis=(1, 2)) & np.isfinite(residual).all(axis=1)
-        ok[ok] = np.linalg.matrix_rank(jac[ok]) == 2
-        delta = np.full_like(u, np.nan)
-        delta[ok] = np.linalg.solve(jac[ok], residual[ok][..., None])[..., 0]
-        u = u - delta
-    return np.hypot(*(u - anchors_tgt_canvas).T)
-
-
-def transition_mad(
-    out_src: np.ndarray, out_tgt: np.ndarray, valid: np.ndarray, seam_x: np.ndarray, width: float
-) -> float:
-    """Mean |src - tgt| (grey levels, over channels) inside the transition band |x - seam_x[y]| <= width/2.
-
-    out_src, out_tgt: (H, W) or (H, W, C) images remapped onto the canvas; valid: (H, W) bool where
-    both are defined; seam_x: (H,) seam x per row. NaN when the band holds no valid pixel.
-    """
-    cols = np.arange(valid.shape[1])[None, :]
-    band = valid & (np.abs(cols - np.asarray(seam_x, np.float64)[:, None]) <= 0.5 * width)
-    if not band.any():
-        return float("nan")
-    diff = np.abs(out_src.astype(np.float64) - out_tgt.astype(np.float64))
-    return float(diff[band].mean())

@@ -1,5 +1,8 @@
 """What a stitch did, as a JSON-ready dict (``--report``): counts, models, zone, anchors, the
-figures of SENA.md "Measuring" and the time per stage."""
+figures of SENA.md "Measuring" and the time per stage.
+
+The pipeline does not measure itself: the figures are computed by the caller (the CLI, with
+``sena_warp.evaluation.figures.report_figures``) and only formatted here."""
 
 from __future__ import annotations
 
@@ -8,47 +11,16 @@ import os
 
 import numpy as np
 
-from .config import Config
-from .imageio import atomic_output
 from .affine import similarity_deviation
-from .metrics import overlap_psnr_ssim
-from .partition import anchor_residuals_px, transition_mad
-from .rig import image_to_working
+from .imageio import atomic_output
 from .stitch import Panorama
-from .warp_map import remap_image
 
 ROUND = 4
 
 
-def alignment_figures(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> dict:
-    """Overlap PSNR/SSIM of the step-6 warp and the seam figures of the final maps.
-
-    Computed in the working frame, where the seam runs top to bottom and ``seam_x_canvas`` is per row;
-    ``cfg.device`` resolved.
-    """
-    maps = pano.maps
-    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
-    seam = maps.seam
-    warped, valid_src = remap_image(img_src, maps.warp.map_src_canvas, cfg)
-    placed, valid_tgt = remap_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
-    seam_src, valid_seam = remap_image(img_src, seam.maps.map_src_canvas, cfg)
-    psnr_db, ssim_val = overlap_psnr_ssim(warped, valid_src, placed, valid_tgt)
-    residuals = anchor_residuals_px(maps.warp.map_src_canvas, seam.maps.map_src_canvas,
-                                    seam.anchors_src_canvas, seam.anchors_tgt_canvas)
-    mad = transition_mad(seam_src, placed, valid_seam & valid_tgt, seam.maps.seam_x_canvas, cfg.transition_px)
-    finite = residuals[np.isfinite(residuals)]
-    return {
-        "overlap_psnr_db": _num(psnr_db),
-        "overlap_ssim": _num(ssim_val),
-        "anchor_residual_median_px": _num(np.median(finite)) if finite.size else None,
-        "anchor_residual_max_px": _num(finite.max()) if finite.size else None,
-        "transition_mad_grey": _num(mad),
-    }
-
-
-def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, cfg: Config,
+def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, metrics: dict[str, float],
                  crop_xywh: tuple[int, int, int, int] | None = None) -> dict:
-    """The ``--report`` of ``sena-warp image``."""
+    """The ``--report`` of ``sena-warp image``; ``metrics``: name -> figure (NaN: not measurable)."""
     maps = pano.maps
     warp, seam, local = maps.warp, maps.seam, maps.warp.local
     zone = seam.zone
@@ -70,7 +42,7 @@ def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, cfg: Conf
         "anchors": {"count": int(len(seam.anchors_tgt_canvas)),
                     "src_canvas": _nums(seam.anchors_src_canvas), "tgt_canvas": _nums(seam.anchors_tgt_canvas),
                     "frame": "working (transposed for a vertical rig)"},
-        "metrics": alignment_figures(pano, img_a, img_b, cfg),
+        "metrics": {name: _num(value) for name, value in metrics.items()},
         "seconds": {k: _num(v) for k, v in pano.seconds.items()},
     }
 

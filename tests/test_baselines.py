@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sena_warp.baselines import (homography_forward, homography_to_target, opencv_forward, opencv_stitch,
+from sena_warp.evaluation.baselines import (homography_forward, homography_to_target, opencv_forward, opencv_stitch,
                                  opencv_views, sift_homography)
 from sena_warp.config import Config
 from sena_warp.errors import MatchError
 from sena_warp.features import match_images
 from sena_warp.imageio import read_image
-from sena_warp.metrics import overlap_psnr_ssim
+from sena_warp.evaluation.metrics import overlap_psnr_ssim
 
 CFG = Config(device="cpu")
 

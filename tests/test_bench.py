@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from sena_warp.bench import COLUMNS, OpenCVReference, make_clip_pair, pan_window, parse_size, run_bench
+from sena_warp.evaluation.bench import COLUMNS, OpenCVReference, make_clip_pair, pan_window, parse_size, run_bench
 from sena_warp.composite import Compositor
 from sena_warp.config import Config
 from sena_warp.errors import InputError

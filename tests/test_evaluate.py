@@ -11,7 +11,7 @@ import pytest
 
 from sena_warp.config import Config
 from sena_warp.errors import InputError
-from sena_warp.evaluate import CSV_FIELDS, METHODS, pair_folders, run_eval
+from sena_warp.evaluation.evaluate import CSV_FIELDS, METHODS, pair_folders, run_eval
 from helpers import run_cli
 
 CFG = Config(device="cpu")

@@ -4,7 +4,8 @@ import pytest
 
 from sena_warp.affine import apply_affine
 from sena_warp.imageio import read_image
-from sena_warp.metrics import forward_anisotropy, line_bend_pct, long_segments, overlap_mask, overlap_psnr_ssim, psnr, ssim
+from sena_warp.evaluation.metrics import (forward_anisotropy, line_bend_pct, long_segments, overlap_mask, overlap_psnr_ssim,
+                                           psnr, ssim, transition_mad)
 
 
 @pytest.fixture(scope="module")
@@ -85,3 +86,13 @@ def test_long_segments_finds_a_drawn_line_longest_first():
     assert len(found) >= 2 and np.all(np.diff(lengths) <= 0) and lengths[0] > 240
     assert len(long_segments(img, min_fraction=0.5)) >= 1 and len(long_segments(img, min_fraction=0.95)) == 0
     assert long_segments(np.zeros((50, 50, 3), np.uint8)).shape == (0, 2, 2)
+
+
+def test_transition_mad_counts_only_the_band():
+    valid = np.ones((4, 10), bool)
+    src = np.zeros((4, 10))
+    tgt = np.zeros((4, 10))
+    tgt[:, 4:7] = 6.0  # inside |x - 5| <= 1
+    tgt[:, 0] = 100.0  # outside the band
+    assert transition_mad(src, tgt, valid, np.full(4, 5.0), 2.0) == pytest.approx(6.0)
+    assert np.isnan(transition_mad(src, tgt, np.zeros((4, 10), bool), np.full(4, 5.0), 2.0))

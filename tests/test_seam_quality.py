@@ -2,7 +2,7 @@
 reconstruction puts every warped-source anchor on its target anchor (median <= 1.5 px), and inside
 the transition band the two images differ less than a linear feather's over the whole overlap.
 
-The figures are ``sena_warp.evaluate.seam_figures`` (defined in docs/evaluation.md, "## Seam (issue 4)").
+The figures are ``sena_warp.evaluation.figures.seam_figures`` (defined in docs/evaluation.md, "## Seam (issue 4)").
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from sena_warp.config import Config
-from sena_warp.evaluate import feather_mad, seam_figures
+from sena_warp.evaluation.figures import feather_mad, seam_figures
 from sena_warp.imageio import read_image
 from sena_warp.stitch import stitch_images
 

@@ -3,7 +3,7 @@ import pytest
 
 from sena_warp.config import Config
 from sena_warp.imageio import read_image
-from sena_warp.metrics import overlap_psnr_ssim
+from sena_warp.evaluation.metrics import overlap_psnr_ssim
 from sena_warp.stitch import stitch_images
 
 

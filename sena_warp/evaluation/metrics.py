@@ -1,9 +1,10 @@
-"""Quality figures of SENA.md "Measuring": overlap alignment (UDIS-D protocol) and shape.
+"""Quality measures of SENA.md "Measuring": overlap alignment (UDIS-D protocol), seam, shape.
 
 Alignment: images already on one frame (the warped source and the placed target, each with a
-validity mask of the same (H, W) shape). Shape: a warp given as a *forward* function that takes
-(N, 2) float64 source (x, y) pixels to (N, 2) output (x, y) pixels (NaN where it is undefined), so
-that SENA, the global models and OpenCV's stitcher are measured the same way.
+validity mask of the same (H, W) shape). Seam: the canvas maps and anchors of steps 6-9 (working
+frame). Shape: a warp given as a *forward* function that takes (N, 2) float64 source (x, y) pixels
+to (N, 2) output (x, y) pixels (NaN where it is undefined), so that SENA, the global models and
+OpenCV's stitcher are measured the same way.
 """
 
 from __future__ import annotations
@@ -13,7 +14,8 @@ from typing import Callable
 import cv2
 import numpy as np
 
-from .affine import similarity_deviation
+from sena_warp.affine import similarity_deviation
+from sena_warp.bilinear import sample_bilinear
 
 OVERLAP_ERODE_PX = 2  # UDIS-D protocol: both masks eroded by 2 px before comparing
 SSIM_SIGMA_PX = 1.5  # Wang et al. 2004 Gaussian window
@@ -23,6 +25,8 @@ JACOBIAN_STEP_PX = 2.0  # central-difference step of a forward warp's Jacobian
 LONG_LINE_FRACTION = 0.10  # a "long line": a detected segment at least this x the image's long side
 MAX_LINES = 30  # the longest this many long lines are measured
 LINE_SAMPLES = 33  # points per line mapped through a warp
+NEWTON_STEPS = 5  # anchor_residuals_px: Newton steps to invert the map (converges in 2-3 on smooth maps)
+ANCHOR_JACOBIAN_STEP_PX = 0.5  # half-step of anchor_residuals_px's central differences of the map
 
 Forward = Callable[[np.ndarray], np.ndarray]
 
@@ -77,6 +81,53 @@ def overlap_psnr_ssim(
     """UDIS-D alignment figures: PSNR (dB) and SSIM of the two images over their eroded overlap."""
     mask = overlap_mask(valid_src_canvas, valid_tgt_canvas)
     return psnr(warped_src_canvas, placed_tgt_canvas, mask), ssim(warped_src_canvas, placed_tgt_canvas, mask)
+
+
+def anchor_residuals_px(
+    map_src_canvas_before: np.ndarray,
+    map_src_canvas_after: np.ndarray,
+    anchors_src_canvas: np.ndarray,
+    anchors_tgt_canvas: np.ndarray,
+) -> np.ndarray:
+    """(K,) float64 canvas distance between where each source anchor lands after reconstruction and
+    its target anchor.
+
+    The source anchor's scene point is ``p = before(anchor_src)`` (a source-image position); where it
+    lands is the canvas point u with ``after(u) = p``, found by Newton steps from the target anchor
+    with a central-difference Jacobian of ``after`` (SENA.md step 6: invert maps numerically).
+    NaN where the maps are not defined, the Newton steps leave the canvas (anchors on its border),
+    or the Jacobian is singular.
+    """
+    p_src = sample_bilinear(map_src_canvas_before, np.asarray(anchors_src_canvas, np.float64))
+    u = np.asarray(anchors_tgt_canvas, np.float64).copy()
+    step = np.array([ANCHOR_JACOBIAN_STEP_PX, 0.0]), np.array([0.0, ANCHOR_JACOBIAN_STEP_PX])
+    for _ in range(NEWTON_STEPS):
+        jac = np.stack(
+            [sample_bilinear(map_src_canvas_after, u + h) - sample_bilinear(map_src_canvas_after, u - h) for h in step], axis=-1
+        ) / (2 * ANCHOR_JACOBIAN_STEP_PX)
+        residual = sample_bilinear(map_src_canvas_after, u) - p_src
+        ok = np.isfinite(jac).all(axis=(1, 2)) & np.isfinite(residual).all(axis=1)
+        ok[ok] = np.linalg.matrix_rank(jac[ok]) == 2
+        delta = np.full_like(u, np.nan)
+        delta[ok] = np.linalg.solve(jac[ok], residual[ok][..., None])[..., 0]
+        u = u - delta
+    return np.hypot(*(u - anchors_tgt_canvas).T)
+
+
+def transition_mad(
+    out_src: np.ndarray, out_tgt: np.ndarray, valid: np.ndarray, seam_x: np.ndarray, width: float
+) -> float:
+    """Mean |src - tgt| (grey levels, over channels) inside the transition band |x - seam_x[y]| <= width/2.
+
+    out_src, out_tgt: (H, W) or (H, W, C) images remapped onto the canvas; valid: (H, W) bool where
+    both are defined; seam_x: (H,) seam x per row. NaN when the band holds no valid pixel.
+    """
+    cols = np.arange(valid.shape[1])[None, :]
+    band = valid & (np.abs(cols - np.asarray(seam_x, np.float64)[:, None]) <= 0.5 * width)
+    if not band.any():
+        return float("nan")
+    diff = np.abs(out_src.astype(np.float64) - out_tgt.astype(np.float64))
+    return float(diff[band].mean())
 
 
 def forward_jacobians(forward: Forward, pts_src: np.ndarray, step_px: float = JACOBIAN_STEP_PX) -> np.ndarray:

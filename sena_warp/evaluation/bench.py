@@ -29,12 +29,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .config import Config
-from .errors import InputError, StitchError
-from .imageio import atomic_output, read_image
+from sena_warp.config import Config
+from sena_warp.errors import InputError, StitchError
+from sena_warp.imageio import atomic_output, read_image
 
 SIZES = {"720p": (1280, 720), "1080p": (1920, 1080), "4k": (3840, 2160)}
-DATA_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+REPO = Path(__file__).resolve().parents[2]
+DATA_DIR = REPO.parent / "shared" / "data"
 PAIR = "rew_lawn_2160"
 
 
@@ -93,7 +94,7 @@ def make_clip_pair(pair: tuple[Path, Path], work: Path, size: tuple[int, int], s
 
     Returns (left, right) paths in ``work``: left shows image a, right image b, same window each frame.
     """
-    from .video.writer import VideoWriter
+    from sena_warp.video.writer import VideoWriter
 
     width, height = size
     frames = max(1, round(seconds * settings.fps))
@@ -129,7 +130,7 @@ class SideBySide:
 
 def transcode_baseline(left: Path, right: Path, output: Path, cfg: Config) -> dict:
     """Decode both, place side by side, encode with the stitcher's settings; frames, seconds, fps."""
-    from .video.loop import VideoOptions, run_video
+    from sena_warp.video.loop import VideoOptions, run_video
 
     report = run_video(left, right, output, SideBySide, VideoOptions.from_config(cfg, audio="none", progress=False))
     seconds = report["timing_s"]["total"]
@@ -170,7 +171,7 @@ class OpenCVReference:
     """
 
     def __init__(self, map_src, map_tgt, alpha, shape_src, shape_tgt, fill):
-        from .video.maps import sampled_mask
+        from sena_warp.video.maps import sampled_mask
 
         valid_src, valid_tgt = sampled_mask(map_src, shape_src), sampled_mask(map_tgt, shape_tgt)
         a = np.where(valid_src, np.where(valid_tgt, np.clip(alpha, 0.0, 1.0), 1.0), 0.0)
@@ -201,21 +202,19 @@ def chroma_shape(shape_y: tuple[int, int]) -> tuple[int, int]:
 
 
 class OpenCVFrameReference:
-    """``SenaFrameCompositor.composite_yuv`` rebuilt on :class:`OpenCVReference` (same planes, same maps)."""
+    """``SenaFrameCompositor.composite_yuv`` rebuilt on :class:`OpenCVReference`: the same roles and the
+    same maps (its public ``source_target`` and ``passes``), on the same planes."""
 
     def __init__(self, compositor, shape_y_src: tuple[int, int], shape_y_tgt: tuple[int, int]):
-        from .video.maps import BLACK_UV, BLACK_Y
-
-        maps = compositor.maps
-        self.rig = compositor.rig
-        self.luma = OpenCVReference(maps.map_src_luma, maps.map_tgt_luma, maps.alpha_luma,
-                                    shape_y_src, shape_y_tgt, (BLACK_Y,))
-        self.chroma = OpenCVReference(maps.map_src_chroma, maps.map_tgt_chroma, maps.alpha_chroma,
-                                      chroma_shape(shape_y_src), chroma_shape(shape_y_tgt), (BLACK_UV, BLACK_UV))
+        luma, chroma = compositor.passes()
+        self.source_target = compositor.source_target
+        self.luma = OpenCVReference(luma.map_src, luma.map_tgt, luma.alpha, shape_y_src, shape_y_tgt, luma.fill)
+        self.chroma = OpenCVReference(chroma.map_src, chroma.map_tgt, chroma.alpha, chroma_shape(shape_y_src),
+                                      chroma_shape(shape_y_tgt), chroma.fill)
 
     def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r):
-        y_src, y_tgt = self.rig.pick(y_l, y_r)
-        uv_src, uv_tgt = self.rig.pick(np.dstack((u_l, v_l)), np.dstack((u_r, v_r)))
+        y_src, y_tgt = self.source_target(y_l, y_r)
+        uv_src, uv_tgt = self.source_target(np.dstack((u_l, v_l)), np.dstack((u_r, v_r)))
         uv = self.chroma.apply(uv_src, uv_tgt)
         return self.luma.apply(y_src, y_tgt), uv[:, :, 0], uv[:, :, 1]
 
@@ -245,16 +244,14 @@ def compare_compositing(left: Path, right: Path, cfg: Config, settings: BenchSet
     ``opencv_ms`` (median wall), ``warp_cpu_ms``, ``opencv_cpu_ms`` (mean process CPU), ``ratio`` /
     ``cpu_ratio`` (Warp / OpenCV) and ``max_diff`` (grey levels, over Y, U, V).
     """
-    from .video.estimate import best_first_estimate
-    from .video.reader import FrameReader
-    from .video.stitch import SenaFrameCompositor
+    from sena_warp.video.reader import FrameReader
+    from sena_warp.video.stitch import SenaFrameCompositor
 
-    maps, pair, attempts = best_first_estimate(left, right, 0.0, cfg.replace(video_estimate_pairs=1), "auto")
-    compositor = SenaFrameCompositor(maps, attempts, pair, cfg)
+    compositor = SenaFrameCompositor.from_videos(left, right, 0.0, cfg.replace(video_estimate_pairs=1), "auto")
     with FrameReader(left) as reader_l, FrameReader(right) as reader_r:
         frame_l, frame_r = next(iter(reader_l)), next(iter(reader_r))
     planes = (frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
-    shape_src, shape_tgt = (f.y.shape for f in compositor.rig.pick(frame_l, frame_r))
+    shape_src, shape_tgt = (f.y.shape for f in compositor.source_target(frame_l, frame_r))
     reference = OpenCVFrameReference(compositor, shape_src, shape_tgt)
     warp_ms, warp_cpu_ms = time_calls(lambda: compositor.composite_yuv(*planes), settings.kernel_repeats,
                                       settings.kernel_warmup)

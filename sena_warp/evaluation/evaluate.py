@@ -35,27 +35,26 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .baselines import (OPENCV_MODES, affine_map_canvas, homography_forward, homography_to_target,
-                        map_in_target_frame, opencv_forward, opencv_stitch, opencv_views, sift_homography)
-from .config import Config
-from .errors import InputError, StitchError
-from .features import match_images
-from .imageio import atomic_output, check_output_folder, make_folder, read_image, write_image
-from .metrics import Forward, forward_anisotropy, line_bend_pct, long_segments, overlap_psnr_ssim
-from .partition import anchor_residuals_px, transition_mad
-from .progress import Progress
-from .rig import Rig, detect_rig, image_to_working
-from .sheets import thumbnail, tile
-from .stitch import Panorama, stitch_images
-from .warp_map import forward_points, remap_image
-from .zone import overlap_x_extent
+from sena_warp.config import Config
+from sena_warp.errors import InputError, StitchError
+from sena_warp.features import match_images
+from sena_warp.imageio import atomic_output, check_output_folder, make_folder, read_image, write_image
 from sena_warp.kernels.runtime import resolve_config
+from sena_warp.progress import Progress
+from sena_warp.rig import Rig, detect_rig, image_to_working
+from sena_warp.stitch import Panorama, stitch_images
+from sena_warp.warp_map import forward_points
+
+from .baselines import (OPENCV_MODES, affine_map_canvas, homography_forward, homography_to_target, opencv_forward,
+                        opencv_stitch, opencv_views, sift_homography)
+from .figures import identity, in_target_frame, map_in_target_frame, overlap_figures, seam_figures, shape_figures
+from .metrics import overlap_psnr_ssim
+from .sheets import thumbnail, tile
 
 METHODS = ("sena", "affine", "homography", *OPENCV_MODES)
 # The methods that make a panorama (the pictures show them), with their names on the pictures.
 SHEET_METHODS = {"sena": "SENA", "opencv_panorama": "OpenCV PANORAMA", "opencv_scans": "OpenCV SCANS"}
 COLUMNS = 2 + len(SHEET_METHODS)  # a sheet row: both inputs, then those panoramas
-SHAPE_GRID = 12  # points per side of the grid over each view where the anisotropy is measured
 PAIR_THUMB_WH = (360, 240)  # per-pair sheet: thumbnail box (px)
 OVERVIEW_THUMB_WH = (180, 116)  # overview sheet: thumbnail box (px)
 OVERVIEW_JPEG_QUALITY = 72
@@ -80,7 +79,8 @@ class MethodResult:
     width: int = 0  # panorama size (methods that make one)
     height: int = 0
     anchors: int = 0  # SENA's seam figures (SENA.md "Measuring: Seam")
-    anchor_residual_px: float = math.nan
+    anchor_residual_px: float = math.nan  # median over the anchors
+    anchor_residual_max_px: float = math.nan
     seam_mad: float = math.nan
     feather_mad: float = math.nan
     panorama: np.ndarray | None = field(default=None, repr=False)  # BGR(A) uint8; not written to the CSV
@@ -124,88 +124,18 @@ def _image_named(folder: Path, stem: str) -> Path | None:
     return found[0] if len(found) == 1 else None
 
 
-def shape_figures(views: list[tuple[np.ndarray, Forward]]) -> dict:
-    """Shape figures over the views (image, forward map into the method's output) of one panorama."""
-    anisotropy, bends = [], []
-    for img, forward in views:
-        height, width = img.shape[:2]
-        grid = np.stack(np.meshgrid(np.linspace(2, width - 3, SHAPE_GRID), np.linspace(2, height - 3, SHAPE_GRID)),
-                        axis=-1).reshape(-1, 2)
-        anisotropy.append(forward_anisotropy(forward, grid))
-        bends.append(line_bend_pct(forward, long_segments(img)))
-    anisotropy, bends = np.concatenate(anisotropy), np.concatenate(bends)
-    anisotropy, bends = anisotropy[np.isfinite(anisotropy)], bends[np.isfinite(bends)]
-    return {"anisotropy": float(anisotropy.mean()) if anisotropy.size else math.nan,
-            "line_bend_mean_pct": float(bends.mean()) if bends.size else math.nan,
-            "line_bend_max_pct": float(bends.max()) if bends.size else math.nan, "lines": int(bends.size)}
-
-
-def identity(pts: np.ndarray) -> np.ndarray:
-    """The forward map of a view pasted unwarped (SENA's and the global models' target)."""
-    return np.asarray(pts, np.float64)
-
-
-def in_target_frame(img_src: np.ndarray, map_src_tgt: np.ndarray, img_tgt: np.ndarray, cfg: Config
-                    ) -> tuple[float, float]:
-    """Overlap (PSNR dB, SSIM) of ``img_src`` warped by a target-frame (x, y) map against ``img_tgt``."""
-    warped, valid = remap_image(img_src, map_src_tgt, cfg)
-    return overlap_psnr_ssim(warped, valid, img_tgt, np.ones(valid.shape, bool))
-
-
-def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
-    """SENA's seam figures of a finished stitch of (img_a, img_b), in the working frame on the canvas.
-
-    ``anchors``: step-8 anchors (edge extensions included); ``anchor_residual_px``: median over them of
-    where the warped-source anchor lands after step 9 vs its target anchor (``anchor_residuals_px``);
-    ``seam_mad``: mean |src - tgt| (grey levels) of the seam-corrected source and the placed target
-    where both are valid within T/2 of the seam (T = ``transition_px``: where the alpha blends);
-    ``feather_mad``: the same for the step-6 source over the overlap's whole x-extent, the band a
-    plain linear feather across the overlap would blend in.
-    """
-    maps = pano.maps
-    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
-    warp, seam = maps.warp, maps.seam
-    placed_tgt, valid_tgt = remap_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
-    seam_src, valid_seam_src = remap_image(img_src, seam.maps.map_src_canvas, cfg)
-    step6_src, valid_step6_src = remap_image(img_src, warp.map_src_canvas, cfg)
-    residuals = anchor_residuals_px(warp.map_src_canvas, seam.maps.map_src_canvas,
-                                    seam.anchors_src_canvas, seam.anchors_tgt_canvas)
-    finite = residuals[np.isfinite(residuals)]
-    return {
-        "anchors": int(len(seam.anchors_tgt_canvas)),
-        "anchor_residual_px": float(np.median(finite)) if finite.size else math.nan,
-        "seam_mad": transition_mad(seam_src, placed_tgt, valid_seam_src & valid_tgt, seam.maps.seam_x_canvas,
-                                   cfg.transition_px),
-        "feather_mad": feather_mad(step6_src, valid_step6_src, placed_tgt, valid_tgt, warp.overlap.mask_canvas),
-    }
-
-
-def feather_mad(warped_src: np.ndarray, valid_src: np.ndarray, placed_tgt: np.ndarray, valid_tgt: np.ndarray,
-                overlap_mask_canvas: np.ndarray) -> float:
-    """Mean |src - tgt| over the blending region of a linear feather across the overlap's x-extent.
-
-    warped_src, placed_tgt: (H, W, C) uint8 canvas images; valid_*: (H, W) bool; overlap_mask_canvas:
-    (H, W) bool step-2 overlap. The feather's alpha ramps from 1 to 0 over [x0, x1) of the overlap,
-    so its band is that whole extent: ``transition_mad`` with the seam at its middle and width x1 - x0.
-    """
-    x0, x1 = overlap_x_extent(overlap_mask_canvas)
-    seam_x = np.full(valid_src.shape[0], 0.5 * (x0 + x1 - 1))
-    return transition_mad(warped_src, placed_tgt, valid_src & valid_tgt, seam_x, x1 - x0)
-
-
 def run_sena(pair: PairImages, pano: Panorama, seconds: float, cfg: Config) -> MethodResult:
     """SENA's figures from its finished stitch ``pano`` of the pair (which took ``seconds``)."""
     warp, seam = pano.maps.warp, pano.maps.seam
-    src, tgt = pair.img_src, pair.img_tgt
     result = MethodResult(pair.name, "sena", True, seconds=seconds, panorama=pano.image,
                           width=pano.image.shape[1], height=pano.image.shape[0])
-    result.psnr_db, result.ssim = in_target_frame(src, map_in_target_frame(warp.map_src_canvas, warp, tgt.shape), tgt,
-                                                  cfg)
+    result.psnr_db, result.ssim = overlap_figures(pair.img_a, pair.img_b, pano, cfg)
 
     def forward(pts: np.ndarray) -> np.ndarray:
         return forward_points(seam.maps.map_src_canvas, warp.glob.affine_src_to_tgt, warp.overlap.canvas, pts, cfg)
 
-    _set(result, **shape_figures([(src, forward), (tgt, identity)]), **seam_figures(pair.img_a, pair.img_b, pano, cfg))
+    _set(result, **shape_figures([(pair.img_src, forward), (pair.img_tgt, identity)]),
+         **seam_figures(pair.img_a, pair.img_b, pano, cfg))
     return result
 
 

@@ -14,13 +14,14 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .affine import as_homogeneous
-from .config import Config
-from .errors import GeometryError, MatchError
-from .features import match_images
+from sena_warp.affine import as_homogeneous
+from sena_warp.config import Config
+from sena_warp.errors import GeometryError, MatchError
+from sena_warp.features import match_images
+from sena_warp.stitch import Warp
+from sena_warp.warp_map import source_map_canvas
+
 from .metrics import Forward
-from .stitch import Warp
-from .warp_map import source_map_canvas
 
 HOMOGRAPHY_RANSAC_PX = 3.0  # the SIFT + RANSAC baseline's inlier threshold (SENA.md "Measuring")
 MIN_HOMOGRAPHY_INLIERS = 8  # fewer RANSAC inliers than this: no usable homography
@@ -37,19 +38,10 @@ OPENCV_STATUS = {  # cv2.Stitcher.Status -> what it means for the user
 
 
 def affine_map_canvas(warp: Warp, cfg: Config) -> np.ndarray:
-    """The source map of ``A_glob`` alone (zero field) over the warp's canvas: (H, W, 2) float32 (x, y)."""
+    """The source map of ``A_glob`` alone (zero field) over the warp's working canvas: (H, W, 2) float32
+    (x, y); ``cfg.device`` resolved."""
     canvas = warp.overlap.canvas
     return source_map_canvas(canvas, warp.glob.affine_src_to_tgt, np.zeros((*canvas.shape, 2), np.float32), cfg)
-
-
-def map_in_target_frame(map_src_canvas: np.ndarray, warp: Warp, shape_tgt: tuple[int, ...]) -> np.ndarray:
-    """The part of a canvas map (H, W, 2) over the target rectangle: (h_tgt, w_tgt, 2), same dtype.
-
-    The canvas offset is integer (``plan_overlap``) and the canvas contains the target rectangle.
-    """
-    ox, oy = (int(round(v)) for v in warp.overlap.canvas.offset_tgt)
-    height, width = shape_tgt[:2]
-    return np.ascontiguousarray(map_src_canvas[oy:oy + height, ox:ox + width])
 
 
 def sift_homography(img_src: np.ndarray, img_tgt: np.ndarray, cfg: Config) -> np.ndarray:

@@ -1,0 +1,129 @@
+"""The figures of a finished SENA stitch (SENA.md "Measuring"), one definition each.
+
+``sena-warp eval`` records them per pair, the benchmarks print them, and the CLI's ``image --report``
+adds them to the report: all three call the functions here. Seam figures are measured in the working
+frame (source left, vertical rigs transposed), where the seam runs top to bottom; overlap PSNR / SSIM
+in the target frame (the UDIS-D protocol: the warped source against the target).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sena_warp.config import Config
+from sena_warp.rig import image_to_working
+from sena_warp.stitch import Panorama, Warp
+from sena_warp.warp_map import remap_image
+from sena_warp.zone import overlap_x_extent
+
+from .metrics import (Forward, anchor_residuals_px, forward_anisotropy, line_bend_pct, long_segments,
+                      overlap_psnr_ssim, transition_mad)
+
+SHAPE_GRID = 12  # points per side of the grid over each view where the anisotropy is measured
+
+
+def map_in_target_frame(map_src_canvas: np.ndarray, warp: Warp, shape_tgt: tuple[int, ...]) -> np.ndarray:
+    """The part of a working-canvas map (H, W, 2) over the target rectangle: (h_tgt, w_tgt, 2), same dtype.
+
+    The canvas offset is integer (``plan_overlap``) and the canvas contains the target rectangle.
+    """
+    ox, oy = (int(round(v)) for v in warp.overlap.canvas.offset_tgt)
+    height, width = shape_tgt[:2]
+    return np.ascontiguousarray(map_src_canvas[oy:oy + height, ox:ox + width])
+
+
+def in_target_frame(img_src: np.ndarray, map_src_tgt: np.ndarray, img_tgt: np.ndarray, cfg: Config
+                    ) -> tuple[float, float]:
+    """Overlap (PSNR dB, SSIM) of ``img_src`` warped by a target-frame (x, y) map against ``img_tgt``.
+
+    ``cfg.device`` resolved (``runtime.resolve_config``).
+    """
+    warped, valid = remap_image(img_src, map_src_tgt, cfg)
+    return overlap_psnr_ssim(warped, valid, img_tgt, np.ones(valid.shape, bool))
+
+
+def overlap_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> tuple[float, float]:
+    """Overlap (PSNR dB, SSIM) of SENA's step-6 warp of a finished stitch of (img_a, img_b), target frame."""
+    maps = pano.maps
+    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
+    return in_target_frame(img_src, map_in_target_frame(maps.warp.map_src_canvas, maps.warp, img_tgt.shape),
+                           img_tgt, cfg)
+
+
+def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
+    """SENA's seam figures of a finished stitch of (img_a, img_b), in the working frame on the canvas.
+
+    ``anchors``: step-8 anchors (edge extensions included); ``anchor_residual_px`` /
+    ``anchor_residual_max_px``: median / largest over them of where the warped-source anchor lands
+    after step 9 vs its target anchor (``anchor_residuals_px``; NaN when none can be located);
+    ``seam_mad``: mean |src - tgt| (grey levels) of the seam-corrected source and the placed target
+    where both are valid within T/2 of the seam (T = ``transition_px``: where the alpha blends);
+    ``feather_mad``: the same for the step-6 source over the overlap's whole x-extent, the band a
+    plain linear feather across the overlap would blend in. ``cfg.device`` resolved.
+    """
+    maps = pano.maps
+    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
+    warp, seam = maps.warp, maps.seam
+    placed_tgt, valid_tgt = remap_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
+    seam_src, valid_seam_src = remap_image(img_src, seam.maps.map_src_canvas, cfg)
+    step6_src, valid_step6_src = remap_image(img_src, warp.map_src_canvas, cfg)
+    residuals = anchor_residuals_px(warp.map_src_canvas, seam.maps.map_src_canvas,
+                                    seam.anchors_src_canvas, seam.anchors_tgt_canvas)
+    finite = residuals[np.isfinite(residuals)]
+    return {
+        "anchors": int(len(seam.anchors_tgt_canvas)),
+        "anchor_residual_px": float(np.median(finite)) if finite.size else math.nan,
+        "anchor_residual_max_px": float(finite.max()) if finite.size else math.nan,
+        "seam_mad": transition_mad(seam_src, placed_tgt, valid_seam_src & valid_tgt, seam.maps.seam_x_canvas,
+                                   cfg.transition_px),
+        "feather_mad": feather_mad(step6_src, valid_step6_src, placed_tgt, valid_tgt, warp.overlap.mask_canvas),
+    }
+
+
+def feather_mad(warped_src: np.ndarray, valid_src: np.ndarray, placed_tgt: np.ndarray, valid_tgt: np.ndarray,
+                overlap_mask_canvas: np.ndarray) -> float:
+    """Mean |src - tgt| over the blending region of a linear feather across the overlap's x-extent.
+
+    warped_src, placed_tgt: (H, W, C) uint8 canvas images; valid_*: (H, W) bool; overlap_mask_canvas:
+    (H, W) bool step-2 overlap. The feather's alpha ramps from 1 to 0 over [x0, x1) of the overlap,
+    so its band is that whole extent: ``transition_mad`` with the seam at its middle and width x1 - x0.
+    """
+    x0, x1 = overlap_x_extent(overlap_mask_canvas)
+    seam_x = np.full(valid_src.shape[0], 0.5 * (x0 + x1 - 1))
+    return transition_mad(warped_src, placed_tgt, valid_src & valid_tgt, seam_x, x1 - x0)
+
+
+def shape_figures(views: list[tuple[np.ndarray, Forward]]) -> dict:
+    """Shape figures over the views (image, forward map into the method's output) of one panorama."""
+    anisotropy, bends = [], []
+    for img, forward in views:
+        height, width = img.shape[:2]
+        grid = np.stack(np.meshgrid(np.linspace(2, width - 3, SHAPE_GRID), np.linspace(2, height - 3, SHAPE_GRID)),
+                        axis=-1).reshape(-1, 2)
+        anisotropy.append(forward_anisotropy(forward, grid))
+        bends.append(line_bend_pct(forward, long_segments(img)))
+    anisotropy, bends = np.concatenate(anisotropy), np.concatenate(bends)
+    anisotropy, bends = anisotropy[np.isfinite(anisotropy)], bends[np.isfinite(bends)]
+    return {"anisotropy": float(anisotropy.mean()) if anisotropy.size else math.nan,
+            "line_bend_mean_pct": float(bends.mean()) if bends.size else math.nan,
+            "line_bend_max_pct": float(bends.max()) if bends.size else math.nan, "lines": int(bends.size)}
+
+
+def identity(pts: np.ndarray) -> np.ndarray:
+    """The forward map of a view pasted unwarped (SENA's and the global models' target)."""
+    return np.asarray(pts, np.float64)
+
+
+def report_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
+    """The ``metrics`` of ``sena-warp image --report``: :func:`overlap_figures` and :func:`seam_figures`."""
+    psnr_db, ssim = overlap_figures(img_a, img_b, pano, cfg)
+    seam = seam_figures(img_a, img_b, pano, cfg)
+    return {
+        "overlap_psnr_db": psnr_db,
+        "overlap_ssim": ssim,
+        "anchor_residual_median_px": seam["anchor_residual_px"],
+        "anchor_residual_max_px": seam["anchor_residual_max_px"],
+        "transition_mad_grey": seam["seam_mad"],
+    }

@@ -1,0 +1,38 @@
+"""Layering: the evaluation subpackage imports the pipeline, never the reverse (issue 12).
+
+Only the command line, the front end, may reach ``sena_warp.evaluation`` (lazily, for ``eval``,
+``bench`` and the figures of ``image --report``).
+"""
+
+from __future__ import annotations
+
+import ast
+
+from conftest import REPO
+
+PIPELINE = [*sorted((REPO / "sena_warp").glob("*.py")), *sorted((REPO / "kernels").glob("*.py")),
+            *sorted((REPO / "video").glob("*.py"))]
+FRONT_END = REPO / "sena_warp" / "cli.py"
+
+
+def imported_modules(path) -> set[str]:
+    """Every module an ``import`` or ``from ... import`` of ``path`` names (relative ones with their dots)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            names.add("." * node.level + (node.module or ""))
+    return names
+
+
+def test_no_pipeline_module_imports_the_evaluation():
+    assert len(PIPELINE) > 30 and FRONT_END in PIPELINE
+    offenders = {path.relative_to(REPO).as_posix(): sorted(name for name in imported_modules(path)
+                                                          if "evaluation" in name.split("."))
+                 for path in PIPELINE if path != FRONT_END}
+    assert {path: names for path, names in offenders.items() if names} == {}
+
+
+def test_the_check_sees_the_front_ends_lazy_imports():
+    assert "sena_warp.evaluation.figures" in imported_modules(FRONT_END)
