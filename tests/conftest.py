@@ -1,4 +1,10 @@
-"""Shared fixtures: bundled test data, the wider ../shared/data set (skipped when absent)."""
+"""Shared fixtures: the bundled test data (tests/data), the wider ../shared/data set (tests marked ``shared``).
+
+A fresh clone has tests/data only: every test marked ``shared`` is then deselected (not skipped),
+so the only skips are the ones the machine decides (no CUDA GPU, running as root). A test that
+needs ../shared/data must carry the marker: using ``shared_dir`` without it is a collection error,
+and ``pair_folder`` refuses a shared pair to an unmarked test.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +15,19 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 BUNDLED = REPO / "tests" / "data"
 SHARED = REPO.parent / "shared" / "data"
+SHARED_PRESENT = (SHARED / "MANIFEST.md").exists()
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    unmarked = [item.nodeid for item in items
+                if "shared_dir" in getattr(item, "fixturenames", ()) and item.get_closest_marker("shared") is None]
+    if unmarked:
+        raise pytest.UsageError("these tests use shared_dir but are not marked shared: " + ", ".join(unmarked))
+    if SHARED_PRESENT:
+        return
+    shared = [item for item in items if item.get_closest_marker("shared") is not None]
+    config.hook.pytest_deselected(items=shared)
+    items[:] = [item for item in items if item.get_closest_marker("shared") is None]
 
 
 @pytest.fixture(scope="session")
@@ -17,10 +36,30 @@ def bundled_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
+def udisd_pair(bundled_dir):
+    """(img_a, img_b) of the bundled udisd_test_000001 pair: uint8 BGR (512, 512, 3) each, b the left view."""
+    from helpers import read_pair
+
+    return read_pair(bundled_dir / "udisd_test_000001")
+
+
+@pytest.fixture(scope="session")
 def shared_dir() -> Path:
-    if not (SHARED / "MANIFEST.md").exists():
-        pytest.skip("../shared/data is not present")
+    """../shared/data (tests using it are marked ``shared``, so they only run when it is there)."""
     return SHARED
+
+
+@pytest.fixture
+def pair_folder(request: pytest.FixtureRequest):
+    """``folder(name)``: a pair's folder, the bundled copy when there is one, else ../shared/data/pairs/name
+    (for a test marked ``shared`` only)."""
+    def folder(name: str) -> Path:
+        if (BUNDLED / name).is_dir():
+            return BUNDLED / name
+        if request.node.get_closest_marker("shared") is None:
+            raise pytest.UsageError(f"{request.node.nodeid} reads the shared pair {name} but is not marked shared")
+        return SHARED / "pairs" / name
+    return folder
 
 
 def shared_pairs() -> list[str]:

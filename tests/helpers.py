@@ -3,11 +3,19 @@
 from __future__ import annotations
 
 from fractions import Fraction
+from pathlib import Path
 
 import av
+import numpy as np
 
 from sena_warp.cli import main
+from sena_warp.imageio import read_image
 from sena_warp.video.reader import FrameReader, YuvFrame
+
+
+def read_pair(folder: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(img_a, img_b) uint8 BGR (H, W, 3) of a pair folder holding one a.* and one b.* image."""
+    return read_image(next(folder.glob("a.*"))), read_image(next(folder.glob("b.*")))
 
 
 def decoded_frames(path) -> list[YuvFrame]:

@@ -5,19 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sena_warp.evaluation.baselines import (homography_forward, homography_to_target, opencv_forward, opencv_stitch,
-                                 opencv_views, sift_homography)
 from sena_warp.config import Config
 from sena_warp.errors import MatchError
-from sena_warp.features import match_images
-from sena_warp.imageio import read_image
+from sena_warp.evaluation.baselines import (homography_forward, homography_to_target, opencv_forward, opencv_stitch,
+                                            opencv_views, sift_homography)
 from sena_warp.evaluation.metrics import overlap_psnr_ssim
+from sena_warp.features import match_images
+from helpers import read_pair
 
 CFG = Config(device="cpu")
-
-
-def read_pair(folder):
-    return tuple(read_image(next(folder.glob(f"{stem}.*"))) for stem in ("a", "b"))
 
 
 @pytest.fixture(scope="module")

@@ -41,6 +41,7 @@ def pair(shared_dir):
     return tuple(shared_dir / "pairs" / "rew_lawn_2160" / name for name in ("a.jpg", "b.jpg"))
 
 
+@pytest.mark.shared
 def test_clip_maker_makes_decodable_panning_clips(pair, tmp_path):
     left, right = make_clip_pair(pair, tmp_path, (160, 96), 1.0)
     for path in (left, right):
@@ -67,6 +68,7 @@ def test_pan_window_stays_inside_and_moves():
     assert abs(w / h - 16 / 9) < 0.01
 
 
+@pytest.mark.shared
 def test_bench_tiny_run_fills_every_column(shared_dir, tmp_path):
     rows = run_bench(["192x108"], 1.0, tmp_path, "cpu", shared_dir)
     assert len(rows) == 1

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_global_affine import load_pair, sift_matches
+from helpers import read_pair
+from test_global_affine import sift_matches
 
 from sena_warp.canvas import Canvas
 from sena_warp.cells import grid_cells
@@ -67,8 +68,8 @@ def test_empty_overlap_has_no_cells():
     assert grid_cells(_overlap_from_polygon(np.zeros((0, 2)), canvas), CFG) == []
 
 
-def test_real_pair_cells_tile_the_overlap(shared_dir):
-    img_a, img_b = load_pair(shared_dir, "udisd_test_000001")
+def test_real_pair_cells_tile_the_overlap(bundled_dir):
+    img_a, img_b = read_pair(bundled_dir / "udisd_test_000001")
     glob = fit_global_affine(*sift_matches(img_a, img_b), CFG)
     overlap = plan_overlap(img_a.shape, img_b.shape, glob.affine_src_to_tgt, CFG)
     cells = grid_cells(overlap, CFG)

@@ -80,9 +80,9 @@ def test_extend_to_edges_uses_overlap_column_and_keeps_residual():
     assert extend_to_edges(on_edge, on_edge, mask)[2].tolist() == [False, False]
 
 
-def test_keypoint_chain_on_real_image_with_known_shift(shared_dir):
+def test_keypoint_chain_on_real_image_with_known_shift(bundled_dir):
     """Target = a real image; warped source = the same image 7 px right, 3 px down (a pure shift)."""
-    grey = cv2.cvtColor(read_image(shared_dir / "pairs" / "udisd_test_000001" / "a.jpg"), cv2.COLOR_BGR2GRAY)
+    grey = cv2.cvtColor(read_image(bundled_dir / "udisd_test_000001" / "a.jpg"), cv2.COLOR_BGR2GRAY)
     grey_tgt = grey.astype(np.float32)
     grey_src = np.full_like(grey_tgt, np.nan)
     grey_src[3:, 7:] = grey_tgt[:-3, :-7]

@@ -15,17 +15,14 @@ from sena_warp.debug import draw_matches
 from sena_warp.errors import InputError
 from sena_warp.features import Matches, detect, match_images, match_mutual_nn, match_ratio
 from sena_warp.imageio import read_image
+from helpers import read_pair
 
 GT_TOLERANCE_PX = 3.0
 
 
-def _read_pair(folder):
-    return read_image(next(folder.glob("a.*"))), read_image(next(folder.glob("b.*")))
-
-
 @pytest.fixture(scope="module")
 def graf(bundled_dir):
-    img_a, img_b = _read_pair(bundled_dir / "graf_gt")
+    img_a, img_b = read_pair(bundled_dir / "graf_gt")
     return img_a, img_b, np.loadtxt(bundled_dir / "graf_gt" / "H_a_to_b.txt")
 
 
@@ -90,7 +87,7 @@ def test_ratio_test_rejects_ambiguous_neighbours():
 @pytest.mark.parametrize("detector", ["xfeat", "sift"])
 def test_flat_image_gives_no_matches(bundled_dir, detector):
     flat = np.full((480, 640, 3), 128, np.uint8)
-    img_a, _ = _read_pair(bundled_dir / "udisd_test_000001")
+    img_a, _ = read_pair(bundled_dir / "udisd_test_000001")
     cfg = Config(features=detector)
     assert len(detect(flat, cfg)[0]) == 0
     matches = match_images(flat, img_a, cfg)
@@ -135,7 +132,7 @@ def test_cli_match_writes_picture(bundled_dir, tmp_path, capsys):
 @pytest.mark.shared
 @pytest.mark.parametrize("pair", shared_pairs())
 def test_every_shared_pair_has_matches_with_both_detectors(shared_dir, pair):
-    img_a, img_b = _read_pair(shared_dir / "pairs" / pair)
+    img_a, img_b = read_pair(shared_dir / "pairs" / pair)
     for detector in ("xfeat", "sift"):
         cfg = Config(features=detector)
         matches = match_images(img_a, img_b, cfg)

@@ -8,14 +8,14 @@ import pytest
 from sena_warp.affine import apply_affine, invert_affine
 from sena_warp.config import Config
 from sena_warp.ffd import ffd_field_canvas
-from test_kernels_maps import load_pair, scene_geometry
+from test_kernels_maps import scene_geometry
 
 CFG = Config(device="cpu")
 
 
 @pytest.fixture(scope="module")
-def geo(shared_dir):
-    img_src, img_tgt = load_pair(shared_dir)
+def geo(udisd_pair):
+    img_src, img_tgt = udisd_pair
     return scene_geometry(img_src.shape, img_tgt.shape)
 
 

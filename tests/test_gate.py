@@ -10,14 +10,14 @@ import pytest
 
 from sena_warp.config import Config
 from sena_warp.gate import gate_canvas, guard_field, inlier_density, open_border_distance_px, ramp_width_px
-from test_kernels_maps import gate_reference, load_pair, scene_geometry, smooth_field
+from test_kernels_maps import gate_reference, scene_geometry, smooth_field
 
 CFG = Config(device="cpu")
 
 
 @pytest.fixture(scope="module")
-def setup(shared_dir):
-    img_src, img_tgt = load_pair(shared_dir)
+def setup(udisd_pair):
+    img_src, img_tgt = udisd_pair
     geo = scene_geometry(img_src.shape, img_tgt.shape)
     h, w = img_tgt.shape[:2]
     mask = geo["overlap_mask_canvas"]

@@ -6,12 +6,12 @@ import cv2
 import numpy as np
 import pytest
 
+from sena_warp.affine import apply_affine
 from sena_warp.config import Config
 from sena_warp.errors import MatchError
 from sena_warp.features import match_images
-from sena_warp.affine import apply_affine, invert_affine
 from sena_warp.global_affine import fit_global_affine
-from sena_warp.imageio import read_image
+from helpers import read_pair
 
 CFG = Config()
 
@@ -28,14 +28,9 @@ def sift_matches(img_a: np.ndarray, img_b: np.ndarray, ratio: float = CFG.sift_r
     return pts_a, pts_b
 
 
-def load_pair(shared_dir, name: str) -> tuple[np.ndarray, np.ndarray]:
-    folder = shared_dir / "pairs" / name
-    return read_image(next(folder.glob("a.*"))), read_image(next(folder.glob("b.*")))
-
-
-def test_graf_sift_affine_agrees_with_ground_truth_homography_where_its_inliers_are(shared_dir):
-    img_a, img_b = load_pair(shared_dir, "graf_gt")
-    h_a_to_b = np.loadtxt(shared_dir / "pairs" / "graf_gt" / "H_a_to_b.txt")
+def test_graf_sift_affine_agrees_with_ground_truth_homography_where_its_inliers_are(bundled_dir):
+    img_a, img_b = read_pair(bundled_dir / "graf_gt")
+    h_a_to_b = np.loadtxt(bundled_dir / "graf_gt" / "H_a_to_b.txt")
     pts_a, pts_b = sift_matches(img_a, img_b)
     glob = fit_global_affine(pts_a, pts_b, CFG)
     # Measured: 520 SIFT matches, 128 affine inliers.
@@ -55,9 +50,9 @@ def test_graf_sift_affine_agrees_with_ground_truth_homography_where_its_inliers_
     assert np.median(err(inl_a)) < 7.0
 
 
-def test_graf_affine_from_project_features_maps_the_centre_like_the_homography(shared_dir):
-    img_a, img_b = load_pair(shared_dir, "graf_gt")
-    h_a_to_b = np.loadtxt(shared_dir / "pairs" / "graf_gt" / "H_a_to_b.txt")
+def test_graf_affine_from_project_features_maps_the_centre_like_the_homography(bundled_dir):
+    img_a, img_b = read_pair(bundled_dir / "graf_gt")
+    h_a_to_b = np.loadtxt(bundled_dir / "graf_gt" / "H_a_to_b.txt")
     matches = match_images(img_a, img_b, CFG)
     glob = fit_global_affine(matches.pts_a, matches.pts_b, CFG)
     # Measured with XFeat: 1414 matches, 235 inliers spread over the middle of the wall, and A_glob
@@ -69,8 +64,8 @@ def test_graf_affine_from_project_features_maps_the_centre_like_the_homography(s
     assert np.linalg.norm(apply_affine(glob.affine_src_to_tgt, centre_a) - centre_h) < 3.0
 
 
-def test_known_affine_on_a_real_image_is_recovered(shared_dir):
-    img_a, _ = load_pair(shared_dir, "udisd_test_000001")
+def test_known_affine_on_a_real_image_is_recovered(bundled_dir):
+    img_a, _ = read_pair(bundled_dir / "udisd_test_000001")
     affine_true = np.array([[0.93, 0.12, 40.0], [-0.08, 1.02, 25.0]])
     height, width = img_a.shape[:2]
     img_b = cv2.warpAffine(img_a, affine_true, (width + 80, height + 80), flags=cv2.INTER_LINEAR)

@@ -1,6 +1,6 @@
 """Map-building kernels (FFD lattice, gate, gated field, source map) against numpy references.
 
-The geometry is a realistic two-view layout of the udisd_test_000001 pair: a rotated, scaled
+The geometry is a realistic two-view layout of the (bundled) udisd_test_000001 pair: a rotated, scaled
 global affine, four perturbed local affines with centres in the overlap. Helpers here are reused
 by the host-module tests (test_ffd, test_gate, test_warp_map, test_composite).
 """
@@ -17,7 +17,6 @@ import warp as wp
 from sena_warp.affine import apply_affine, invert_affine
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
-from sena_warp.imageio import read_image
 from sena_warp.kernels import runtime
 from sena_warp.kernels.ffd import ffd_lattice_kernel
 from sena_warp.kernels.gate import gate_kernel, gated_field_kernel
@@ -25,12 +24,6 @@ from sena_warp.kernels.sampling import source_map_kernel
 
 HAS_CUDA = wp.get_cuda_device_count() > 0
 DEVICES = ["cpu", pytest.param("cuda", marks=pytest.mark.skipif(not HAS_CUDA, reason="no CUDA GPU"))]
-
-
-def load_pair(shared_dir, name: str = "udisd_test_000001") -> tuple[np.ndarray, np.ndarray]:
-    """(img_src, img_tgt) uint8 BGR of a shared pair."""
-    folder = shared_dir / "pairs" / name
-    return read_image(next(folder.glob("a.*"))), read_image(next(folder.glob("b.*")))
 
 
 def scene_geometry(shape_src: tuple, shape_tgt: tuple, seed: int = 0) -> dict:
@@ -115,8 +108,8 @@ def smooth_field(shape: tuple[int, int], amplitude_px: float, seed: int = 1) -> 
 
 
 @pytest.fixture(scope="module")
-def geo(shared_dir):
-    img_src, img_tgt = load_pair(shared_dir)
+def geo(udisd_pair):
+    img_src, img_tgt = udisd_pair
     return scene_geometry(img_src.shape, img_tgt.shape)
 
 

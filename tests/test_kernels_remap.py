@@ -10,7 +10,7 @@ from sena_warp.bilinear import sample_bilinear
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import composite_kernel
 from sena_warp.kernels.remap import remap_kernel
-from test_kernels_maps import DEVICES, load_pair, scene_geometry, smooth_field, source_map_reference
+from test_kernels_maps import DEVICES, scene_geometry, smooth_field, source_map_reference
 
 
 def remap_reference(img: np.ndarray, map_canvas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -30,8 +30,8 @@ def composite_reference(img_src, img_tgt, map_src, map_tgt, alpha):
 
 
 @pytest.fixture(scope="module")
-def scene(shared_dir):
-    img_src, img_tgt = load_pair(shared_dir)
+def scene(udisd_pair):
+    img_src, img_tgt = udisd_pair
     geo = scene_geometry(img_src.shape, img_tgt.shape)
     canvas = geo["canvas"]
     map_src = source_map_reference(canvas, geo["affine_src_to_tgt"], smooth_field(canvas.shape, 8.0)).astype(np.float32)

@@ -10,7 +10,7 @@ import warp as wp
 
 from sena_warp.errors import InputError
 from sena_warp.kernels import runtime
-from test_kernels_maps import HAS_CUDA, load_pair, scene_geometry, smooth_field, source_map_reference
+from test_kernels_maps import HAS_CUDA, scene_geometry, smooth_field, source_map_reference
 from test_kernels_remap import run_remap
 
 
@@ -35,8 +35,8 @@ def test_row_bands_cover_each_row_once(height, bands):
     assert len(pieces) == min(height, bands) and min(n for _, n in pieces) >= height // bands
 
 
-def test_threaded_launch_equals_single_launch(shared_dir, warp_device):
-    img_src, img_tgt = load_pair(shared_dir)
+def test_threaded_launch_equals_single_launch(udisd_pair, warp_device):
+    img_src, img_tgt = udisd_pair
     geo = scene_geometry(img_src.shape, img_tgt.shape)
     map_src = source_map_reference(geo["canvas"], geo["affine_src_to_tgt"], smooth_field(geo["canvas"].shape, 8.0))
     map_src = map_src.astype(np.float32)

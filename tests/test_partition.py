@@ -85,13 +85,13 @@ def test_vertical_offset_anchors_meet_and_far_source_keeps_its_shape():
     np.testing.assert_array_equal(maps.map_src_canvas[far], map_before[far])
 
 
-def test_real_image_shifted_source_meets_target_in_the_transition(shared_dir):
+def test_real_image_shifted_source_meets_target_in_the_transition(bundled_dir):
     """Target = a real image on the canvas; source = the same image moved 3 px down, step-6 map = identity.
 
     Anchors say the scene point at target (x, y) sits at (x, y + 3) in the warped source; after the
     reconstruction the source equals the target inside the transition band (integer shift: exact).
     """
-    grey = cv2.cvtColor(read_image(shared_dir / "pairs" / "udisd_test_000001" / "a.jpg"), cv2.COLOR_BGR2GRAY)
+    grey = cv2.cvtColor(read_image(bundled_dir / "udisd_test_000001" / "a.jpg"), cv2.COLOR_BGR2GRAY)
     height, width = grey.shape
     grey_src = np.zeros_like(grey)
     grey_src[3:] = grey[:-3]

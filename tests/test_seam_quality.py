@@ -14,21 +14,23 @@ import pytest
 
 from sena_warp.config import Config
 from sena_warp.evaluation.figures import feather_mad, seam_figures
-from sena_warp.imageio import read_image
 from sena_warp.stitch import stitch_images
+from helpers import read_pair
 
 MAX_MEDIAN_RESIDUAL_PX = 1.5
-# Shared pairs of different kinds: strong parallax (dhw_carpark), a planar scene with a ground truth
-# (graf_gt), a wide street with repeated facades (spw_0). Each runs in both input orders, so the
-# left view comes first once and second once (the rig detection must pick it either way).
-SHARED_PAIRS = ("dhw_carpark", "graf_gt", "spw_0")
+# Pairs of different kinds: the bundled udisd_test_000001 and graf_gt (a planar scene with a ground
+# truth), and from ../shared strong parallax (dhw_carpark) and a wide street with repeated facades
+# (spw_0). Each runs in both input orders, so the left view comes first once and second once (the
+# rig detection must pick it either way).
+PAIRS = ("udisd_test_000001", "graf_gt", pytest.param("dhw_carpark", marks=pytest.mark.shared),
+         pytest.param("spw_0", marks=pytest.mark.shared))
 
 
 ORDERS = ("ab", "ba")
 
 
 def _pair(folder: Path, order: str) -> tuple[np.ndarray, np.ndarray]:
-    img_a, img_b = read_image(next(folder.glob("a.*"))), read_image(next(folder.glob("b.*")))
+    img_a, img_b = read_pair(folder)
     return (img_a, img_b) if order == "ab" else (img_b, img_a)
 
 
@@ -45,14 +47,9 @@ def _check_seam(img_first: np.ndarray, img_second: np.ndarray) -> None:
 
 
 @pytest.mark.parametrize("order", ORDERS)
-def test_bundled_pair_seam(bundled_dir, order):
-    _check_seam(*_pair(bundled_dir / "udisd_test_000001", order))
-
-
-@pytest.mark.parametrize("order", ORDERS)
-@pytest.mark.parametrize("pair", SHARED_PAIRS)
-def test_shared_pair_seam(shared_dir, pair, order):
-    _check_seam(*_pair(shared_dir / "pairs" / pair, order))
+@pytest.mark.parametrize("pair", PAIRS)
+def test_pair_seam(pair_folder, pair, order):
+    _check_seam(*_pair(pair_folder(pair), order))
 
 
 def test_feather_mad_is_the_mean_difference_over_the_overlap_extent():

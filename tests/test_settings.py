@@ -12,7 +12,6 @@ import pytest
 
 from sena_warp import stitch
 from sena_warp.config import Config
-from sena_warp.imageio import read_image
 from sena_warp.kernels import runtime
 from sena_warp.video.loop import VideoOptions
 from sena_warp.video.stitch import stitch_videos
@@ -22,12 +21,6 @@ THREADS = 3  # not the default (0 = one per core), so a stage running on Config(
 
 class ZoneInputs(Exception):
     """Raised by the spy in place of step 7: the stitch stops once its inputs are seen."""
-
-
-@pytest.fixture(scope="module")
-def udis_pair(bundled_dir):
-    folder = bundled_dir / "udisd_test_000001"
-    return read_image(folder / "a.jpg"), read_image(folder / "b.jpg")
 
 
 def zone_inputs(monkeypatch, img_a, img_b, cfg):
@@ -55,29 +48,29 @@ def launches(monkeypatch) -> list[tuple[str, str, int]]:
     return seen
 
 
-def test_forward_settings_reach_the_step_7_inputs(udis_pair, monkeypatch):
+def test_forward_settings_reach_the_step_7_inputs(udisd_pair, monkeypatch):
     cfg = Config(device="cpu")
-    pts_default, grey_default = zone_inputs(monkeypatch, *udis_pair, cfg)
+    pts_default, grey_default = zone_inputs(monkeypatch, *udisd_pair, cfg)
     # Measured on this pair: all 606 inlier points converge with the default 30 iterations ...
     assert np.isfinite(pts_default).all()
     # ... and 605 of them without any iteration: u = A s + o does not solve M_s(u) = s to 0.01 px.
-    pts_none, grey_none = zone_inputs(monkeypatch, *udis_pair, cfg.replace(forward_max_iters=0))
+    pts_none, grey_none = zone_inputs(monkeypatch, *udisd_pair, cfg.replace(forward_max_iters=0))
     assert np.isnan(pts_none[:, 0]).mean() > 0.99
     # A loose tolerance stops the iterations early: the points move (measured: up to 0.43 px, median
     # 0.03 px), and by less than the tolerance itself.
-    pts_loose, _ = zone_inputs(monkeypatch, *udis_pair, cfg.replace(forward_tol_px=2.0))
+    pts_loose, _ = zone_inputs(monkeypatch, *udisd_pair, cfg.replace(forward_tol_px=2.0))
     moved = np.linalg.norm(pts_loose - pts_default, axis=1)
     assert 0.2 < moved.max() < 2.0
     # The grey canvas follows M_s alone, which those settings do not touch.
     np.testing.assert_array_equal(grey_none, grey_default)
 
 
-def test_device_and_threads_reach_every_launch_of_an_image_stitch(udis_pair, monkeypatch):
+def test_device_and_threads_reach_every_launch_of_an_image_stitch(udisd_pair, monkeypatch):
     resolved = []
     real_resolve = runtime.resolve_device
     monkeypatch.setattr(runtime, "resolve_device", lambda name: resolved.append(name) or real_resolve(name))
     seen = launches(monkeypatch)
-    stitch.stitch_images(*udis_pair, Config(device="auto", cpu_threads=THREADS))
+    stitch.stitch_images(*udisd_pair, Config(device="auto", cpu_threads=THREADS))
     assert resolved == ["auto"]  # the device is chosen once per run
     kernels = {key for key, _, _ in seen}
     # FFD lattice, gate, gated field, source map, the grey canvas's remap, seam maps, compositor.

@@ -2,33 +2,26 @@ import numpy as np
 import pytest
 
 from sena_warp.config import Config
-from sena_warp.imageio import read_image
 from sena_warp.evaluation.metrics import overlap_psnr_ssim
 from sena_warp.stitch import stitch_images
 
 
 @pytest.fixture(scope="module")
-def udis_pair(bundled_dir):
-    d = bundled_dir / "udisd_test_000001"
-    return read_image(d / "a.jpg"), read_image(d / "b.jpg")
+def pano(udisd_pair, warp_device):
+    return stitch_images(*udisd_pair, Config(device=warp_device))
 
 
-@pytest.fixture(scope="module")
-def pano(udis_pair, warp_device):
-    return stitch_images(*udis_pair, Config(device=warp_device))
-
-
-def test_panorama_covers_both_inputs_once(pano, udis_pair):
-    img_a, img_b = udis_pair
+def test_panorama_covers_both_inputs_once(pano, udisd_pair):
+    img_a, img_b = udisd_pair
     covered = int((pano.image[:, :, 3] > 0).sum())
     # The union of two 512x512 views that overlap: more than one view, less than two.
     assert 512 * 512 * 1.05 < covered < 512 * 512 * 2
     assert pano.maps.rig.source == "b"  # b is the left view of this pair (median dx < 0)
 
 
-def test_target_is_pasted_unwarped_right_of_the_seam(pano, udis_pair):
+def test_target_is_pasted_unwarped_right_of_the_seam(pano, udisd_pair):
     maps = pano.maps
-    img_tgt = maps.rig.pick(*udis_pair)[1]
+    img_tgt = maps.rig.pick(*udisd_pair)[1]
     ox, oy = (int(round(v)) for v in maps.warp.overlap.canvas.offset_tgt)
     seam_x = maps.seam.maps.seam_x_canvas
     rows = np.arange(oy + 20, oy + img_tgt.shape[0] - 20)
@@ -38,12 +31,12 @@ def test_target_is_pasted_unwarped_right_of_the_seam(pano, udis_pair):
     assert np.abs(region.astype(int) - expect).max() <= 1
 
 
-def test_anchors_meet_and_sena_warp_aligns_the_overlap(pano, udis_pair, warp_device):
+def test_anchors_meet_and_sena_warp_aligns_the_overlap(pano, udisd_pair, warp_device):
     cfg = Config(device=warp_device)
     seam = pano.maps.seam
     assert len(seam.anchors_src_canvas) >= 5
     warp = pano.maps.warp
-    img_src, img_tgt = pano.maps.rig.pick(*udis_pair)
+    img_src, img_tgt = pano.maps.rig.pick(*udisd_pair)
     from sena_warp.warp_map import remap_image, source_map_canvas
 
     def overlap_psnr(map_src):
@@ -60,8 +53,8 @@ def test_anchors_meet_and_sena_warp_aligns_the_overlap(pano, udis_pair, warp_dev
     assert overlap_psnr(warp.map_src_canvas) > overlap_psnr(affine_only)
 
 
-def test_vertical_rig_is_stitched_like_the_transposed_horizontal_one(pano, udis_pair, warp_device):
-    img_a, img_b = (np.ascontiguousarray(img.transpose(1, 0, 2)) for img in udis_pair)
+def test_vertical_rig_is_stitched_like_the_transposed_horizontal_one(pano, udisd_pair, warp_device):
+    img_a, img_b = (np.ascontiguousarray(img.transpose(1, 0, 2)) for img in udisd_pair)
     vertical = stitch_images(img_a, img_b, Config(device=warp_device))
     maps = vertical.maps
     assert maps.rig.vertical and maps.rig.source == pano.maps.rig.source

@@ -101,6 +101,7 @@ def test_rooftop_frames_are_real_stitches(clips, rooftop_static):
     assert abs(np.median(out_frames[30].u[rows // 2, cols // 2]) - 128) <= 2
 
 
+@pytest.mark.shared
 @pytest.mark.parametrize("pair, frames, rate", [(("rooftop_handheld", "left.mp4", "right.mp4"), 296, 30),
                                                  (("office_static", "cam1.mp4", "cam2.mp4"), 385, 24)])
 def test_full_shared_videos_give_every_frame_at_the_input_rate_with_the_audio(shared_dir, tmp_path, pair, frames, rate):

@@ -14,16 +14,16 @@ from sena_warp.config import Config
 from sena_warp.ffd import ffd_field_canvas
 from sena_warp.gate import gate_canvas, guard_field
 from sena_warp.warp_map import forward_points, remap_image, source_map_canvas
-from test_kernels_maps import load_pair, scene_geometry, source_map_reference
+from test_kernels_maps import scene_geometry, source_map_reference
 
 CFG = Config(device="cpu")
 
 
 @pytest.fixture(scope="module")
-def pipeline(shared_dir):
+def pipeline(udisd_pair):
     """Steps 4-6 on the udisd pair's geometry with inliers spread over the overlap."""
     cfg = CFG
-    img_src, img_tgt = load_pair(shared_dir)
+    img_src, img_tgt = udisd_pair
     geo = scene_geometry(img_src.shape, img_tgt.shape)
     canvas = geo["canvas"]
     field = ffd_field_canvas(
