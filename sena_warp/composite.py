@@ -68,6 +68,12 @@ class Compositor:
         self.alpha = wp.array(np.ascontiguousarray(alpha_canvas, dtype=np.float32), dtype=float, device=device)
         self._buffers: dict[tuple, _Buffers] = {}
 
+    @property
+    def planned_shapes(self) -> tuple[tuple[tuple, tuple], ...]:
+        """(source shape, target shape) of every input pair a plan and its buffers were made for, in
+        order: a video's frames, all of one shape, reuse a single one."""
+        return tuple(self._buffers)
+
     def set_maps(self, map_src_canvas: np.ndarray | None = None, map_tgt_canvas: np.ndarray | None = None,
                  alpha_canvas: np.ndarray | None = None) -> None:
         """Upload new maps (same shapes) in place; the plans are rebuilt on the next ``apply``."""

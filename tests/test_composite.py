@@ -26,7 +26,9 @@ def test_compositor_matches_reference_and_reuses_buffers(scene, device, warp_dev
     out2, _ = comp.apply(img_tgt[:, ::-1].copy(), img_src[:, ::-1].copy())
     np.testing.assert_array_equal(out, first)
     assert not np.array_equal(out2, out)
-    assert len(comp._buffers) == 1
+    assert comp.planned_shapes == ((img_src.shape, img_tgt.shape),)  # one plan and buffer set for both pairs
+    comp.apply(np.ascontiguousarray(img_src[:, :, 0]), np.ascontiguousarray(img_tgt[:, :, 0]))
+    assert comp.planned_shapes == ((img_src.shape, img_tgt.shape), ((*img_src.shape[:2], 1), (*img_tgt.shape[:2], 1)))
 
 
 @pytest.mark.parametrize("device", DEVICES)

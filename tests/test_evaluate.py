@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import math
 import shutil
 
 import cv2
@@ -11,7 +10,9 @@ import pytest
 
 from sena_warp.config import Config
 from sena_warp.errors import InputError
-from sena_warp.evaluation.evaluate import CSV_FIELDS, METHODS, pair_folders, run_eval
+from sena_warp.evaluation.evaluate import (COLUMNS, CSV_FIELDS, METHODS, OVERVIEW_THUMB_WH, PAIR_THUMB_WH, pair_folders,
+                                           run_eval)
+from sena_warp.evaluation.sheets import LABEL_H_PX
 from helpers import run_cli
 
 CFG = Config(device="cpu")
@@ -57,7 +58,8 @@ def test_sena_is_measured_against_its_own_affine_on_real_pairs(evaluated):
         # The global models keep lines straight; SENA's local warp bends them a little, never much.
         assert affine.line_bend_max_pct == pytest.approx(0.0, abs=1e-6)
         assert table[pair, "homography"].line_bend_max_pct < 1e-6
-        assert math.isnan(sena.line_bend_mean_pct) or sena.line_bend_mean_pct < 2.0
+        # Measured mean bend of SENA's long lines: 0.30 % (graf, 36 lines), 0.02 % (udisd, 1 line).
+        assert sena.lines >= 1 and sena.line_bend_mean_pct < 0.6
     assert table["udisd_test_000001", "opencv_panorama"].ok and table["udisd_test_000001", "opencv_panorama"].psnr_db > 12
 
 
@@ -69,15 +71,30 @@ def test_failures_are_recorded_with_their_reason_and_the_run_goes_on(evaluated):
     assert not table["featureless", "opencv_scans"].ok and "ERR_NEED_MORE_IMGS" in table["featureless", "opencv_scans"].error
 
 
-def test_sheets_overview_and_summary_are_written(evaluated):
-    _, out, _ = evaluated
-    sheet = cv2.imread(str(out / "sheets" / "udisd_test_000001.png"))
-    assert sheet is not None and sheet.shape[1] == 5 * 360  # a, b, SENA, OpenCV PANORAMA, OpenCV SCANS
-    assert cv2.imread(str(out / "sheets" / "broken.png")) is not None  # a failed pair still gets its sheet
+def test_sheets_overview_summary_and_csv_show_the_results(evaluated):
+    _, out, table = evaluated
+    box_w, _ = PAIR_THUMB_WH
+
+    def pictures(sheet):
+        """The image part (below its label) of each cell: a, b, SENA, OpenCV PANORAMA, OpenCV SCANS."""
+        return [sheet[LABEL_H_PX:, k * box_w:(k + 1) * box_w] for k in range(COLUMNS)]
+
+    made = pictures(cv2.imread(str(out / "sheets" / "udisd_test_000001.png")))
+    assert all(picture.mean() > 20 for picture in made)  # both inputs and all three panoramas drawn
+    failed = pictures(cv2.imread(str(out / "sheets" / "broken.png")))  # a failed pair still gets its sheet
+    assert failed[0].mean() > 20 and all(picture.max() == 0 for picture in failed[1:])  # b unreadable, no panorama
     overview = cv2.imread(str(out / "overview.jpg"))
-    assert overview is not None and overview.shape[1] == 5 * 180 and overview.shape[0] >= 4 * 116
+    assert overview.shape == (4 * (OVERVIEW_THUMB_WH[1] + LABEL_H_PX), COLUMNS * OVERVIEW_THUMB_WH[0], 3)
     summary = (out / "summary.md").read_text()
-    assert "| sena | 2/4 |" in summary and "## Failures" in summary and "broken, sena" in summary
+    sena = table["udisd_test_000001", "sena"]
+    assert "| sena | 2/4 |" in summary and "- broken, sena: " in summary
+    assert f"| udisd_test_000001 | {sena.psnr_db:.2f} / {sena.ssim:.3f} |" in summary
+    assert (f"| udisd_test_000001 | {sena.anchors} | {sena.anchor_residual_px:.3f} | {sena.seam_mad:.2f} | "
+            f"{sena.feather_mad:.2f} |") in summary
+    with open(out / "results.csv", newline="") as handle:
+        rows = {(r["pair"], r["method"]): r for r in csv.DictReader(handle)}
+    assert float(rows["udisd_test_000001", "sena"]["psnr_db"]) == pytest.approx(sena.psnr_db, abs=1e-4)
+    assert rows["featureless", "sena"]["ok"] == "False" and rows["featureless", "sena"]["psnr_db"] == ""
     assert not list(out.glob(".*part*"))  # nothing half-written
 
 

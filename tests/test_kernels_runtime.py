@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
 import sys
 
 import numpy as np
 import pytest
-import warp as wp
 
+from conftest import REPO
 from sena_warp.errors import InputError
 from sena_warp.kernels import runtime
 from test_kernels_maps import HAS_CUDA, scene_geometry, smooth_field, source_map_reference
@@ -48,8 +50,41 @@ def test_threaded_launch_equals_single_launch(udisd_pair, warp_device):
     assert valid_one.any()
 
 
-def test_prewarm_imports_every_kernel_module(warp_device):
-    runtime.prewarm(warp_device)
-    for name in ("ffd", "gate", "sampling", "remap", "composite"):
-        module = sys.modules[f"sena_warp.kernels.{name}"]
-        assert any(isinstance(obj, wp.Kernel) for obj in vars(module).values())
+# Run in a fresh process, where nothing is loaded yet: prewarm, then an image stitch and the video
+# compositor's Y (1 channel) and UV (2 channels) passes; print what was loaded before and after.
+PREWARM_PROBE = """
+import json, sys
+import numpy as np
+from sena_warp.composite import Compositor
+from sena_warp.config import Config
+from sena_warp.imageio import read_image
+from sena_warp.kernels import runtime
+from sena_warp.stitch import stitch_images
+
+before = runtime.loaded()
+runtime.prewarm("cpu")
+warmed = runtime.loaded()
+cfg = Config(device="cpu")
+img_a, img_b = (read_image(sys.argv[1] + name) for name in ("/a.jpg", "/b.jpg"))
+maps = stitch_images(img_a, img_b, cfg).maps
+compositor = Compositor(maps.map_src_input, maps.map_tgt_input, maps.alpha_input, cfg)
+for channels in (1, 2):
+    compositor.apply(np.ascontiguousarray(img_a[:, :, :channels]), np.ascontiguousarray(img_b[:, :, :channels]))
+print(json.dumps({"before": sorted(before), "warmed": sorted(warmed), "after": sorted(runtime.loaded()),
+                  "imported": sorted(m for m in sys.modules if m.startswith("sena_warp.kernels."))}))
+"""
+
+
+def test_prewarm_loads_every_kernel_module_and_all_that_a_stitch_launches(bundled_dir):
+    probe = subprocess.run([sys.executable, "-c", PREWARM_PROBE, str(bundled_dir / "udisd_test_000001")],
+                           capture_output=True, text=True, check=True)
+    seen = json.loads(probe.stdout.strip().splitlines()[-1])
+    kernel_files = {path.stem for path in (REPO / "kernels").glob("*.py")} - {"__init__"}
+    assert {"composite", "ffd", "gate", "remap", "sampling", "seam"} <= kernel_files
+    assert seen["imported"] == sorted(f"sena_warp.kernels.{name}" for name in kernel_files)
+    assert seen["before"] == []
+    warmed_modules = {name for name, _ in seen["warmed"]}
+    for name in kernel_files - {"runtime"}:
+        assert any(module.startswith(f"sena_warp.kernels.{name}") for module in warmed_modules), name
+    # Nothing the stitch or the planes launched had to be loaded (compiled) after the prewarm.
+    assert seen["after"] == seen["warmed"]

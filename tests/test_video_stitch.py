@@ -160,18 +160,20 @@ def test_office_static_rig_seam_never_moves(clips, tmp_path):
     assert target_region_diff(out_frames[20], in_1[20], report, FAST) < 3.0
 
 
-def test_moving_rig_reestimates_and_reports_finite_jitter(clips, tmp_path):
+def test_moving_rig_reestimates_blends_and_reports_the_jitter(clips, tmp_path):
     cfg = FAST.replace(video_rig="moving", video_reestimate_s=0.5)
     report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "m.mp4", cfg,
                            VideoOptions.from_config(cfg, progress=False))
     re = report["stitch"]["reestimations"]
-    # Left times 0 .. 59/30 s: due at 0.5, 1.0, 1.5 s (attempts are not made while a blend runs).
-    assert re["attempted"] == 3 and re["accepted"] + re["rejected"] == 3 and len(re["rejections"]) == re["rejected"]
+    # Left times 0 .. 59/30 s: due at 0.5, 1.0, 1.5 s (attempts are not made while a blend runs); the
+    # hand-held rig moves little in 2 s, so every re-estimate is plausible (measured: 3 accepted).
+    assert (re["attempted"], re["accepted"], re["rejected"], re["rejections"]) == (3, 3, 0, [])
+    # The blends move the seam and the map (measured: seam jitter mean 2.65 px, max 7.50 px; largest
+    # p99 map change 1.53 px per frame), and by less than a rejected estimate may move the map.
     jitter = report["stitch"]["jitter"]
     assert jitter["frames"] == 60
-    assert all(math.isfinite(v) for v in jitter.values())
-    if re["accepted"]:
-        assert jitter["seam_jitter_px_max"] > 0 and jitter["map_change_p99_px_max"] > 0
+    assert 1.0 < jitter["seam_jitter_px_mean"] < 5.0 and 3.0 < jitter["seam_jitter_px_max"] < 15.0
+    assert 0.5 < jitter["map_change_p99_px_max"] < cfg.video_max_median_change_px
     assert report["frames_out"] == 60 and "maps_update" in report["timing_s"]
 
 

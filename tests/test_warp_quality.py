@@ -17,8 +17,16 @@ from sena_warp.evaluation.baselines import affine_map_canvas
 
 # Pairs of ../shared/data with parallax where the local warp has work to do; two keep the file fast.
 SHARED_PAIRS = ("seagull_18", "dhw_temple")
-AFFINE_SHAPE_TOL_PX = 0.5  # issue 3: where G == 0 the map may leave A_glob by less than this
-MIN_LOCAL_MOVE_PX = 0.2  # inside the overlap the map must leave A_glob by more, or the check is empty
+# Where G == 0 the map is A_glob's up to float32 rounding: measured at most 0.0006 px on both pairs and
+# settings (issue 3 asked for < 0.5 px).
+AFFINE_SHAPE_TOL_PX = 0.01
+# Inside the overlap the local warp moves pixels far: measured largest |M_s - A_glob| 29.9 px
+# (dhw_temple) to 49.2 px (seagull_18), default and tuned alike.
+MIN_LOCAL_MOVE_PX = 20.0
+# SENA's overlap PSNR over the global affine's, measured: +2.2 dB (udisd), +3.2 dB (graf) bundled;
+# +1.18 to +1.99 dB on the two shared pairs, both settings.
+MIN_GAIN_BUNDLED_DB = 1.5
+MIN_GAIN_SHARED_DB = 1.0
 
 
 @pytest.fixture(scope="module")
@@ -29,16 +37,16 @@ def cfg(warp_device) -> Config:
 @pytest.mark.parametrize("name", ["udisd_test_000001", "graf_gt"])
 def test_sena_beats_the_global_affine_on_bundled_pairs(bundled_dir, cfg, name):
     _, figures = alignment.evaluate_pair(alignment.load_pair(bundled_dir / name, cfg), cfg)
-    assert figures.sena[0] > figures.affine[0]
+    assert figures.sena[0] > figures.affine[0] + MIN_GAIN_BUNDLED_DB
     assert figures.sena[1] > figures.affine[1]
 
 
 @pytest.mark.shared
 @pytest.mark.parametrize("setting", ["default", alignment.TUNED_SETTING])
 @pytest.mark.parametrize("name", SHARED_PAIRS)
-def test_warp_is_the_global_affine_where_the_gate_is_zero(shared_dir, cfg, name, setting):
+def test_warp_is_the_global_affine_where_the_gate_is_zero(pair_folder, cfg, name, setting):
     cfg = alignment.parse_setting(setting, cfg)
-    warp, figures = alignment.evaluate_pair(alignment.load_pair(shared_dir / "pairs" / name, cfg), cfg)
+    warp, figures = alignment.evaluate_pair(alignment.load_pair(pair_folder(name), cfg), cfg)
     map_affine = affine_map_canvas(warp, cfg)
     outside = warp.gate_canvas == 0.0
     inside = warp.overlap.mask_canvas & ~outside
@@ -46,6 +54,5 @@ def test_warp_is_the_global_affine_where_the_gate_is_zero(shared_dir, cfg, name,
     # Both regions must be there, or the check says nothing: the source outside the overlap, the local warp in it.
     assert outside.mean() > 0.1 and inside.mean() > 0.1
     assert deviation_px[outside].max() < AFFINE_SHAPE_TOL_PX
-    # The local warp does move pixels inside the overlap (measured: 0.3-0.65 px default, 19.5-26 px tuned).
     assert deviation_px[inside].max() > MIN_LOCAL_MOVE_PX
-    assert figures.sena[0] >= figures.affine[0]
+    assert figures.sena[0] > figures.affine[0] + MIN_GAIN_SHARED_DB

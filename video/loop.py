@@ -96,7 +96,7 @@ def run_video(
     right: str | os.PathLike,
     output: str | os.PathLike,
     compositor_factory: CompositorFactory,
-    options: VideoOptions = VideoOptions(),
+    options: VideoOptions,
 ) -> dict:
     """Stitch two videos frame pair by frame pair into ``output``; return the run's report.
 

@@ -314,14 +314,17 @@ def format_table(rows: list[dict], markdown: bool = False) -> str:
     return "\n".join("  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in cells)
 
 
-def run_bench(sizes: list[str], seconds: float, work: Path, device: str = Config.device,
-              data_dir: Path = DATA_DIR, settings: BenchSettings = BenchSettings()) -> list[dict]:
-    """Benchmark every size (labels as :func:`parse_size` takes); one row dict per size (keys: COLUMNS)."""
+def run_bench(sizes: list[str], seconds: float, work: Path, cfg: Config, data_dir: Path = DATA_DIR,
+              settings: BenchSettings = BenchSettings()) -> list[dict]:
+    """Benchmark every size (labels as :func:`parse_size` takes); one row dict per size (keys: COLUMNS).
+
+    ``cfg``: the stitcher's settings (its device is resolved here, once for every size).
+    """
     from sena_warp.kernels.runtime import resolve_config
 
     pair = pair_paths(data_dir)
     work.mkdir(parents=True, exist_ok=True)
-    cfg = resolve_config(Config(device=device))
+    cfg = resolve_config(cfg)
     return [bench_size(*parse_size(size), seconds, work, pair, cfg, settings) for size in sizes]
 
 
@@ -334,7 +337,7 @@ def machine_line() -> str:
 def cmd_bench(args: argparse.Namespace) -> int:
     """``sena-warp bench``: print the table (and write it as Markdown with --markdown)."""
     data, sizes = Path(args.data or DATA_DIR), args.sizes or list(SIZES)
-    rows = run_bench(sizes, args.seconds, Path(args.work), args.device, data)
+    rows = run_bench(sizes, args.seconds, Path(args.work), Config(device=args.device), data)
     rss_rows = [measure_rss(seconds, Path(args.work), args.device, data) for seconds in args.rss]
     text = format_table(rows)
     print(f"sena-warp bench: {machine_line()}\n{text}")
@@ -349,7 +352,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
-def measure_rss(seconds: float, work: Path, device: str = Config.device, data_dir: Path = DATA_DIR) -> dict:
+def measure_rss(seconds: float, work: Path, device: str, data_dir: Path = DATA_DIR) -> dict:
     """Peak RSS (MiB) of ``sena-warp video`` on 1080p clips of ``seconds`` (child process)."""
     left, right = make_clip_pair(pair_paths(data_dir), work, SIZES["1080p"], seconds)
     report = stitch_in_child(left, right, work / f"rss_{seconds:g}s.mp4", device)
