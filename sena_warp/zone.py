@@ -76,14 +76,17 @@ def patch_values(grey_canvas: np.ndarray, pts_canvas: np.ndarray, patch_px: int)
 
     grey_canvas: (H, W) float32, NaN where not covered. pts_canvas: (N, 2) float64 (x, y).
     Returns (N, patch_px * patch_px) float64; pixels outside the canvas are NaN, so any statistic
-    over a patch that leaves the covered area is NaN (and every comparison with it is False).
+    over a patch that leaves the covered area is NaN (and every comparison with it is False). A
+    point with a NaN coordinate (a forward point that did not converge, ``forward_points``) gets an
+    all-NaN patch.
     """
     height, width = grey_canvas.shape
     half = patch_px // 2
     steps = np.arange(patch_px) - half
-    cols = np.rint(pts_canvas[:, 0]).astype(np.int64)[:, None, None] + steps[None, None, :]
-    rows = np.rint(pts_canvas[:, 1]).astype(np.int64)[:, None, None] + steps[None, :, None]
-    inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height)
+    centres, finite = _nearest_pixels(pts_canvas)
+    cols = centres[:, 0, None, None] + steps[None, None, :]
+    rows = centres[:, 1, None, None] + steps[None, :, None]
+    inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height) & finite[:, None, None]
     values = grey_canvas[np.clip(rows, 0, height - 1), np.clip(cols, 0, width - 1)].astype(np.float64)
     values[~inside] = np.nan
     return values.reshape(len(pts_canvas), patch_px * patch_px)
@@ -220,12 +223,22 @@ def _cluster(group: list[int], classes: DisparityClasses, global_mean_px: float,
     )
 
 
+def _nearest_pixels(pts_canvas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """((N, 2) int64 (col, row) of the pixel nearest each (x, y) point, (N,) bool: the point is finite).
+
+    NaN points get pixel (0, 0) and False: casting NaN to an integer is undefined (numpy warns).
+    """
+    finite = np.isfinite(pts_canvas).all(axis=1)
+    return np.rint(np.where(finite[:, None], pts_canvas, 0.0)).astype(np.int64), finite
+
+
 def _in_mask(mask_canvas: np.ndarray, pts_canvas: np.ndarray) -> np.ndarray:
-    """(N,) bool: the pixel nearest each (x, y) canvas point is inside the canvas and the mask."""
+    """(N,) bool: the pixel nearest each (x, y) canvas point is inside the canvas and the mask (False
+    for NaN points)."""
     height, width = mask_canvas.shape
-    cols = np.rint(pts_canvas[:, 0]).astype(np.int64)
-    rows = np.rint(pts_canvas[:, 1]).astype(np.int64)
-    inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height)
+    centres, finite = _nearest_pixels(pts_canvas)
+    cols, rows = centres[:, 0], centres[:, 1]
+    inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height) & finite
     hit = np.zeros(len(pts_canvas), dtype=bool)
     hit[inside] = mask_canvas[rows[inside], cols[inside]]
     return hit

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -139,6 +141,20 @@ def test_flat_points_are_dropped_before_clustering():
     )
     assert [c.classes for c in zone.clusters] == [(0, 1, 2, 3), (4, 5)]
     assert sorted(zone.point_indices.tolist()) == list(range(120))
+
+
+def test_unconverged_forward_points_are_dropped_without_a_cast_warning():
+    """forward_points gives NaN for a source point it cannot place; step 7 drops it, explicitly."""
+    rng = np.random.default_rng(7)
+    disparities = [0.0, 0.5, 0.2, 0.4, 10.0, 11.0, 30.0, 35.0, 40.0, 45.0]
+    pts_src, pts_tgt, mask, grey_src, grey_tgt = _scene(rng, disparities, [30, 30, 30, 30, 3, 3, 5, 5, 5, 5])
+    pts_src[[3, 50]] = np.nan  # two of the dominant cluster's points did not converge
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's "invalid value encountered in cast" would raise here
+        zone = adequate_zone(pts_src, pts_tgt, mask, grey_src, grey_tgt, Config(zone_classes=10))
+    assert (zone.x0, zone.x1) == pytest.approx((100.0, 180.0))
+    assert sorted(zone.point_indices.tolist()) == sorted(set(range(120)) - {3, 50})
+    assert np.isnan(patch_values(grey_src, pts_src[[3]], 7)).all()
 
 
 def test_no_cluster_falls_back_to_whole_overlap():
