@@ -130,16 +130,17 @@ def estimate_warp(img_src: np.ndarray, img_tgt: np.ndarray, pts_src: np.ndarray,
 def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, warp: Warp, cfg: Config, clock: StageClock) -> Seam:
     """SENA steps 7-9 ("Optimal stitching line", "Partitioning and Reconstruction") in the working frame;
     ``cfg.device`` resolved."""
-    canvas, mask = warp.overlap.canvas, warp.overlap.mask_canvas
+    canvas, mask_canvas = warp.overlap.canvas, warp.overlap.mask_canvas
     with clock("forward_points"):
-        pts_src = forward_points(warp.map_src_canvas, warp.glob.affine_src_to_tgt, canvas, warp.inliers_src, cfg)
-    pts_tgt = canvas.tgt_to_canvas(warp.inliers_tgt)
+        pts_src_canvas = forward_points(warp.map_src_canvas, warp.glob.affine_src_to_tgt, canvas, warp.inliers_src, cfg)
+    pts_tgt_canvas = canvas.tgt_to_canvas(warp.inliers_tgt)
     with clock("grey_canvas"):
-        grey_src, grey_tgt = _grey_canvas(img_src, img_tgt, warp, cfg)
+        grey_src_canvas, grey_tgt_canvas = _grey_canvas(img_src, img_tgt, warp, cfg)
     with clock("zone"):
-        zone = adequate_zone(pts_src, pts_tgt, mask, grey_src, grey_tgt, cfg)
+        zone = adequate_zone(pts_src_canvas, pts_tgt_canvas, mask_canvas, grey_src_canvas, grey_tgt_canvas, cfg)
     with clock("chain"):
-        anchors_src, anchors_tgt = keypoint_chain(zone, pts_src, pts_tgt, grey_src, grey_tgt, mask, cfg)
+        anchors_src, anchors_tgt = keypoint_chain(zone, pts_src_canvas, pts_tgt_canvas, grey_src_canvas,
+                                                  grey_tgt_canvas, mask_canvas, cfg)
     with clock("seam_maps"):
         maps = seam_maps(warp.map_src_canvas, canvas, anchors_src, anchors_tgt, cfg)
     return Seam(zone, anchors_src, anchors_tgt, maps)

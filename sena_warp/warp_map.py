@@ -19,7 +19,8 @@ from sena_warp.kernels.remap import remap_kernel
 from sena_warp.kernels.sampling import source_map_kernel
 
 
-def source_map_canvas(canvas: Canvas, affine_src_to_tgt: np.ndarray, field_guarded: np.ndarray, cfg: Config) -> np.ndarray:
+def source_map_canvas(canvas: Canvas, affine_src_to_tgt: np.ndarray, field_guarded: np.ndarray,
+                      cfg: Config) -> np.ndarray:
     """M_s over the canvas: (H, W, 2) float32 source (x, y) per canvas pixel (x, y).
 
     ``field_guarded`` (H, W, 2) float32: guarded displacement in source pixels (``gate.guard_field``).
