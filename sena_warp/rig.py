@@ -65,9 +65,15 @@ def points_to_working(pts: np.ndarray, rig: Rig) -> np.ndarray:
 
 
 def matches_to_working(pts_a: np.ndarray, pts_b: np.ndarray, rig: Rig) -> tuple[np.ndarray, np.ndarray]:
-    """Matched (N, 2) xy points of inputs a and b as (pts_src, pts_tgt) in the working frame."""
-    pts_src, pts_tgt = rig.pick(pts_a, pts_b)
-    return points_to_working(pts_src, rig), points_to_working(pts_tgt, rig)
+    """Matched (N, 2) xy points of inputs a and b as (pts_src, pts_tgt) in the working frame, in a
+    canonical order: by source x, then source y, then target x and y.
+
+    The order of the matches depends on which input came first (``image a b`` vs ``image b a``), and
+    RANSAC samples in that order: sorted, both orders give the same model and the same maps (issue 13).
+    """
+    pts_src, pts_tgt = (points_to_working(pts, rig) for pts in rig.pick(pts_a, pts_b))
+    order = np.lexsort((pts_tgt[:, 1], pts_tgt[:, 0], pts_src[:, 1], pts_src[:, 0]))
+    return np.ascontiguousarray(pts_src[order]), np.ascontiguousarray(pts_tgt[order])
 
 
 def map_from_working(map_canvas: np.ndarray, rig: Rig) -> np.ndarray:
