@@ -123,3 +123,24 @@ def match_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> Matches:
     idx_a, idx_b, scores = match_descriptors(desc_a, desc_b, cfg)
     return Matches(pts_a=pts_a[idx_a], pts_b=pts_b[idx_b], scores=scores,
                    n_keypoints_a=len(pts_a), n_keypoints_b=len(pts_b))
+
+
+def neighbour_supported(pts_src: np.ndarray, pts_tgt: np.ndarray, neighbours: int, tol_px: float,
+                        min_support: int) -> np.ndarray:
+    """(N,) bool: matches whose displacement ``pts_tgt - pts_src`` is shared, within ``tol_px``, by at
+    least ``min_support`` of their ``neighbours`` nearest matches (by target position).
+
+    A wrong match on a periodic pattern (tiles, windows, fence rails) is displaced by a whole period
+    from its correct neighbours and finds no support; a true match on something at another depth, or
+    on something that moved, has neighbours on the same object that move with it.
+    """
+    pts_src = np.asarray(pts_src, np.float32).reshape(-1, 2)
+    pts_tgt = np.asarray(pts_tgt, np.float32).reshape(-1, 2)
+    if len(pts_tgt) <= min_support:
+        return np.zeros(len(pts_tgt), bool)
+    k = min(neighbours + 1, len(pts_tgt))
+    nearest = cv2.BFMatcher(cv2.NORM_L2).knnMatch(pts_tgt, pts_tgt, k=k)
+    index = np.array([[m.trainIdx for m in row] + [row[-1].trainIdx] * (k - len(row)) for row in nearest])
+    displacement = pts_tgt - pts_src
+    agree = np.linalg.norm(displacement[index] - displacement[:, None, :], axis=2) <= tol_px
+    return agree.sum(axis=1) - 1 >= min_support  # the point itself is among its nearest

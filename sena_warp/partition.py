@@ -1,14 +1,21 @@
-"""Step 9: partition the canvas at the keypoint chain and build the seam maps (SENA.md step 9, paper
+"""Step 9: partition the canvas at the seam and build the seam maps (SENA.md step 9, paper
 "Partitioning and Reconstruction").
 
-The K anchors cut the canvas into K+1 horizontal bands. In each band the seam x follows the target
-anchors, interpolated linearly in y (constant above the first and below the last anchor). The
-output row is the source left of its seam and the target right of it, blended by a linear alpha of
-width ``cfg.transition_px`` (Gaussian-smoothed with ``cfg.seam_smooth_sigma_px`` across the seam).
-The source is resampled so that each source anchor lands on its target anchor: per row, the
-anchor residual (dx, dy) = anchor_src - anchor_tgt is interpolated like the seam, applied in full
-inside the transition and faded out (smootherstep) over ``cfg.seam_fade_px`` beyond it, so the
-source far from the seam keeps its step-6 shape. The per-pixel part is ``kernels/seam.py``.
+The seam (``seam_path.SeamPath``: one x per canvas row, through the anchors) splits every row: the
+source left of it, the target right of it, mixed by an alpha of width ``cfg.transition_px``
+(Gaussian-smoothed with ``cfg.seam_smooth_sigma_px``, ``kernels/seam.py``'s ``source_alpha``, the
+same rule the compositor applies). The source is resampled so that each source anchor lands on its
+target anchor: per row, the anchor residual (dx, dy) = anchor_src - anchor_tgt is interpolated over
+the rows, applied in full inside the transition and faded out (smootherstep) over
+``cfg.seam_fade_px`` beyond it, so the source far from the seam keeps its step-6 shape. The paper
+interpolates the residual linearly between anchors, which kinks lines that cross the seam at every
+anchor (issue 13); with ``cfg.seam_model == "path"`` it is a smoothing spline through them
+(``smooth_curve``). The per-pixel part is ``kernels/seam.py``.
+
+What is left of an exposure difference after the gains is hidden by the seam blend's low-frequency
+part (``seam_offsets``): per row, half the mean difference of the two views next to the seam is taken
+off the brighter side and added to the darker one, fading to nothing ``cfg.seam_blend_ratio`` x the
+image diagonal away, while detail still switches sides within the narrow transition.
 Convention: the source is the LEFT view on the canvas (the caller transposes/flips other rigs).
 """
 
@@ -21,9 +28,14 @@ import warp as wp
 
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
-from sena_warp.errors import GeometryError, InputError
+from sena_warp.errors import InputError
 from sena_warp.kernels import runtime
 from sena_warp.kernels.seam import seam_maps_kernel
+from sena_warp.seam_path import SeamPath
+from sena_warp.warp_map import CanvasViews
+
+CURVE_STEP_ROWS = 8  # smooth_curve: one unknown every this many rows
+
 
 @dataclass(frozen=True)
 class SeamRows:
@@ -54,45 +66,67 @@ class SeamMaps:
     anchors_tgt_canvas: np.ndarray
 
 
-def seam_rows(anchors_src_canvas: np.ndarray, anchors_tgt_canvas: np.ndarray, height: int) -> SeamRows:
-    """Interpolate seam x and the anchor residual over canvas rows 0..height-1.
+def smooth_curve(y_knots: np.ndarray, values: np.ndarray, height: int, smoothing: float) -> np.ndarray:
+    """(height,) float64: a smooth curve over rows 0..height-1 that follows ``values`` at ``y_knots``.
 
-    anchors_*_canvas: (K, 2) float64 (x, y), K >= 1, target y strictly increasing. Linear between
-    anchors in target y, constant beyond the first and last anchor.
+    Unknowns every ``CURVE_STEP_ROWS`` rows, linear between them, minimising the squared misfit at the
+    knots plus ``smoothing`` x the squared second differences (a discrete smoothing spline); constant
+    beyond the first and last knot, zero without knots.
     """
-    anchors_src = np.asarray(anchors_src_canvas, np.float64)
-    anchors_tgt = np.asarray(anchors_tgt_canvas, np.float64)
-    if len(anchors_tgt) == 0 or anchors_src.shape != anchors_tgt.shape:
-        raise GeometryError("the seam needs at least one anchor, with as many source as target anchors")
-    if np.any(np.diff(anchors_tgt[:, 1]) <= 0):
-        raise GeometryError("seam anchors must be sorted by strictly increasing target y")
+    y_knots = np.asarray(y_knots, np.float64)
+    values = np.asarray(values, np.float64)
+    if y_knots.size == 0:
+        return np.zeros(height)
+    nodes = int(np.ceil(max(height - 1, 1) / CURVE_STEP_ROWS)) + 1
+    g = np.clip(y_knots / CURVE_STEP_ROWS, 0, nodes - 1)
+    i0 = np.clip(np.floor(g).astype(np.int64), 0, nodes - 2)
+    t = g - i0
+    design = np.zeros((len(g), nodes))
+    design[np.arange(len(g)), i0] = 1.0 - t
+    design[np.arange(len(g)), i0 + 1] = t
+    second = np.zeros((nodes - 2, nodes))
+    diag = np.arange(nodes - 2)
+    second[diag, diag], second[diag, diag + 1], second[diag, diag + 2] = 1.0, -2.0, 1.0
+    system = design.T @ design + smoothing * second.T @ second + 1e-9 * np.eye(nodes)
+    curve = np.interp(np.arange(height) / CURVE_STEP_ROWS, np.arange(nodes), np.linalg.solve(system, design.T @ values))
+    rows = np.arange(height)
+    curve[rows < y_knots.min()] = curve[int(np.clip(np.ceil(y_knots.min()), 0, height - 1))]
+    curve[rows > y_knots.max()] = curve[int(np.clip(np.floor(y_knots.max()), 0, height - 1))]
+    return curve
+
+
+def seam_rows(path: SeamPath, height: int, cfg: Config) -> SeamRows:
+    """The seam and the anchor correction per canvas row 0..height-1.
+
+    The residual of the anchors (source minus target copy) is interpolated linearly between them
+    (``cfg.seam_model == "paper"``) or by ``smooth_curve`` (``"path"``), constant beyond the ends,
+    zero without anchors.
+    """
+    anchors_src = np.asarray(path.anchors_src_canvas, np.float64).reshape(-1, 2)
+    anchors_tgt = np.asarray(path.anchors_tgt_canvas, np.float64).reshape(-1, 2)
     rows = np.arange(height, dtype=np.float64)
     residual = anchors_src - anchors_tgt
-    return SeamRows(
-        seam_x=np.interp(rows, anchors_tgt[:, 1], anchors_tgt[:, 0]).astype(np.float32),
-        src_row_y=(rows + np.interp(rows, anchors_tgt[:, 1], residual[:, 1])).astype(np.float32),
-        shift_x=np.interp(rows, anchors_tgt[:, 1], residual[:, 0]).astype(np.float32),
-    )
+    y = anchors_tgt[:, 1]
+    if cfg.seam_model == "paper":
+        dx, dy = (np.interp(rows, y, residual[:, k]) for k in range(2))
+    else:
+        dx, dy = (smooth_curve(y, residual[:, k], height, cfg.correction_smooth) for k in range(2))
+    return SeamRows(seam_x=np.asarray(path.seam_x_canvas, np.float32), src_row_y=(rows + dy).astype(np.float32),
+                    shift_x=dx.astype(np.float32))
 
 
-def seam_maps(
-    map_src_canvas: np.ndarray,
-    canvas: Canvas,
-    anchors_src_canvas: np.ndarray,
-    anchors_tgt_canvas: np.ndarray,
-    cfg: Config,
-) -> SeamMaps:
+def seam_maps(map_src_canvas: np.ndarray, canvas: Canvas, path: SeamPath, cfg: Config) -> SeamMaps:
     """SENA step 9: source map, target map and alpha of the stitch (Warp kernel ``seam_maps_kernel``).
 
     map_src_canvas: (H, W, 2) float32 step-6 source sampling map; canvas: its size and target offset;
-    anchors_*_canvas: (K, 2) float64 (x, y) from ``keypoint_chain`` (warped source / target
-    positions). Runs on ``cfg.device`` (resolved, ``runtime.resolve_config``) with ``cfg.cpu_threads``.
+    path: the seam of ``seam_path.seam_line``. Runs on ``cfg.device`` (resolved,
+    ``runtime.resolve_config``) with ``cfg.cpu_threads``.
     """
     if map_src_canvas.shape != (canvas.height, canvas.width, 2):
         raise InputError(f"source map shape {map_src_canvas.shape} does not match the canvas {canvas.shape}")
     if cfg.transition_px < 1 or cfg.seam_fade_px <= 0:
         raise InputError("transition_px must be >= 1 and seam_fade_px > 0")
-    rows = seam_rows(anchors_src_canvas, anchors_tgt_canvas, canvas.height)
+    rows = seam_rows(path, canvas.height, cfg)
     shape = canvas.shape
     device = cfg.device
     map_src_out = wp.empty(shape, dtype=wp.vec2, device=device)
@@ -117,6 +151,50 @@ def seam_maps(
         map_tgt_canvas=map_tgt_out.numpy().reshape(*shape, 2),
         alpha_canvas=alpha_out.numpy(),
         seam_x_canvas=rows.seam_x,
-        anchors_src_canvas=np.asarray(anchors_src_canvas, np.float64),
-        anchors_tgt_canvas=np.asarray(anchors_tgt_canvas, np.float64),
+        anchors_src_canvas=np.asarray(path.anchors_src_canvas, np.float64),
+        anchors_tgt_canvas=np.asarray(path.anchors_tgt_canvas, np.float64),
     )
+
+
+@dataclass(frozen=True)
+class SeamOffsets:
+    """The seam blend's low-frequency part: per canvas row, grey levels added to each view near the
+    seam (``src``, ``tgt``: (H, C) float32, full at the seam, fading linearly to 0 at ``fade_px``)."""
+
+    src: np.ndarray
+    tgt: np.ndarray
+    fade_px: float
+
+
+def running_mean(values: np.ndarray, known: np.ndarray, window: int) -> np.ndarray:
+    """Mean over ``window`` rows of (H, C) ``values`` where ``known`` (H,); rows without any known row in
+    their window take the nearest row that has one."""
+    kernel = np.ones(max(1, window))
+    count = np.convolve(known.astype(np.float64), kernel, "same")
+    total = np.stack([np.convolve(np.where(known, values[:, c], 0.0), kernel, "same") for c in range(values.shape[1])], 1)
+    have = count > 0
+    if not have.any():
+        return np.zeros_like(values, dtype=np.float64)
+    mean = total[have] / count[have][:, None]
+    rows = np.arange(len(values))
+    return np.stack([np.interp(rows, rows[have], mean[:, c]) for c in range(values.shape[1])], 1)
+
+
+def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, cfg: Config) -> SeamOffsets:
+    """Offsets that take half the two views' mean difference next to the seam off one side and add it
+    to the other (module docstring); zero when ``cfg.seam_blend_ratio`` is 0.
+
+    views: the gain-compensated canvas views; seam_x_canvas: (H,) seam x per row.
+    """
+    height, width = views.both.shape
+    channels = views.src.shape[2]
+    if cfg.seam_blend_ratio <= 0:
+        zeros = np.zeros((height, channels), np.float32)
+        return SeamOffsets(zeros, zeros.copy(), 0.0)
+    cols = np.arange(width)[None, :]
+    strip = views.both & (np.abs(cols - np.asarray(seam_x_canvas, np.float64)[:, None]) <= cfg.seam_blend_strip_px)
+    diff = (views.src.astype(np.float32) - views.tgt.astype(np.float32)) * strip[:, :, None]
+    count = strip.sum(axis=1)
+    per_row = diff.sum(axis=1) / np.maximum(count, 1)[:, None]
+    delta = running_mean(per_row, count > 0, cfg.seam_blend_rows).astype(np.float32)
+    return SeamOffsets(-0.5 * delta, 0.5 * delta, float(cfg.seam_blend_ratio * diag_px))

@@ -7,6 +7,9 @@ numerically, never as ``A s + o + d`` (d is defined at u, not at s).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+import cv2
 import numpy as np
 import warp as wp
 
@@ -73,6 +76,47 @@ def forward_points(
     converged = np.all(np.abs(residual_src) < cfg.forward_tol_px, axis=1) & on_canvas
     pts_canvas[~converged] = np.nan
     return pts_canvas
+
+
+@dataclass(frozen=True)
+class CanvasViews:
+    """Both views on the working canvas, as the seam stages see them.
+
+    ``src``: (H, W, C) uint8 the source warped by a source map (0 where invalid); ``tgt``: (H, W, C)
+    uint8 the target pasted at its offset (0 outside); ``valid_src``, ``valid_tgt``: (H, W) bool.
+    """
+
+    src: np.ndarray
+    tgt: np.ndarray
+    valid_src: np.ndarray
+    valid_tgt: np.ndarray
+
+    @property
+    def both(self) -> np.ndarray:
+        """(H, W) bool: the overlap, where both views are defined."""
+        return self.valid_src & self.valid_tgt
+
+    def grey(self) -> tuple[np.ndarray, np.ndarray]:
+        """The two views in grey, float32 (H, W), NaN where a view is not defined."""
+        def one(img: np.ndarray, valid: np.ndarray) -> np.ndarray:
+            grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.shape[2] == 3 else img[:, :, 0]
+            return np.where(valid, grey.astype(np.float32), np.float32(np.nan))
+        return one(self.src, self.valid_src), one(self.tgt, self.valid_tgt)
+
+
+def canvas_views(img_src: np.ndarray, img_tgt: np.ndarray, map_src_canvas: np.ndarray, canvas: Canvas,
+                 cfg: Config) -> CanvasViews:
+    """The source warped by ``map_src_canvas`` and the target pasted at ``canvas.offset_tgt`` (an
+    integer offset: no resampling), both (H, W, C) uint8 on the canvas, with their validity."""
+    warped, valid_src = remap_image(img_src, map_src_canvas, cfg)
+    warped = as_channels(warped)
+    placed = np.zeros((*canvas.shape, warped.shape[2]), np.uint8)
+    valid_tgt = np.zeros(canvas.shape, bool)
+    ox, oy = (int(round(v)) for v in canvas.offset_tgt)
+    h, w = img_tgt.shape[:2]
+    placed[oy:oy + h, ox:ox + w] = as_channels(img_tgt)
+    valid_tgt[oy:oy + h, ox:ox + w] = True
+    return CanvasViews(warped, placed, valid_src, valid_tgt)
 
 
 def as_channels(img: np.ndarray) -> np.ndarray:
