@@ -1,78 +1,48 @@
-"""Per-frame compositing: out = alpha * src(map_src) + (1 - alpha) * tgt(map_tgt) (SENA.md "Maps, not images").
+"""Per-frame compositing along a seam (SENA.md "Maps, not images"; issue 13's gains and seam blend).
 
-Bilinear samples of both images; where only one side is valid it is used alone; where neither is,
-the pixel is 0 and its coverage 0. Generic in C (C = 3 images, C = 1 video planes).
+The source is shown on one side of the seam, the target on the other; across a transition of width T
+the two are mixed by ``kernels/seam.py``'s ``source_alpha`` (the rule the seam maps' alpha follows). Each side gets its own per-channel affine gain (exposure
+compensation) and, within ``lf_px`` of the seam, a per-line offset that fades linearly to 0 (the
+low-frequency part of the seam blend: what is left of an exposure difference after the gains is
+spread over a wide band, while detail switches sides within T).
+
+The seam is one position per *line*: per canvas row (x of the seam) when ``lines_are_rows`` is 1,
+per canvas column (y of the seam) for a vertical rig. The source lies at positions below the seam.
+
+Fixed-point plan. The maps do not change between frames, so what depends only on them (validity,
+which side, tap positions, sub-pixel fractions, coverage) is worked out once per map set by
+``composite_plan_kernel``; the per-frame ``COMPOSITE_FRAME_KERNELS`` read one int64 word per pixel.
+A plan word: bits 0-1 the kind (KIND_*), bits 2-12 fx and 13-23 fy (bilinear fractions in
+1/1024 px, 0..1024), bits 24+ the flat element offset of the top-left tap in the image of the side
+shown (the source for a band pixel, whose target word, same layout, is in ``plan_tgt``).
 """
 
 from __future__ import annotations
 
 import warp as wp
 
-from sena_warp.kernels.remap import bilinear_sample, inside_image, to_uint8
+from sena_warp.kernels.seam import source_alpha
 
-
-@wp.kernel
-def composite_kernel(
-    row0: int,
-    img_src: wp.array3d(dtype=wp.uint8),
-    img_tgt: wp.array3d(dtype=wp.uint8),
-    map_src: wp.array2d(dtype=wp.vec2),
-    map_tgt: wp.array2d(dtype=wp.vec2),
-    alpha_src: wp.array2d(dtype=float),
-    out: wp.array3d(dtype=wp.uint8),
-    coverage: wp.array2d(dtype=wp.uint8),
-):
-    """out[y, x, :] blended from both sides; coverage[y, x] = 255 where any side is valid, else 0."""
-    i, x = wp.tid()
-    y = row0 + i
-    p_src = map_src[y, x]
-    p_tgt = map_tgt[y, x]
-    ok_src = inside_image(img_src, p_src)
-    ok_tgt = inside_image(img_tgt, p_tgt)
-    a = wp.clamp(alpha_src[y, x], 0.0, 1.0)
-    if not ok_src:
-        a = 0.0
-    if not ok_tgt:
-        a = 1.0
-    covered = ok_src or ok_tgt
-    for c in range(out.shape[2]):
-        v = 0.0
-        if ok_src and a > 0.0:
-            v = v + a * bilinear_sample(img_src, p_src, c)
-        if ok_tgt and a < 1.0:
-            v = v + (1.0 - a) * bilinear_sample(img_tgt, p_tgt, c)
-        out[y, x, c] = wp.where(covered, to_uint8(v), wp.uint8(0))
-    coverage[y, x] = wp.where(covered, wp.uint8(255), wp.uint8(0))
-
-
-# Fixed-point compositing (the per-frame path). The maps do not change between frames, so everything
-# that depends only on them (validity, which side is shown, tap positions, sub-pixel fractions,
-# alpha, coverage) is worked out once per map set by ``composite_plan_kernel``, like
-# ``cv2.convertMaps``; the per-frame ``COMPOSITE_FIXED_KERNELS`` then do integer arithmetic only.
-# On the CPU every array access costs about as much as the arithmetic, so a pixel shown from one side
-# (all but the seam's transition band) needs one int64 load besides its image taps, and only blend
-# pixels read their target taps and alpha from two more arrays.
-#
-# A plan word (int64): bits 0-1 the kind (KIND_*), bits 2-12 fx and 13-23 fy (the bilinear
-# fractions in 1/1024 px, 0..1024), bits 24+ the flat element offset of the top-left tap in the
-# image of the side shown (the source for a blend, whose target word has the same layout).
 KIND_FILL = wp.constant(0)  # no side covers the pixel: the fill value
-KIND_SOURCE = wp.constant(1)  # the source alone (alpha 1, or the target invalid)
-KIND_TARGET = wp.constant(2)  # the target alone (alpha 0, or the source invalid)
-KIND_BLEND = wp.constant(3)  # alpha * source + (1 - alpha) * target
+KIND_SOURCE = wp.constant(1)  # the source alone
+KIND_TARGET = wp.constant(2)  # the target alone
+KIND_BAND = wp.constant(3)  # both valid near the seam: the side (or the mix) follows the seam of the frame
 FRAC_BITS = wp.constant(10)  # sub-pixel steps of 1/1024 px: the value moves < 0.25 grey level
 FRAC_ONE = wp.constant(1 << 10)
 FRAC_MASK = wp.constant(2047)  # 11 bits: a fraction may be exactly 1 at the last row / column
-ALPHA_BITS = wp.constant(14)  # alpha in 1/16384
+
+
+@wp.func
+def lf_weight(d: float, lf_px: float) -> float:
+    """How much of a line's low-frequency offset a pixel at distance d from the seam gets."""
+    if lf_px <= 0.0:
+        return 0.0
+    return wp.max(0.0, 1.0 - wp.abs(d) / lf_px)
 
 
 @wp.func
 def tap_origin(p: wp.vec2, height: int, width: int) -> wp.vec2:
-    """(x0, y0) top-left bilinear tap of a valid (x, y), kept at x0 <= W-2, y0 <= H-2 (when W, H >= 2).
-
-    Keeping the 2x2 footprint inside the plane (x = W-1 becomes x0 = W-2 with fx = 1) lets the frame
-    kernel read all four taps without a bounds check.
-    """
+    """(x0, y0) top-left bilinear tap of a valid (x, y), kept at x0 <= W-2, y0 <= H-2 (when W, H >= 2)."""
     x0 = wp.min(wp.floor(p[0]), float(wp.max(width - 2, 0)))
     y0 = wp.min(wp.floor(p[1]), float(wp.max(height - 2, 0)))
     return wp.vec2(x0, y0)
@@ -89,45 +59,59 @@ def plan_word(kind: int, p: wp.vec2, shape: wp.vec3i) -> wp.int64:
         | wp.int64(kind)
 
 
+@wp.func
+def inside(p: wp.vec2, shape: wp.vec3i) -> bool:
+    return p[0] >= 0.0 and p[1] >= 0.0 and p[0] <= float(shape[1] - 1) and p[1] <= float(shape[0] - 1)
+
+
+@wp.func
+def line_and_position(x: int, y: int, lines_are_rows: int) -> wp.vec2i:
+    if lines_are_rows != 0:
+        return wp.vec2i(y, x)
+    return wp.vec2i(x, y)
+
+
 @wp.kernel
 def composite_plan_kernel(
     row0: int,
     map_src: wp.array2d(dtype=wp.vec2),
     map_tgt: wp.array2d(dtype=wp.vec2),
-    alpha_src: wp.array2d(dtype=float),
+    seam: wp.array(dtype=float),
+    lines_are_rows: int,
+    band_px: float,
     shape_src: wp.vec3i,
     shape_tgt: wp.vec3i,
     plan: wp.array(dtype=wp.int64),
     plan_tgt: wp.array(dtype=wp.int64),
-    alpha: wp.array(dtype=wp.uint16),
     coverage: wp.array2d(dtype=wp.uint8),
 ):
-    """Per canvas pixel q = y * Wc + x: plan[q] (see above), and for blends plan_tgt[q] (the target's
-    word) and alpha[q] (the source weight in 1/2**14); coverage 255 / 0. Same rule as ``composite_kernel``.
+    """Per canvas pixel q = y * Wc + x: plan[q], plan_tgt[q] for band pixels, coverage 255 / 0.
 
-    ``shape_*`` = (H, W, C) of the uint8 images that will be composited (offsets index them flattened).
+    Where both sides are valid, pixels within ``band_px`` of the seam are band pixels (the frame
+    decides the side); the others show the source below the seam and the target above it.
     """
     i, x = wp.tid()
     y = row0 + i
     q = y * map_src.shape[1] + x
     p_src = map_src[y, x]
     p_tgt = map_tgt[y, x]
-    ok_src = p_src[0] >= 0.0 and p_src[1] >= 0.0 and p_src[0] <= float(shape_src[1] - 1) and p_src[1] <= float(shape_src[0] - 1)
-    ok_tgt = p_tgt[0] >= 0.0 and p_tgt[1] >= 0.0 and p_tgt[0] <= float(shape_tgt[1] - 1) and p_tgt[1] <= float(shape_tgt[0] - 1)
-    a = wp.clamp(alpha_src[y, x], 0.0, 1.0)
-    if not ok_src:
-        a = 0.0
-    if not ok_tgt:
-        a = 1.0
+    ok_src = inside(p_src, shape_src)
+    ok_tgt = inside(p_tgt, shape_tgt)
+    lp = line_and_position(x, y, lines_are_rows)
+    d = float(lp[1]) - seam[lp[0]]
     word = wp.int64(KIND_FILL)
-    if ok_src and a >= 1.0:
+    if ok_src and ok_tgt:
+        if wp.abs(d) <= band_px:
+            word = plan_word(KIND_BAND, p_src, shape_src)
+            plan_tgt[q] = plan_word(KIND_TARGET, p_tgt, shape_tgt)
+        elif d < 0.0:
+            word = plan_word(KIND_SOURCE, p_src, shape_src)
+        else:
+            word = plan_word(KIND_TARGET, p_tgt, shape_tgt)
+    elif ok_src:
         word = plan_word(KIND_SOURCE, p_src, shape_src)
-    elif ok_tgt and a <= 0.0:
+    elif ok_tgt:
         word = plan_word(KIND_TARGET, p_tgt, shape_tgt)
-    elif ok_src and ok_tgt:
-        word = plan_word(KIND_BLEND, p_src, shape_src)
-        plan_tgt[q] = plan_word(KIND_TARGET, p_tgt, shape_tgt)
-        alpha[q] = wp.uint16(int(a * float(1 << ALPHA_BITS) + 0.5))
     plan[q] = word
     coverage[y, x] = wp.where(ok_src or ok_tgt, wp.uint8(255), wp.uint8(0))
 
@@ -157,21 +141,32 @@ def sample_fixed(img: wp.array(dtype=wp.uint8), p: int, fx: int, fy: int, step_x
     return (FRAC_ONE - fy) * top + fy * bottom
 
 
+GAIN_BITS = wp.constant(12)  # gains in 1/4096
+ONE20 = wp.constant(1 << 20)  # one grey level in sample units
+
+
 @wp.func
 def grey_level(sample: int) -> wp.uint8:
-    """A sample in 1/2**20 grey levels rounded to uint8."""
-    return wp.uint8(wp.min((sample + (1 << (2 * FRAC_BITS - 1))) >> (2 * FRAC_BITS), 255))
+    """A sample in 1/2**20 grey levels rounded to uint8, saturating at both ends."""
+    return wp.uint8(wp.clamp((sample + (1 << (2 * FRAC_BITS - 1))) >> (2 * FRAC_BITS), 0, 255))
 
 
-def _composite_fixed_kernel(channels: int):
+@wp.func
+def adjusted(sample: int, gain: int, bias: int, offset: int) -> int:
+    """gain * sample + bias + offset, all in 1/2**20 grey levels (gain in 1/2**GAIN_BITS)."""
+    return int((wp.int64(sample) * wp.int64(gain)) >> wp.int64(GAIN_BITS)) + bias + offset
+
+
+def _composite_frame_kernel(channels: int):
     """The frame kernel for images of ``channels`` (1 to 4) channels, its channel loops unrolled.
 
     A compile-time channel count matters on the CPU: a dynamic per-pixel channel loop doubled the
-    kernel's time at 1080p.
+    kernel's time at 1080p. Integer arithmetic throughout; the low-frequency offsets only cost a
+    multiply inside ``lf_px`` of the seam.
     """
 
     @wp.kernel(module="unique")
-    def composite_fixed(
+    def composite_frame(
         row0: int,
         col_step: int,
         width: int,
@@ -180,17 +175,26 @@ def _composite_fixed_kernel(channels: int):
         steps: wp.vec4i,
         plan: wp.array(dtype=wp.int64),
         plan_tgt: wp.array(dtype=wp.int64),
-        alpha: wp.array(dtype=wp.uint16),
+        seam: wp.array(dtype=float),
+        lines_are_rows: int,
+        transition_px: float,
+        smooth_sigma_px: float,
+        lf_px: float,
+        lf_src: wp.array(dtype=int),
+        lf_tgt: wp.array(dtype=int),
+        gain_src: wp.vec4i,
+        bias_src: wp.vec4i,
+        gain_tgt: wp.vec4i,
+        bias_tgt: wp.vec4i,
         fill: wp.vec4i,
         out: wp.array(dtype=wp.uint8),
     ):
-        """out[y, x, c] from the plan (``composite_plan_kernel``); ``fill[c]`` where no side is.
+        """out[y, x, c] from the plan; per side ``gain * sample + bias + lf_weight * lf[line, c]``.
 
-        Flat arrays: ``img_*`` (H, W, C), ``out`` (Hc, Wc, C), ``plan*`` and ``alpha`` (Hc, Wc).
-        ``steps`` = (src x step, src y step, tgt x step, tgt y step) in elements: C and W*C (0 along an
-        axis of length 1). Thread (i, j) does row ``row0 + i``, columns j, j + col_step, ...: on CPU a
-        thread loops over a whole row (no per-pixel launch overhead, see ``runtime.launch_row_loops``),
-        on CUDA it does one pixel.
+        Flat arrays: ``img_*`` (H, W, C), ``out`` (Hc, Wc, C), ``plan*`` (Hc, Wc), ``lf_*`` (lines, C)
+        in 1/2**20 grey levels; gains in 1/2**12, biases in 1/2**20 grey levels. ``steps`` = (src x
+        step, src y step, tgt x step, tgt y step) in elements. Thread (i, j) does row ``row0 + i``,
+        columns j, j + col_step, ... (see ``runtime.launch_row_loops``).
         """
         i, j = wp.tid()
         y = row0 + i
@@ -199,33 +203,58 @@ def _composite_fixed_kernel(channels: int):
             o = q * wp.static(channels)
             word = plan[q]
             kind = int(word & wp.int64(3))
+            if kind == KIND_FILL:
+                for c in range(wp.static(channels)):
+                    out[o + c] = wp.uint8(fill[c])
+                continue
+            lp = line_and_position(x, y, lines_are_rows)
+            d = float(lp[1]) - seam[lp[0]]
+            lf = lf_weight(d, lf_px)
+            lo = lp[0] * wp.static(channels)
+            a = float(1.0)
+            if kind == KIND_TARGET:
+                a = 0.0
+            elif kind == KIND_BAND:
+                # The smoothed ramp's tails never reach 0 or 1 exactly: one side alone beyond 1e-4.
+                a = source_alpha(d, transition_px, smooth_sigma_px)
+                a = wp.where(a > 0.9999, 1.0, wp.where(a < 0.0001, 0.0, a))
             p = word_offset(word)
             fx = word_fx(word)
             fy = word_fy(word)
-            if kind == KIND_SOURCE:
+            if a >= 1.0:
                 for c in range(wp.static(channels)):
-                    out[o + c] = grey_level(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]))
-            elif kind == KIND_TARGET:
+                    off = int(0)
+                    if lf > 0.0:
+                        off = int(lf * float(lf_src[lo + c]))
+                    v = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], off)
+                    out[o + c] = grey_level(v)
+            elif a <= 0.0:
+                if kind == KIND_BAND:
+                    word = plan_tgt[q]
+                    p = word_offset(word)
+                    fx = word_fx(word)
+                    fy = word_fy(word)
                 for c in range(wp.static(channels)):
-                    out[o + c] = grey_level(sample_fixed(img_tgt, p + c, fx, fy, steps[2], steps[3]))
-            elif kind == KIND_BLEND:
+                    off = int(0)
+                    if lf > 0.0:
+                        off = int(lf * float(lf_tgt[lo + c]))
+                    v = adjusted(sample_fixed(img_tgt, p + c, fx, fy, steps[2], steps[3]), gain_tgt[c], bias_tgt[c], off)
+                    out[o + c] = grey_level(v)
+            else:
                 word_t = plan_tgt[q]
                 p_t = word_offset(word_t)
                 fx_t = word_fx(word_t)
                 fy_t = word_fy(word_t)
-                a = wp.int64(alpha[q])
-                shift = wp.int64(2 * FRAC_BITS + ALPHA_BITS)
                 for c in range(wp.static(channels)):
-                    mix = a * wp.int64(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1])) + (
-                        wp.int64(1 << ALPHA_BITS) - a) * wp.int64(sample_fixed(img_tgt, p_t + c, fx_t, fy_t, steps[2], steps[3]))
-                    out[o + c] = wp.uint8(wp.min(int((mix + (wp.int64(1) << (shift - wp.int64(1)))) >> shift), 255))
-            else:
-                for c in range(wp.static(channels)):
-                    out[o + c] = wp.uint8(fill[c])
+                    vs = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c],
+                                  int(lf * float(lf_src[lo + c])))
+                    vt = adjusted(sample_fixed(img_tgt, p_t + c, fx_t, fy_t, steps[2], steps[3]), gain_tgt[c], bias_tgt[c],
+                                  int(lf * float(lf_tgt[lo + c])))
+                    out[o + c] = grey_level(int(a * float(vs) + (1.0 - a) * float(vt)))
 
-    return composite_fixed
+    return composite_frame
 
 
-MAX_CHANNELS = 4  # the frame kernel takes the fill values as one vec4i
+MAX_CHANNELS = 4  # gains, biases and fill values travel as one vec4 each
 # The frame kernel per channel count, built at import so that ``runtime.prewarm`` loads them all.
-COMPOSITE_FIXED_KERNELS = {channels: _composite_fixed_kernel(channels) for channels in range(1, MAX_CHANNELS + 1)}
+COMPOSITE_FRAME_KERNELS = {channels: _composite_frame_kernel(channels) for channels in range(1, MAX_CHANNELS + 1)}

@@ -1,13 +1,14 @@
-"""Apply the three canvas maps to a frame pair: the per-frame path of images and videos.
+"""Apply the canvas maps and the seam to a frame pair: the per-frame path of images and videos.
 
 ``Compositor`` uploads the maps to the Warp device once and turns them, once per input shape, into a
-fixed-point plan (per pixel: which side is shown, its tap offset and sub-pixel fractions; alpha
-where the two blend, see ``kernels/composite.py``), so a video's per-frame cost is two uploads, one integer kernel launch and
-one download (SENA.md "Maps, not images": cached warps, per-frame compositing).
+fixed-point plan (see ``kernels/composite.py``). Per frame it takes the two images and, when they
+change, the seam positions (video: the seam re-optimised in its band), the per-side gains and the
+seam blend's low-frequency offsets; one integer-plan kernel launch composites the frame.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
@@ -15,8 +16,33 @@ import warp as wp
 
 from sena_warp.config import Config
 from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import COMPOSITE_FIXED_KERNELS, MAX_CHANNELS, composite_plan_kernel
+from sena_warp.kernels.composite import COMPOSITE_FRAME_KERNELS, MAX_CHANNELS, composite_plan_kernel
 from sena_warp.warp_map import as_channels
+
+
+@dataclass(frozen=True)
+class SeamLayout:
+    """Where the seam runs on the canvas and how wide its parts are (canvas pixels, input frame).
+
+    ``positions`` (L,) float32: the seam's position per line; a line is a canvas row when
+    ``lines_are_rows`` (the seam's x per row; the source is left of it), else a canvas column (the
+    seam's y per column; the source is above it). ``band_px``: half-width of the band in which the
+    frame's seam may move (both sides are kept there); ``transition_px`` and ``smooth_sigma_px``: the
+    mix across the seam (``kernels/seam.py``'s ``source_alpha``); ``lf_px``: half-width over which the
+    low-frequency offsets fade to 0.
+    """
+
+    positions: np.ndarray
+    lines_are_rows: bool
+    band_px: float
+    transition_px: float
+    smooth_sigma_px: float
+    lf_px: float
+
+
+IDENTITY = (np.ones(MAX_CHANNELS), np.zeros(MAX_CHANNELS))
+GAIN_ONE = 1 << 12  # kernel gains in 1/4096
+LEVEL = 1 << 20  # kernel biases and offsets in 1/2**20 grey levels
 
 
 class _Buffers:
@@ -30,42 +56,44 @@ class _Buffers:
         self.out = wp.empty((*canvas_shape, channels), dtype=wp.uint8, device=device)
         self.coverage = wp.empty(canvas_shape, dtype=wp.uint8, device=device)
         self.plan = wp.empty(pixels, dtype=wp.int64, device=device)
-        self.plan_tgt = wp.empty(pixels, dtype=wp.int64, device=device)  # read for blend pixels only
-        self.alpha = wp.empty(pixels, dtype=wp.uint16, device=device)  # likewise
+        self.plan_tgt = wp.empty(pixels, dtype=wp.int64, device=device)  # read for band pixels only
         self.plan_ready = False
-        # Neighbour taps in flat elements: C along x, W*C along y (0 on an axis of length 1).
         steps = wp.vec4i(
             channels * min(1, shape_src[1] - 1), channels * shape_src[1] * min(1, shape_src[0] - 1),
             channels * min(1, shape_tgt[1] - 1), channels * shape_tgt[1] * min(1, shape_tgt[0] - 1),
         )
-        # The frame kernel's inputs before (channels, fill, out); flat views of the (H, W, C) arrays.
-        self.frame_inputs = [self.src.flatten(), self.tgt.flatten(), steps, self.plan, self.plan_tgt, self.alpha]
+        self.frame_inputs = [self.src.flatten(), self.tgt.flatten(), steps, self.plan, self.plan_tgt]
         self.out_flat = self.out.flatten()
-        # On CPU the device arrays are host memory already; on CUDA copies go through pinned memory.
         on_cpu = device == "cpu"
         self.src_host = self.src if on_cpu else wp.empty(shape_src, dtype=wp.uint8, device="cpu", pinned=True)
         self.tgt_host = self.tgt if on_cpu else wp.empty(shape_tgt, dtype=wp.uint8, device="cpu", pinned=True)
 
 
 class Compositor:
-    """out = alpha * src(map_src) + (1 - alpha) * tgt(map_tgt), bilinear, on the Warp device.
+    """The panorama of a frame pair from the source / target maps and the seam, on the Warp device.
 
-    ``map_src_canvas``, ``map_tgt_canvas``: (Hc, Wc, 2) float32 (x, y) sample positions in the
-    source / target; ``alpha_canvas``: (Hc, Wc) float32 weight of the source. Runs on ``cfg.device``
-    (resolved, ``runtime.resolve_config``) with ``cfg.cpu_threads`` row-band threads. Results match
-    the float rule of ``kernels.composite.composite_kernel`` within 1 grey level (positions in
-    1/1024 px, alpha in 1/16384).
+    ``map_src_canvas``, ``map_tgt_canvas``: (Hc, Wc, 2) float32 (x, y) sample positions in the source
+    / target (input frame); ``seam``: its layout. Runs on ``cfg.device`` (resolved,
+    ``runtime.resolve_config``) with ``cfg.cpu_threads``. Gains default to the identity and offsets to
+    zero until set.
     """
 
-    def __init__(self, map_src_canvas: np.ndarray, map_tgt_canvas: np.ndarray, alpha_canvas: np.ndarray, cfg: Config):
-        self.canvas_shape = tuple(np.asarray(alpha_canvas).shape[:2])
-        if map_src_canvas.shape[:2] != self.canvas_shape or map_tgt_canvas.shape[:2] != self.canvas_shape:
-            raise ValueError("map_src_canvas, map_tgt_canvas and alpha_canvas must share one (Hc, Wc)")
-        self.device = device = cfg.device
-        self.threads = cfg.cpu_threads
-        self.map_src = wp.array(np.ascontiguousarray(map_src_canvas, dtype=np.float32), dtype=wp.vec2, device=device)
-        self.map_tgt = wp.array(np.ascontiguousarray(map_tgt_canvas, dtype=np.float32), dtype=wp.vec2, device=device)
-        self.alpha = wp.array(np.ascontiguousarray(alpha_canvas, dtype=np.float32), dtype=float, device=device)
+    def __init__(self, map_src_canvas: np.ndarray, map_tgt_canvas: np.ndarray, seam: SeamLayout, cfg: Config):
+        device, threads = cfg.device, cfg.cpu_threads
+        self.canvas_shape = tuple(np.asarray(map_src_canvas).shape[:2])
+        if map_tgt_canvas.shape[:2] != self.canvas_shape:
+            raise ValueError("map_src_canvas and map_tgt_canvas must share one (Hc, Wc)")
+        lines = self.canvas_shape[0] if seam.lines_are_rows else self.canvas_shape[1]
+        if seam.positions.shape != (lines,):
+            raise ValueError(f"the seam needs one position per line ({lines}), got {seam.positions.shape}")
+        self.device, self.threads, self.layout = device, threads, seam
+        self.lines = lines
+        self.map_src = wp.array(np.ascontiguousarray(map_src_canvas, np.float32), dtype=wp.vec2, device=device)
+        self.map_tgt = wp.array(np.ascontiguousarray(map_tgt_canvas, np.float32), dtype=wp.vec2, device=device)
+        self.seam_static = wp.array(np.ascontiguousarray(seam.positions, np.float32), dtype=float, device=device)
+        self.seam = wp.clone(self.seam_static)
+        self._lf = {}
+        self._gains = {}
         self._buffers: dict[tuple, _Buffers] = {}
 
     @property
@@ -74,15 +102,39 @@ class Compositor:
         order: a video's frames, all of one shape, reuse a single one."""
         return tuple(self._buffers)
 
-    def set_maps(self, map_src_canvas: np.ndarray | None = None, map_tgt_canvas: np.ndarray | None = None,
-                 alpha_canvas: np.ndarray | None = None) -> None:
-        """Upload new maps (same shapes) in place; the plans are rebuilt on the next ``apply``."""
-        for array, values in ((self.map_src, map_src_canvas), (self.map_tgt, map_tgt_canvas),
-                              (self.alpha, alpha_canvas)):
-            if values is not None:
-                array.assign(np.ascontiguousarray(values, dtype=np.float32))
+    def set_maps(self, map_src_canvas: np.ndarray, positions: np.ndarray) -> None:
+        """A new source map (same shape) and static seam; the plans are rebuilt on the next ``apply``."""
+        self.map_src.assign(np.ascontiguousarray(map_src_canvas, np.float32))
+        self.layout = replace(self.layout, positions=np.asarray(positions, np.float32))
+        self.seam_static.assign(self.layout.positions)
+        self.seam.assign(self.layout.positions)
         for buf in self._buffers.values():
             buf.plan_ready = False
+
+    def set_seam(self, positions: np.ndarray) -> None:
+        """This frame's seam (L,) float32, kept within the band around the static seam."""
+        static = self.layout.positions
+        reach = max(self.layout.band_px - 0.5 * self.layout.transition_px, 0.0)
+        self.seam.assign(np.clip(positions, static - reach, static + reach).astype(np.float32))
+
+    def set_gains(self, channels: int, gain_src, bias_src, gain_tgt, bias_tgt) -> None:
+        """Per-channel affine gains of each side for images of ``channels`` channels."""
+        def vec(values, default, unit):
+            v = np.array(default, np.float64)
+            v[:channels] = values
+            return wp.vec4i(*np.rint(v * unit).astype(int).tolist())
+        self._gains[channels] = (vec(gain_src, IDENTITY[0], GAIN_ONE), vec(bias_src, IDENTITY[1], LEVEL),
+                                 vec(gain_tgt, IDENTITY[0], GAIN_ONE), vec(bias_tgt, IDENTITY[1], LEVEL))
+
+    def set_offsets(self, lf_src: np.ndarray, lf_tgt: np.ndarray) -> None:
+        """Low-frequency offsets (L, C) float32 of each side at the seam (grey levels)."""
+        channels = lf_src.shape[1]
+        arrays = self._lf.get(channels)
+        if arrays is None:
+            arrays = self._lf[channels] = (wp.zeros(self.lines * channels, dtype=int, device=self.device),
+                                           wp.zeros(self.lines * channels, dtype=int, device=self.device))
+        arrays[0].assign(np.rint(np.ascontiguousarray(lf_src, np.float64).ravel() * LEVEL).astype(np.int32))
+        arrays[1].assign(np.rint(np.ascontiguousarray(lf_tgt, np.float64).ravel() * LEVEL).astype(np.int32))
 
     def _buffers_for(self, shape_src: tuple, shape_tgt: tuple) -> _Buffers:
         key = (shape_src, shape_tgt)
@@ -90,20 +142,19 @@ class Compositor:
             self._buffers[key] = _Buffers(shape_src, shape_tgt, self.canvas_shape, self.device)
         buf = self._buffers[key]
         if not buf.plan_ready:
-            inputs = [self.map_src, self.map_tgt, self.alpha, wp.vec3i(*shape_src), wp.vec3i(*shape_tgt),
-                      buf.plan, buf.plan_tgt, buf.alpha, buf.coverage]
+            inputs = [self.map_src, self.map_tgt, self.seam_static, int(self.layout.lines_are_rows),
+                      float(self.layout.band_px), wp.vec3i(*shape_src), wp.vec3i(*shape_tgt),
+                      buf.plan, buf.plan_tgt, buf.coverage]
             runtime.launch_rows(composite_plan_kernel, *self.canvas_shape, inputs, self.device, self.threads)
             buf.plan_ready = True
         return buf
 
-    def apply(self, img_src: np.ndarray, img_tgt: np.ndarray,
-              fill: Sequence[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Composite one pair of uint8 images (H, W, C) or planes (H, W), same C on both sides.
+    def coverage(self, shape_src: tuple, shape_tgt: tuple) -> np.ndarray:
+        """(Hc, Wc) uint8 255 where at least one side of images of these shapes is sampled, else 0."""
+        return self._buffers_for(tuple(shape_src), tuple(shape_tgt)).coverage.numpy()
 
-        ``fill``: the C values of pixels no side covers (default 0). Returns (out uint8 (Hc, Wc, C),
-        or (Hc, Wc) for planes; coverage uint8 (Hc, Wc), 255 where at least one side was sampled,
-        else 0). Both are fresh arrays the caller may keep.
-        """
+    def apply(self, img_src: np.ndarray, img_tgt: np.ndarray, fill: Sequence[int] | None = None) -> np.ndarray:
+        """Composite uint8 images (H, W, C) or planes (H, W), same C on both sides: (Hc, Wc[, C]) uint8."""
         src3, tgt3 = as_channels(img_src), as_channels(img_tgt)
         if src3.shape[2] != tgt3.shape[2]:
             raise ValueError(f"source has {src3.shape[2]} channels, target {tgt3.shape[2]}")
@@ -114,14 +165,22 @@ class Compositor:
         values = [int(v) for v in fill] if fill is not None else [0] * channels
         if len(values) != channels:
             raise ValueError(f"fill has {len(values)} values for {channels} channels")
-        fill_vec = wp.vec4i(*values, *[0] * (MAX_CHANNELS - channels))
+        if channels not in self._gains:
+            self.set_gains(channels, *(v[:channels] for v in IDENTITY * 2))
+        if channels not in self._lf:
+            zeros = np.zeros((self.lines, channels), np.float32)
+            self.set_offsets(zeros, zeros)
         np.copyto(buf.src_host.numpy(), src3)
         np.copyto(buf.tgt_host.numpy(), tgt3)
         if buf.src_host is not buf.src:
             wp.copy(buf.src, buf.src_host)
             wp.copy(buf.tgt, buf.tgt_host)
-        inputs = [*buf.frame_inputs, fill_vec, buf.out_flat]
-        runtime.launch_row_loops(COMPOSITE_FIXED_KERNELS[channels], *self.canvas_shape, inputs, self.device,
+        lf_src, lf_tgt = self._lf[channels]
+        inputs = [*buf.frame_inputs, self.seam, int(self.layout.lines_are_rows), float(self.layout.transition_px),
+                  float(self.layout.smooth_sigma_px), float(self.layout.lf_px), lf_src, lf_tgt, *self._gains[channels],
+                  wp.vec4i(*values, *[0] * (MAX_CHANNELS - channels)), buf.out_flat]
+        runtime.launch_row_loops(COMPOSITE_FRAME_KERNELS[channels], *self.canvas_shape, inputs, self.device,
                                  self.threads)
         out = buf.out.numpy()
-        return (out[:, :, 0] if np.ndim(img_src) == 2 else out).copy(), buf.coverage.numpy().copy()
+        return out[:, :, 0] if np.ndim(img_src) == 2 else out
+
