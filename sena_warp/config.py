@@ -22,6 +22,9 @@ class Config:
     xfeat_top_k: int = 4096  # keypoints kept per image, by score = prob x reliability
     min_cossim: float = 0.82  # mutual-NN matches need cosine similarity >= this
     sift_ratio: float = 0.75  # Lowe ratio for the SIFT alternative
+    support_neighbours: int = 8  # a match is trusted where enough of this many nearest matches ...
+    support_tol_px: float = 3.0  # ... move like it, within this (wrong matches on periodic patterns do not)
+    support_min: int = 2  # ... at least this many
 
     # --- Step 1: global affine A_glob ---------------------------------------------------------
     ransac_reproj_px: float = 3.0  # RANSAC inlier threshold
@@ -56,6 +59,12 @@ class Config:
     w_delta: float = 0.002  # omega_delta
 
     # --- Step 4: FFD field --------------------------------------------------------------------
+    ffd_model: str = "fit"  # "fit": lattice fitted to the matches (ours, ffd.py); "blend": the paper's blend of T_j
+    lattice_nodes: float = 25.0  # fit: lattice nodes are image diagonal / this apart over the canvas
+    lambda_bend: float = 1e-6  # lambda_b, fit: thin-plate bending energy against the match residuals (scale-free)
+    fit_match_px: float = 50.0  # fit: matches within this of A_glob take part (the IRLS drops wrong ones)
+    fit_tukey_px: float = 4.0  # fit: Tukey biweight scale of the iteratively reweighted fit
+    fit_iterations: int = 4  # fit: reweighted least-squares solves
     lattice_nx: int = 64  # N_x: FFD lattice nodes across the canvas
     lattice_ny: int = 64  # N_y: FFD lattice nodes down the canvas
     alpha_f: float = 0.35  # alpha_f: sigma_f = alpha_f * mean cell diagonal
@@ -63,6 +72,7 @@ class Config:
     sigma_l_nodes: float = 0.6  # sigma_l: Gaussian blur on the lattice, in nodes
 
     # --- Step 5: seam guard (gate G) ----------------------------------------------------------
+    gate_model: str = "none"  # "none": D as fitted (ours); "paper": G ramps D in from the source-only border
     ramp_min_px: float = 40.0  # b = max(ramp_min_px, ramp_diag_ratio * image diagonal)
     ramp_diag_ratio: float = 0.10
     sigma_d_ratio: float = 24.0 / 512.0  # sigma_d: density blur, as a fraction of the image's long side
@@ -82,13 +92,45 @@ class Config:
     flat_min_std: float = 4.0  # drop points whose local grey std is below this (flat regions)
     flat_patch_px: int = 7  # patch side for the flatness and brightness tests
 
-    # --- Step 8: keypoint chain ---------------------------------------------------------------
+    # --- Step 8: keypoint chain and seam path ------------------------------------------------
     brightness_max_diff: float = 25.0  # max mean grey difference between warped-source and target patches
+    seam_model: str = "path"  # "path": cheapest path through anchors (ours, seam_path.py); "paper": straight lines
+    seam_coarse_px: int = 700  # path: the first search runs on a canvas reduced to this long side
+    seam_max_step_px: int = 2  # path: sideways step per canvas row at most (and of the anchor chain)
+    seam_step_cost: float = 2.0  # path: cost per pixel of sideways step (grey levels): no near-horizontal runs
+    seam_gradient_weight: float = 1.0  # path: weight of the gradient difference beside the colour difference
+    seam_edge_weight: float = 0.5  # path: weight of the edge strength (cutting structure costs)
+    seam_separation_weight: float = 40.0  # path: cost per row of a seam position between a match's two copies
+    seam_separation_rows: int = 3  # path: rows above and below a match that carry that cost
+    seam_separation_min_px: float = 2.0  # path: copies closer than this are one point
+    seam_separation_max_px: float = 150.0  # path: copies farther apart than this: a wrong match, ignored
+    seam_unique_weight: float = 0.0  # path: weight of the structure a seam position would hide
+    seam_unique_sigma_px: float = 8.0  # path: smoothing of differences and edge energy for that term
+    seam_unique_diff: float = 20.0  # path: views differing by more (grey levels, blurred) show different things
+    seam_unique_norm: float = 0.01  # path: hidden structure is summed along a row, per this fraction of its width
+    seam_zone_margin: float = 0.5  # path: the search spans the adequate zone widened by this x its width each side
+    seam_anchor_px: float = 2.0  # path: anchors lie within this of the reduced-canvas path (reduced px)
+    seam_anchor_spacing_px: float = 6.0  # path: anchors at least this far apart down the seam
+    seam_refine_px: int = 3  # path: full-resolution band half-width beyond the reduction factor (2 f + this)
+    correction_smooth: float = 50.0  # path: smoothing of the anchor residual curve (second differences, per 8 rows)
 
     # --- Step 9: partition and reconstruction -------------------------------------------------
-    transition_px: int = 24  # width of the linear alpha ramp across the seam
+    transition_px: int = 8  # width of the linear alpha ramp across the seam (paper's code: 24; sweep in evaluation.md)
     seam_smooth_sigma_px: float = 1.5  # light Gaussian smoothing inside the transition only
     seam_fade_px: float = 64.0  # distance beyond the transition over which the source's anchor correction fades to 0
+    seam_blend_ratio: float = 0.08  # seam blend: low-frequency offsets fade over this x image diagonal (0: off)
+    seam_blend_strip_px: int = 12  # seam blend: the offsets are measured within this of the seam
+    seam_blend_rows: int = 31  # seam blend: and averaged over this many rows
+
+    # --- Exposure compensation (Brown & Lowe 2007; no step of the paper) ------------------------
+    gain_model: str = "channels"  # "channels": per-channel gains (gains.py); "opencv": cv2's ChannelsCompensator; "none"
+    gain_sigma_n: float = 10.0  # sigma_N: std of the intensity error (grey levels)
+    gain_sigma_g: float = 0.1  # sigma_g: std of the gains' prior around 1
+    gain_outlier_fraction: float = 0.2  # the largest differences (misalignment, moving things) left out
+    gain_dark_level: float = 5.0  # pixels at or below this in any channel left out (clipped)
+    gain_bright_level: float = 250.0  # pixels at or above this left out (saturated)
+    gain_stride: int = 2  # every this-th overlap pixel in each direction is used
+    gain_min_pixels: int = 500  # fewer agreeing pixels: no compensation
 
     # --- Video I/O (no paper symbol: encoder and pipeline settings) ---------------------------
     video_codec: str = "libx264"  # H.264 encoder: "libx264" or "h264_nvenc" (falls back to libx264)

@@ -71,7 +71,8 @@ def draw_overlap_cells(img_tgt: np.ndarray, warp) -> np.ndarray:
     poly = np.round(warp.overlap.polygon_canvas).astype(np.int32)
     cv2.polylines(pic, [poly], True, (0, 255, 255), 2, cv2.LINE_AA)
     offset = np.asarray(canvas.offset_tgt)
-    for centre, conf, affine in zip(warp.local.centres_tgt, warp.local.conf, warp.local.affines_src_to_tgt):
+    cells = () if warp.local is None else zip(warp.local.centres_tgt, warp.local.conf, warp.local.affines_src_to_tgt)
+    for centre, conf, affine in cells:
         c = tuple(int(round(v)) for v in centre + offset)
         cv2.circle(pic, c, 6, (0, 0, 255), -1, cv2.LINE_AA)
         cv2.putText(pic, f"conf {conf:.2f}", (c[0] + 8, c[1]), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 255), 1,
@@ -109,15 +110,16 @@ def draw_warped_over_target(img_src: np.ndarray, img_tgt: np.ndarray, warp, cfg:
 
 
 def draw_seam(pano_working: np.ndarray, seam) -> np.ndarray:
-    """The panorama with the adequate zone (blue band), the anchors (red) and the seam (green)."""
+    """The panorama with the adequate zone (blue band), the anchors (red), the seam (green) and the
+    reduced-canvas path it was refined from (yellow)."""
     pic = pano_working[:, :, :3].copy()
     x0, x1 = int(round(seam.zone.x0)), int(round(seam.zone.x1))
     band = pic[:, x0:x1 + 1].astype(np.uint16)
     band[:, :, 0] = np.minimum(band[:, :, 0] + 80, 255)
     pic[:, x0:x1 + 1] = band.astype(np.uint8)
-    seam_x = seam.maps.seam_x_canvas
-    pts = np.stack([seam_x, np.arange(len(seam_x))], axis=1)
-    cv2.polylines(pic, [np.round(pts).astype(np.int32)], False, (0, 255, 0), 1, cv2.LINE_AA)
+    for seam_x, colour in ((seam.path.coarse_x_canvas, (0, 255, 255)), (seam.maps.seam_x_canvas, (0, 255, 0))):
+        pts = np.stack([seam_x, np.arange(len(seam_x))], axis=1)
+        cv2.polylines(pic, [np.round(pts).astype(np.int32)], False, colour, 1, cv2.LINE_AA)
     for a in np.round(seam.anchors_tgt_canvas).astype(int):
         cv2.circle(pic, tuple(a), 4, (0, 0, 255), -1, cv2.LINE_AA)
     return pic
@@ -137,7 +139,7 @@ def dump_stages(folder, img_a: np.ndarray, img_b: np.ndarray, pano, cfg: Config)
         "01_matches.jpg": draw_matches(img_a, img_b, maps.matches),
         "02_overlap_cells.jpg": draw_overlap_cells(img_tgt, maps.warp),
         "03_ffd_field.jpg": draw_field(maps.warp.field_canvas),
-        "04_gate.jpg": _heatmap(maps.warp.gate_canvas, 1.0),
+        **({} if maps.warp.gate_canvas is None else {"04_gate.jpg": _heatmap(maps.warp.gate_canvas, 1.0)}),
         "05_warped_over_target.jpg": draw_warped_over_target(img_src, img_tgt, maps.warp, cfg),
         "06_zone_chain_seam.jpg": draw_seam(pano_working, maps.seam),
         "07_alpha.jpg": _heatmap(maps.seam.maps.alpha_canvas, 1.0),

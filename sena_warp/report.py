@@ -22,7 +22,7 @@ def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, metrics: 
                  crop_xywh: tuple[int, int, int, int] | None = None) -> dict:
     """The ``--report`` of ``sena-warp image``; ``metrics``: name -> figure (NaN: not measurable)."""
     maps = pano.maps
-    warp, seam, local = maps.warp, maps.seam, maps.warp.local
+    warp, seam = maps.warp, maps.seam
     zone = seam.zone
     return {
         "inputs": {"a": _size(img_a), "b": _size(img_b)},
@@ -32,19 +32,35 @@ def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, metrics: 
                      "matches": len(maps.matches)},
         "global_affine": {"model": warp.glob.model, "inliers": warp.glob.n_inliers,
                           "matrix_src_to_tgt": _nums(warp.glob.affine_src_to_tgt)},
-        "local_affines": {"cells": len(local.conf), "conf": _nums(local.conf), "refit": local.refit.tolist(),
-                          "rmse_px": _nums(local.rmse_px),
-                          "similarity_deviation": _nums(similarity_deviation(local.affines_src_to_tgt))},
+        "warp": warp_figures(warp, cfg),
         "canvas": {"width": int(pano.image.shape[1]), "height": int(pano.image.shape[0]),
                    "crop_xywh": list(crop_xywh) if crop_xywh is not None else None},
         "zone": {"x0_canvas": _num(zone.x0), "x1_canvas": _num(zone.x1), "fallback": bool(zone.fallback),
                  "clusters": len(zone.clusters), "points": int(len(zone.point_indices))},
+        "gains": {"model": cfg.gain_model, "source": _nums(seam.gains.gain_src), "target": _nums(seam.gains.gain_tgt),
+                  "pixels": seam.gains.pixels},
         "anchors": {"count": int(len(seam.anchors_tgt_canvas)),
                     "src_canvas": _nums(seam.anchors_src_canvas), "tgt_canvas": _nums(seam.anchors_tgt_canvas),
                     "frame": "working (transposed for a vertical rig)"},
         "metrics": {name: _num(value) for name, value in metrics.items()},
         "seconds": {k: _num(v) for k, v in pano.seconds.items()},
     }
+
+
+def warp_figures(warp, cfg: Config) -> dict:
+    """Step 3-5 figures of the warp's model: the fitted lattice (``ffd_model="fit"``) or the paper's
+    local affines (``"blend"``), and whether a gate damped it."""
+    figures: dict = {"ffd_model": cfg.ffd_model, "gate_model": cfg.gate_model,
+                     "lattice_nodes": list(warp.lattice.shape[:2])}
+    if warp.fit is not None:
+        used = warp.fit.weights > 0
+        figures.update(matches_used=int(warp.fit.used.sum()), matches_kept=int(used.sum()),
+                       residual_median_px=_num(np.median(warp.fit.residual_px[used])) if used.any() else None)
+    if warp.local is not None:
+        local = warp.local
+        figures.update(cells=len(local.conf), conf=_nums(local.conf), refit=local.refit.tolist(),
+                       rmse_px=_nums(local.rmse_px), similarity_deviation=_nums(similarity_deviation(local.affines_src_to_tgt)))
+    return figures
 
 
 def write_json(path: str | os.PathLike, data: dict) -> None:

@@ -1,13 +1,18 @@
 """The SENA stitch, one stage per line (SENA.md steps 0-9).
 
-``estimate_maps`` turns two images into three per-pixel maps over the output canvas (where to sample
-the source, where to sample the target, the alpha between them); ``stitch_images`` applies them once.
-The video path estimates maps the same way and applies them to every frame pair.
+``estimate_maps`` turns two images into what the compositor needs over the output canvas: where to
+sample the source, where to sample the target, the seam between them (and so the alpha), each view's
+exposure gains and the seam blend's offsets; ``stitch_images`` applies them once. The video path
+estimates maps the same way and applies them to every frame pair.
 
 Stages run in the *working frame* of :mod:`sena_warp.rig` (source left, vertical rigs transposed):
 every ``*_canvas`` array here is on the working-frame canvas. The final maps are expressed once in
 the input frame (``*_input``: the same canvas, transposed back for a vertical rig) so the
 compositor never transposes frames.
+
+Where this departs from the paper (issue 13, ``docs/evaluation.md``), the paper's version stays one
+setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
+``seam_model="paper"`` (steps 8-9), ``gain_model="none"``, ``seam_blend_ratio=0``, ``transition_px=24``.
 """
 
 from __future__ import annotations
@@ -17,24 +22,28 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from .cells import grid_cells
-from .chain import keypoint_chain
-from .composite import Compositor
+from .composite import Compositor, SeamLayout
 from .config import Config
-from .features import Matches, match_images
-from .ffd import ffd_field_canvas
+from .errors import InputError
+from .features import Matches, match_images, neighbour_supported
+from .ffd import LatticeFit, field_from_lattice, fitted_lattice, smoothed_blend_lattice
+from .gains import Gains, compensated_views, view_gains
 from .gate import gate_canvas, guard_field
 from .global_affine import GlobalAffine, fit_global_affine, near_model
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
-from .partition import SeamMaps, seam_maps
+from .partition import SeamMaps, SeamOffsets, seam_maps, seam_offsets
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
-from .warp_map import forward_points, remap_image, source_map_canvas
+from .seam_path import SeamPath, seam_line
+from .warp_map import CanvasViews, canvas_views, forward_points, source_map_canvas
 from .zone import Zone, adequate_zone
 from sena_warp.kernels import runtime
+
+FFD_MODELS = ("fit", "blend")
+GATE_MODELS = ("none", "paper")
 
 
 class StageClock:
@@ -52,42 +61,62 @@ class StageClock:
 
 @dataclass(frozen=True)
 class Warp:
-    """Steps 1-6 in the working frame: models, overlap, gate and the source sampling map (working canvas)."""
+    """Steps 1-6 in the working frame: models, overlap, the FFD field and the source sampling map
+    (working canvas).
+
+    ``local`` (the paper's local affines) is None with ``ffd_model="fit"``, ``fit`` (the fitted
+    lattice) None with ``"blend"``; ``gate_canvas`` is None without a gate (``gate_model="none"``).
+    ``inliers_*`` are the matches the warp follows: the fit's matches it kept, or A_glob's inliers.
+    """
 
     glob: GlobalAffine
     overlap: Overlap
-    local: LocalAffines
-    inliers_src: np.ndarray  # (N, 2) inlier source points, source pixels
-    inliers_tgt: np.ndarray  # (N, 2) matching target points, target pixels
+    local: LocalAffines | None
+    fit: LatticeFit | None
+    inliers_src: np.ndarray  # (N, 2) source points, working-frame source pixels
+    inliers_tgt: np.ndarray  # (N, 2) matching target points, working-frame target pixels
+    lattice: np.ndarray  # (Ny, Nx, 2) float32 FFD lattice (source px) before the gate
     field_canvas: np.ndarray  # (H, W, 2) float32 FFD displacement before the gate (source px)
-    gate_canvas: np.ndarray  # (H, W) float32 G in [0, 1]
+    gate_canvas: np.ndarray | None  # (H, W) float32 G in [0, 1]
     map_src_canvas: np.ndarray  # (H, W, 2) float32 M_s: working-frame source (x, y) per working-canvas pixel
 
 
 @dataclass(frozen=True)
 class Seam:
-    """Steps 7-9 in the working frame (positions and maps on the working canvas)."""
+    """Steps 7-9 in the working frame (positions and maps on the working canvas): the zone, the seam's
+    path and anchors, the seam maps, each view's gains and the seam blend's offsets."""
 
     zone: Zone
-    anchors_src_canvas: np.ndarray  # (K, 2) warped-source anchor positions
-    anchors_tgt_canvas: np.ndarray  # (K, 2) target anchor positions
+    path: SeamPath
     maps: SeamMaps
+    gains: Gains
+    offsets: SeamOffsets
+
+    @property
+    def anchors_src_canvas(self) -> np.ndarray:
+        return self.path.anchors_src_canvas
+
+    @property
+    def anchors_tgt_canvas(self) -> np.ndarray:
+        return self.path.anchors_tgt_canvas
 
 
 @dataclass
 class StitchMaps:
     """What a stitch needs to be applied to any frame pair of the same two cameras.
 
-    The three maps are in the INPUT frame (the panorama as written; ``warp`` and ``seam`` hold the
+    The maps are in the INPUT frame (the panorama as written; ``warp`` and ``seam`` hold the
     working-frame ones): ``map_src_input[y, x]`` (H, W, 2) float32 is the (x, y) to sample in the
     source input image (``rig.source``), ``map_tgt_input`` likewise in the target input image,
-    ``alpha_input`` (H, W) float32 the source weight.
+    ``alpha_input`` (H, W) float32 the source weight (what ``seam_input`` gives), ``seam_input`` the
+    seam's layout for the compositor (per input row, or per input column for a vertical rig).
     """
 
     rig: Rig
     map_src_input: np.ndarray
     map_tgt_input: np.ndarray
     alpha_input: np.ndarray
+    seam_input: SeamLayout
     matches: Matches
     warp: Warp
     seam: Seam
@@ -104,46 +133,69 @@ class Panorama:
 def estimate_warp(img_src: np.ndarray, img_tgt: np.ndarray, pts_src: np.ndarray, pts_tgt: np.ndarray,
                   cfg: Config, clock: StageClock) -> Warp:
     """SENA steps 1-6 ("Locally adaptive image warping") in the working frame; ``cfg.device`` resolved."""
+    if cfg.ffd_model not in FFD_MODELS or cfg.gate_model not in GATE_MODELS:
+        raise InputError(f"ffd_model must be one of {FFD_MODELS} and gate_model one of {GATE_MODELS}")
     with clock("global_affine"):
         glob = fit_global_affine(pts_src, pts_tgt, cfg)
     affine = glob.affine_src_to_tgt
     near = near_model(affine, pts_src, pts_tgt, cfg.local_match_px)
-    near_src, near_tgt = pts_src[near], pts_tgt[near]
     with clock("overlap"):
         overlap = plan_overlap(img_src.shape, img_tgt.shape, affine, cfg)
-    with clock("cells"):
-        cells = grid_cells(overlap, cfg)
-    with clock("local_affines"):
-        local = fit_local_affines(near_src, near_tgt, affine, cells, cfg)
-    with clock("ffd"):
-        field = ffd_field_canvas(overlap.canvas, affine, local.affines_src_to_tgt, local.centres_tgt, local.conf,
-                                 sigma_f(local, cfg), cfg)
-    with clock("gate"):
-        gate = gate_canvas(source_only_mask(overlap), overlap.canvas.tgt_to_canvas(near_tgt),
-                           _diagonal_px(img_src, img_tgt), _long_side_px(img_src, img_tgt), cfg)
-        field_guarded = guard_field(field, gate, cfg)
+    local, fit = None, None
+    if cfg.ffd_model == "fit":
+        with clock("ffd"):
+            fit = fitted_lattice(overlap.canvas, affine, pts_src, pts_tgt, _diagonal_px(img_src, img_tgt), cfg)
+        kept = np.flatnonzero(fit.used)[fit.weights > 0]
+        inliers_src, inliers_tgt, lattice = pts_src[kept], pts_tgt[kept], fit.lattice
+    else:
+        with clock("cells"):
+            cells = grid_cells(overlap, cfg)
+        with clock("local_affines"):
+            local = fit_local_affines(pts_src[near], pts_tgt[near], affine, cells, cfg)
+        with clock("ffd"):
+            lattice = smoothed_blend_lattice(overlap.canvas, affine, local.affines_src_to_tgt, local.centres_tgt,
+                                             local.conf, sigma_f(local, cfg), cfg)
+        inliers_src, inliers_tgt = pts_src[glob.inliers], pts_tgt[glob.inliers]
+    field_canvas = field_from_lattice(lattice, overlap.canvas)
+    gate, field_guarded = None, field_canvas
+    if cfg.gate_model == "paper":
+        with clock("gate"):
+            gate = gate_canvas(source_only_mask(overlap), overlap.canvas.tgt_to_canvas(pts_tgt[near]),
+                               _diagonal_px(img_src, img_tgt), _long_side_px(img_src, img_tgt), cfg)
+            field_guarded = guard_field(field_canvas, gate, cfg)
     with clock("warp_map"):
         map_src = source_map_canvas(overlap.canvas, affine, field_guarded, cfg)
-    return Warp(glob, overlap, local, pts_src[glob.inliers], pts_tgt[glob.inliers], field, gate, map_src)
+    return Warp(glob, overlap, local, fit, inliers_src, inliers_tgt, lattice, field_canvas, gate, map_src)
 
 
-def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, warp: Warp, cfg: Config, clock: StageClock) -> Seam:
-    """SENA steps 7-9 ("Optimal stitching line", "Partitioning and Reconstruction") in the working frame;
-    ``cfg.device`` resolved."""
-    canvas, mask_canvas = warp.overlap.canvas, warp.overlap.mask_canvas
+def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndarray, matches_tgt: np.ndarray,
+                  warp: Warp, cfg: Config, clock: StageClock) -> Seam:
+    """SENA steps 7-9 ("Optimal stitching line", "Partitioning and Reconstruction") in the working frame,
+    with each view's gains and the seam blend; ``cfg.device`` resolved. ``matches_*``: every match
+    (N, 2), working-frame source / target pixels: where its neighbours support it, the seam does not
+    separate its two copies."""
+    canvas = warp.overlap.canvas
+    supported = neighbour_supported(matches_src, matches_tgt, cfg.support_neighbours, cfg.support_tol_px,
+                                    cfg.support_min)
     with clock("forward_points"):
         pts_src_canvas = forward_points(warp.map_src_canvas, warp.glob.affine_src_to_tgt, canvas, warp.inliers_src, cfg)
+        copies_src_canvas = forward_points(warp.map_src_canvas, warp.glob.affine_src_to_tgt, canvas, matches_src[supported], cfg)
     pts_tgt_canvas = canvas.tgt_to_canvas(warp.inliers_tgt)
-    with clock("grey_canvas"):
-        grey_src_canvas, grey_tgt_canvas = _grey_canvas(img_src, img_tgt, warp, cfg)
+    with clock("views"):
+        views = canvas_views(img_src, img_tgt, warp.map_src_canvas, canvas, cfg)
+    with clock("gains"):
+        gains = view_gains(views, cfg)
+        views = compensated_views(views, gains)
     with clock("zone"):
-        zone = adequate_zone(pts_src_canvas, pts_tgt_canvas, mask_canvas, grey_src_canvas, grey_tgt_canvas, cfg)
+        zone = adequate_zone(pts_src_canvas, pts_tgt_canvas, views.both, *views.grey(), cfg)
     with clock("chain"):
-        anchors_src, anchors_tgt = keypoint_chain(zone, pts_src_canvas, pts_tgt_canvas, grey_src_canvas,
-                                                  grey_tgt_canvas, mask_canvas, cfg)
+        path = seam_line(zone, views, pts_src_canvas, pts_tgt_canvas, copies_src_canvas,
+                         canvas.tgt_to_canvas(matches_tgt[supported]), cfg)
     with clock("seam_maps"):
-        maps = seam_maps(warp.map_src_canvas, canvas, anchors_src, anchors_tgt, cfg)
-    return Seam(zone, anchors_src, anchors_tgt, maps)
+        maps = seam_maps(warp.map_src_canvas, canvas, path, cfg)
+    with clock("seam_blend"):
+        offsets = seam_offsets(views, path.seam_x_canvas, _diagonal_px(img_src, img_tgt), cfg)
+    return Seam(zone, path, maps, gains, offsets)
 
 
 def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
@@ -162,17 +214,36 @@ def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
     warp = estimate_warp(img_src, img_tgt, pts_src, pts_tgt, cfg, clock)
-    seam = estimate_seam(img_src, img_tgt, warp, cfg, clock)
+    seam = estimate_seam(img_src, img_tgt, pts_src, pts_tgt, warp, cfg, clock)
     return StitchMaps(
         rig=rig,
         map_src_input=map_from_working(seam.maps.map_src_canvas, rig),
         map_tgt_input=map_from_working(seam.maps.map_tgt_canvas, rig),
         alpha_input=map_from_working(seam.maps.alpha_canvas, rig),
+        seam_input=seam_layout(seam, rig, cfg),
         matches=matches,
         warp=warp,
         seam=seam,
         seconds=clock.seconds,
     )
+
+
+def seam_layout(seam: Seam, rig: Rig, cfg: Config, band_px: float | None = None) -> SeamLayout:
+    """The seam as the compositor takes it: per working-frame row = per input row, or per input column
+    for a vertical rig. ``band_px`` defaults to the transition's reach (a seam fixed for good)."""
+    reach = 0.5 * cfg.transition_px + 3.0 * cfg.seam_smooth_sigma_px
+    return SeamLayout(positions=np.asarray(seam.path.seam_x_canvas, np.float32), lines_are_rows=not rig.vertical,
+                      band_px=reach if band_px is None else band_px, transition_px=float(cfg.transition_px),
+                      smooth_sigma_px=float(cfg.seam_smooth_sigma_px), lf_px=seam.offsets.fade_px)
+
+
+def panorama_compositor(maps: StitchMaps, cfg: Config) -> Compositor:
+    """A compositor for BGR images of the two inputs: the maps, the seam, both views' gains and offsets."""
+    compositor = Compositor(maps.map_src_input, maps.map_tgt_input, maps.seam_input, cfg)
+    gains, offsets = maps.seam.gains, maps.seam.offsets
+    compositor.set_gains(len(gains.gain_src), gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt)
+    compositor.set_offsets(offsets.src, offsets.tgt)
+    return compositor
 
 
 def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto") -> Panorama:
@@ -186,28 +257,18 @@ def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     clock.seconds.update(maps.seconds)
     img_src, img_tgt = maps.rig.pick(img_a, img_b)
     with clock("composite"):
-        compositor = Compositor(maps.map_src_input, maps.map_tgt_input, maps.alpha_input, cfg)
-        out, coverage = compositor.apply(img_src, img_tgt)
+        compositor = panorama_compositor(maps, cfg)
+        out = compositor.apply(img_src, img_tgt)
+        coverage = compositor.coverage(img_src.shape, img_tgt.shape)
     return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
 
 
 def _diagonal_px(img_src: np.ndarray, img_tgt: np.ndarray) -> float:
-    """The larger image diagonal, the scale of the gate's ramp band b (SENA.md step 5)."""
+    """The larger image diagonal: the scale of the lattice (step 4), the gate's ramp band b (step 5) and
+    the seam blend's fade."""
     return float(max(np.hypot(*img_src.shape[:2]), np.hypot(*img_tgt.shape[:2])))
 
 
 def _long_side_px(img_src: np.ndarray, img_tgt: np.ndarray) -> int:
     """The longest image side, the scale of the gate's density blur sigma_d (SENA.md step 5)."""
     return max(*img_src.shape[:2], *img_tgt.shape[:2])
-
-
-def _grey_canvas(img_src: np.ndarray, img_tgt: np.ndarray, warp: Warp, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
-    """Warped-source and placed-target grey images on the canvas, float32, NaN where not covered."""
-    canvas = warp.overlap.canvas
-    warped, valid = remap_image(cv2.cvtColor(img_src, cv2.COLOR_BGR2GRAY)[:, :, None], warp.map_src_canvas, cfg)
-    grey_src = np.where(valid, warped[:, :, 0].astype(np.float32), np.nan)
-    grey_tgt = np.full(canvas.shape, np.nan, np.float32)
-    ox, oy = (int(round(v)) for v in canvas.offset_tgt)
-    h, w = img_tgt.shape[:2]
-    grey_tgt[oy:oy + h, ox:ox + w] = cv2.cvtColor(img_tgt, cv2.COLOR_BGR2GRAY)
-    return grey_src.astype(np.float32), grey_tgt

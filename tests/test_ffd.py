@@ -55,3 +55,37 @@ def test_field_is_clipped_to_d_max(geo):
     field = field_of(geo, affines, cfg)
     assert np.abs(field).max() <= cfg.d_max_px + 1e-3
     assert np.abs(field).max() > cfg.d_max_px - 0.5
+
+
+def test_cubic_taps_reproduce_cv2_resize():
+    """The fit's data term samples the lattice exactly as the bicubic upsampling does."""
+    rng = np.random.default_rng(3)
+    lattice = rng.random((7, 9, 2)).astype(np.float32)
+    canvas = Canvas(width=157, height=123, offset_tgt=(0.0, 0.0))
+    dense = field_from_lattice(lattice, canvas)
+    pts = np.rint(rng.random((300, 2)) * [156, 122])
+    index, weight = lattice_taps(pts, canvas, lattice.shape[:2])
+    values = np.einsum("nk,nkc->nc", weight, lattice.reshape(-1, 2)[index])
+    np.testing.assert_allclose(values, dense[pts[:, 1].astype(int), pts[:, 0].astype(int)], atol=1e-5)
+
+
+def fit_cfg(**changes):
+    return Config(device="cpu", **changes)
+
+
+def test_fit_recovers_an_affine_field_and_drops_wrong_matches():
+    """Bending energy does not penalise an affine field: matches displaced by one are fitted exactly,
+    and the field continues affinely beyond them; wrong matches get zero Tukey weight."""
+    rng = np.random.default_rng(5)
+    canvas = Canvas(width=600, height=400, offset_tgt=(100.0, 0.0))
+    affine_src_to_tgt = np.array([[1.0, 0.0, -100.0], [0.0, 1.0, 0.0]])
+    pts_tgt = rng.uniform([10, 10], [390, 390], (300, 2))
+    correction = lambda p: np.stack([0.01 * p[:, 0] + 2.0, -0.005 * p[:, 1] + 1.0], 1)  # noqa: E731
+    pts_src = pts_tgt + 100.0 + correction(pts_tgt + 100.0 - 100.0)
+    pts_src[:10] += 30.0  # wrong matches, still within fit_match_px of A_glob
+    fit = fitted_lattice(canvas, affine_src_to_tgt, pts_src, pts_tgt, 500.0, fit_cfg())
+    assert np.all(fit.weights[:10] == 0) and np.all(fit.weights[10:] > 0.9)
+    field = field_from_lattice(fit.lattice, canvas)
+    far = np.array([[30, 200], [560, 300]])  # canvas points outside the matches (source-only, target-only)
+    expected = correction(far - 100.0)
+    np.testing.assert_allclose(field[far[:, 1], far[:, 0]], expected, atol=0.05)

@@ -11,15 +11,19 @@ sampled (the compositor treats NaN as outside); alpha is float32 ``(H, W)``, the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..composite import SeamLayout
+from ..gains import Gains
 from ..rig import Rig
 from ..stitch import StitchMaps
 
 # Output pixels no input covers: black in limited-range BT.601, the range H.264 decoders assume.
 BLACK_Y, BLACK_UV = 16, 128
+# BT.601 luma of B, G, R, scaled to the limited range (219 of 255 levels): Y = 16 + LUMA_BGR . (B, G, R).
+LUMA_BGR = np.array([0.114, 0.587, 0.299]) * 219.0 / 255.0
 
 
 @dataclass(frozen=True)
@@ -27,7 +31,8 @@ class PlaneMaps:
     """One estimate's maps on the fixed (even-sized) output canvas, for luma and for chroma.
 
     ``map_src_luma`` / ``map_tgt_luma``: (H, W, 2) float32 (x, y) in the source / target Y plane;
-    ``alpha_luma`` (H, W). ``*_chroma``: the same at (H/2, W/2), positions in the U/V planes.
+    ``alpha_luma`` (H, W) the source weight the seam gives; ``seam_luma`` the seam for the compositor.
+    ``*_chroma``: the same at (H/2, W/2), positions in the U/V planes.
     ``seam_x_working``: (rows,) float32 seam x per row of the *working* frame (``rig.py``), NaN
     where the estimate's canvas does not reach. ``inliers``: global-affine inliers of the estimate.
     """
@@ -38,6 +43,8 @@ class PlaneMaps:
     map_src_chroma: np.ndarray
     map_tgt_chroma: np.ndarray
     alpha_chroma: np.ndarray
+    seam_luma: SeamLayout
+    seam_chroma: SeamLayout
     seam_x_working: np.ndarray
     inliers: int
 
@@ -106,13 +113,56 @@ def plane_maps(maps: StitchMaps, shape: tuple[int, int], offset_fixed: np.ndarra
     map_src = shift_onto(maps.map_src_input.astype(np.float32), shift_xy, shape, np.nan)
     map_tgt = target_map(shape, offset_fixed)
     alpha = shift_onto(maps.alpha_input.astype(np.float32), shift_xy, shape, 0.0)
+    seam_x = seam_on_canvas(maps.seam.maps.seam_x_canvas, maps.rig, shift_xy, shape)
+    seam_luma = SeamLayout(positions=filled(seam_x), lines_are_rows=not maps.rig.vertical,
+                           band_px=maps.seam_input.band_px, transition_px=maps.seam_input.transition_px,
+                           smooth_sigma_px=maps.seam_input.smooth_sigma_px, lf_px=maps.seam_input.lf_px)
     return PlaneMaps(
         map_src_luma=map_src, map_tgt_luma=map_tgt, alpha_luma=alpha,
         map_src_chroma=chroma_positions(map_src), map_tgt_chroma=chroma_positions(map_tgt),
         alpha_chroma=block_mean(alpha).astype(np.float32),
-        seam_x_working=seam_on_canvas(maps.seam.maps.seam_x_canvas, maps.rig, shift_xy, shape),
+        seam_luma=seam_luma, seam_chroma=chroma_seam(seam_luma),
+        seam_x_working=seam_x,
         inliers=int(maps.warp.glob.n_inliers),
     )
+
+
+def filled(positions: np.ndarray) -> np.ndarray:
+    """(L,) float32 with NaN entries (lines the estimate's canvas does not reach) set to the nearest
+    known one, so that every line of the fixed canvas has a seam."""
+    known = np.isfinite(positions)
+    if known.all() or not known.any():
+        return np.nan_to_num(positions).astype(np.float32)
+    lines = np.arange(len(positions))
+    return np.interp(lines, lines[known], positions[known]).astype(np.float32)
+
+
+def chroma_seam(seam: SeamLayout) -> SeamLayout:
+    """The seam of the half-resolution U/V planes: chroma line l holds luma lines 2l and 2l + 1, and
+    chroma position p sits at luma position 2p + 0.5 (``chroma_positions``); widths halve."""
+    pairs = seam.positions[: len(seam.positions) // 2 * 2].reshape(-1, 2).mean(axis=1)
+    return SeamLayout(positions=((pairs - 0.5) * 0.5).astype(np.float32), lines_are_rows=seam.lines_are_rows,
+                      band_px=0.5 * seam.band_px, transition_px=0.5 * seam.transition_px,
+                      smooth_sigma_px=0.5 * seam.smooth_sigma_px, lf_px=0.5 * seam.lf_px)
+
+
+def yuv_gains(gains: Gains) -> tuple[tuple, tuple]:
+    """The images' BGR gains as gains of the Y plane: ((gain, bias) of the source, of the target) for
+    ``Y' = 16 + g (Y - 16)`` with g the luma-weighted mean of the channel gains (the chroma planes are
+    left as they are)."""
+    def luma(gain: np.ndarray) -> tuple:
+        g = float(np.dot(LUMA_BGR, gain) / LUMA_BGR.sum())
+        return [g], [BLACK_Y * (1.0 - g)]
+    return luma(gains.gain_src), luma(gains.gain_tgt)
+
+
+def luma_offsets(offsets: np.ndarray, positions: int) -> np.ndarray:
+    """(L, 1) float32 Y-plane offsets from (L', 3) BGR offsets, L lines (an estimate's lines beyond the
+    fixed canvas are cut, missing ones take the last)."""
+    y = offsets @ LUMA_BGR
+    out = np.full(positions, y[-1] if len(y) else 0.0, np.float32)
+    out[: min(positions, len(y))] = y[:positions]
+    return out[:, None]
 
 
 def seam_on_canvas(seam_x_working: np.ndarray, rig: Rig, shift_xy: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -139,6 +189,8 @@ def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
         map_src_chroma=lerp(start.map_src_chroma, goal.map_src_chroma),
         map_tgt_chroma=lerp(start.map_tgt_chroma, goal.map_tgt_chroma),
         alpha_chroma=lerp(start.alpha_chroma, goal.alpha_chroma),
+        seam_luma=replace(goal.seam_luma, positions=lerp(start.seam_luma.positions, goal.seam_luma.positions)),
+        seam_chroma=replace(goal.seam_chroma, positions=lerp(start.seam_chroma.positions, goal.seam_chroma.positions)),
         seam_x_working=lerp(start.seam_x_working, goal.seam_x_working),
         inliers=goal.inliers,
     )

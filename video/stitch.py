@@ -24,7 +24,8 @@ from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import resolve_config
 from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
 from .loop import VideoOptions, run_video
-from .maps import BLACK_UV, BLACK_Y, PlaneMaps, lerp_maps, map_change_px, plane_maps, seam_change_px, target_offset
+from .maps import (BLACK_UV, BLACK_Y, PlaneMaps, lerp_maps, luma_offsets, map_change_px, plane_maps, seam_change_px,
+                   target_offset, yuv_gains)
 from .reader import YuvFrame
 from .writer import even_size
 
@@ -73,8 +74,12 @@ class SenaFrameCompositor:
         self._offset_tgt = target_offset(first.map_tgt_input)
         self._maps = plane_maps(first, shape, self._offset_tgt)
         self.output_size = (shape[1], shape[0])
-        self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.alpha_luma, cfg)
-        self._chroma = Compositor(self._maps.map_src_chroma, self._maps.map_tgt_chroma, self._maps.alpha_chroma, cfg)
+        self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.seam_luma, cfg)
+        self._chroma = Compositor(self._maps.map_src_chroma, self._maps.map_tgt_chroma, self._maps.seam_chroma, cfg)
+        (gain_src, bias_src), (gain_tgt, bias_tgt) = yuv_gains(first.seam.gains)
+        self._luma.set_gains(1, gain_src, bias_src, gain_tgt, bias_tgt)
+        offsets = first.seam.offsets
+        self._luma.set_offsets(luma_offsets(offsets.src, self._luma.lines), luma_offsets(offsets.tgt, self._luma.lines))
         self._first_inliers = self._maps.inliers
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": self._first_inliers, "seconds": round(sum(first.seconds.values()), 4)}
@@ -153,17 +158,17 @@ class SenaFrameCompositor:
         self._maps = lerp_maps(start, goal, done / frames)
         self._blend = None if done >= frames else (start, goal, done)
         t0 = time.perf_counter()
-        # The target maps never change on the fixed canvas; only the source map and alpha move.
-        self._luma.set_maps(map_src_canvas=self._maps.map_src_luma, alpha_canvas=self._maps.alpha_luma)
-        self._chroma.set_maps(map_src_canvas=self._maps.map_src_chroma, alpha_canvas=self._maps.alpha_chroma)
+        # The target maps never change on the fixed canvas; only the source map and the seam move.
+        self._luma.set_maps(self._maps.map_src_luma, self._maps.seam_luma.positions)
+        self._chroma.set_maps(self._maps.map_src_chroma, self._maps.seam_chroma.positions)
         self._seconds["maps_upload"] += time.perf_counter() - t0
 
     def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Output (y, u, v) planes of ``output_size``; uncovered pixels are black (Y 16, U = V = 128)."""
         y_src, y_tgt = self.source_target(y_l, y_r)
         uv_src, uv_tgt = self.source_target(np.dstack((u_l, v_l)), np.dstack((u_r, v_r)))
-        y, _ = self._luma.apply(y_src, y_tgt, fill=LUMA_FILL)
-        uv, _ = self._chroma.apply(uv_src, uv_tgt, fill=CHROMA_FILL)
+        y = self._luma.apply(y_src, y_tgt, fill=LUMA_FILL)
+        uv = self._chroma.apply(uv_src, uv_tgt, fill=CHROMA_FILL)
         return y, uv[:, :, 0], uv[:, :, 1]
 
     def report(self) -> dict:
