@@ -258,3 +258,49 @@ def _composite_frame_kernel(channels: int):
 MAX_CHANNELS = 4  # gains, biases and fill values travel as one vec4 each
 # The frame kernel per channel count, built at import so that ``runtime.prewarm`` loads them all.
 COMPOSITE_FRAME_KERNELS = {channels: _composite_frame_kernel(channels) for channels in range(1, MAX_CHANNELS + 1)}
+
+
+NOT_BOTH = wp.constant(1.0e9)  # band_difference_kernel: the cell is not a band pixel (a view is missing)
+
+
+@wp.kernel
+def band_difference_kernel(
+    row0: int,
+    img_src: wp.array(dtype=wp.uint8),
+    img_tgt: wp.array(dtype=wp.uint8),
+    steps: wp.vec4i,
+    plan: wp.array(dtype=wp.int64),
+    plan_tgt: wp.array(dtype=wp.int64),
+    canvas_width: int,
+    canvas_height: int,
+    lines_are_rows: int,
+    band_x0: wp.array(dtype=int),
+    gain_src: wp.vec4i,
+    bias_src: wp.vec4i,
+    gain_tgt: wp.vec4i,
+    bias_tgt: wp.vec4i,
+    diff: wp.array2d(dtype=float),
+):
+    """Per seam line l = row0 + i and band cell j (position band_x0[l] + j): channel 0 of the source
+    minus the target there, both with their gains (grey levels), or ``NOT_BOTH`` where the plan does
+    not hold both taps (outside the overlap or the band). The per-frame seam reads it."""
+    i, j = wp.tid()
+    line = row0 + i
+    pos = band_x0[line] + j
+    x = pos
+    y = line
+    if lines_are_rows == 0:
+        x = line
+        y = pos
+    value = float(NOT_BOTH)
+    if x >= 0 and y >= 0 and x < canvas_width and y < canvas_height:
+        q = y * canvas_width + x
+        word = plan[q]
+        if int(word & wp.int64(3)) == KIND_BAND:
+            word_t = plan_tgt[q]
+            vs = adjusted(sample_fixed(img_src, word_offset(word), word_fx(word), word_fy(word), steps[0], steps[1]),
+                          gain_src[0], bias_src[0], 0)
+            vt = adjusted(sample_fixed(img_tgt, word_offset(word_t), word_fx(word_t), word_fy(word_t), steps[2],
+                                       steps[3]), gain_tgt[0], bias_tgt[0], 0)
+            value = float(vs - vt) / float(ONE20)
+    diff[line, j] = value

@@ -16,7 +16,8 @@ import warp as wp
 
 from sena_warp.config import Config
 from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import COMPOSITE_FRAME_KERNELS, MAX_CHANNELS, composite_plan_kernel
+from sena_warp.kernels.composite import (COMPOSITE_FRAME_KERNELS, MAX_CHANNELS, band_difference_kernel,
+                                        composite_plan_kernel)
 from sena_warp.warp_map import as_channels
 
 
@@ -95,6 +96,7 @@ class Compositor:
         self._lf = {}
         self._gains = {}
         self._buffers: dict[tuple, _Buffers] = {}
+        self._loaded: tuple[_Buffers, int, bool] | None = None
 
     @property
     def planned_shapes(self) -> tuple[tuple[tuple, tuple], ...]:
@@ -153,28 +155,49 @@ class Compositor:
         """(Hc, Wc) uint8 255 where at least one side of images of these shapes is sampled, else 0."""
         return self._buffers_for(tuple(shape_src), tuple(shape_tgt)).coverage.numpy()
 
-    def apply(self, img_src: np.ndarray, img_tgt: np.ndarray, fill: Sequence[int] | None = None) -> np.ndarray:
-        """Composite uint8 images (H, W, C) or planes (H, W), same C on both sides: (Hc, Wc[, C]) uint8."""
+    def load(self, img_src: np.ndarray, img_tgt: np.ndarray) -> None:
+        """Upload one pair of uint8 images (H, W, C) or planes (H, W), same C on both sides, for
+        :meth:`band_difference` and :meth:`composite`."""
         src3, tgt3 = as_channels(img_src), as_channels(img_tgt)
         if src3.shape[2] != tgt3.shape[2]:
             raise ValueError(f"source has {src3.shape[2]} channels, target {tgt3.shape[2]}")
-        channels = src3.shape[2]
-        if channels > MAX_CHANNELS:
-            raise ValueError(f"images have {channels} channels; at most {MAX_CHANNELS} are supported")
+        if src3.shape[2] > MAX_CHANNELS:
+            raise ValueError(f"images have {src3.shape[2]} channels; at most {MAX_CHANNELS} are supported")
         buf = self._buffers_for(src3.shape, tgt3.shape)
-        values = [int(v) for v in fill] if fill is not None else [0] * channels
-        if len(values) != channels:
-            raise ValueError(f"fill has {len(values)} values for {channels} channels")
-        if channels not in self._gains:
-            self.set_gains(channels, *(v[:channels] for v in IDENTITY * 2))
-        if channels not in self._lf:
-            zeros = np.zeros((self.lines, channels), np.float32)
-            self.set_offsets(zeros, zeros)
         np.copyto(buf.src_host.numpy(), src3)
         np.copyto(buf.tgt_host.numpy(), tgt3)
         if buf.src_host is not buf.src:
             wp.copy(buf.src, buf.src_host)
             wp.copy(buf.tgt, buf.tgt_host)
+        self._loaded = (buf, src3.shape[2], np.ndim(img_src) == 2)
+        self._ensure_defaults(src3.shape[2])
+
+    def _ensure_defaults(self, channels: int) -> None:
+        if channels not in self._gains:
+            self.set_gains(channels, *(v[:channels] for v in IDENTITY * 2))
+        if channels not in self._lf:
+            zeros = np.zeros((self.lines, channels), np.float32)
+            self.set_offsets(zeros, zeros)
+
+    def band_difference(self, band_x0: np.ndarray, width: int, out: wp.array) -> np.ndarray:
+        """Source minus target (channel 0, with gains; grey levels) of the loaded pair on a band of
+        ``width`` cells per line starting at ``band_x0`` (L,) int32: (L, width) float32, ``NOT_BOTH``
+        where a cell does not hold both views. ``out``: a (L, width) float Warp array to fill."""
+        buf, channels, _ = self._loaded
+        gains = self._gains[channels]
+        inputs = [buf.src.flatten(), buf.tgt.flatten(), buf.frame_inputs[2], buf.plan, buf.plan_tgt,
+                  self.canvas_shape[1], self.canvas_shape[0], int(self.layout.lines_are_rows),
+                  wp.array(np.ascontiguousarray(band_x0, np.int32), dtype=int, device=self.device), *gains, out]
+        runtime.launch_rows(band_difference_kernel, self.lines, width, inputs, self.device, self.threads)
+        return out.numpy()
+
+    def composite(self, fill: Sequence[int] | None = None) -> np.ndarray:
+        """The panorama of the loaded pair: (Hc, Wc, C) uint8, or (Hc, Wc) for planes; ``fill``: the C
+        values of pixels no side covers (default 0). The array is reused by the next call."""
+        buf, channels, planes = self._loaded
+        values = [int(v) for v in fill] if fill is not None else [0] * channels
+        if len(values) != channels:
+            raise ValueError(f"fill has {len(values)} values for {channels} channels")
         lf_src, lf_tgt = self._lf[channels]
         inputs = [*buf.frame_inputs, self.seam, int(self.layout.lines_are_rows), float(self.layout.transition_px),
                   float(self.layout.smooth_sigma_px), float(self.layout.lf_px), lf_src, lf_tgt, *self._gains[channels],
@@ -182,5 +205,9 @@ class Compositor:
         runtime.launch_row_loops(COMPOSITE_FRAME_KERNELS[channels], *self.canvas_shape, inputs, self.device,
                                  self.threads)
         out = buf.out.numpy()
-        return out[:, :, 0] if np.ndim(img_src) == 2 else out
+        return out[:, :, 0] if planes else out
 
+    def apply(self, img_src: np.ndarray, img_tgt: np.ndarray, fill: Sequence[int] | None = None) -> np.ndarray:
+        """:meth:`load` then :meth:`composite`: a fresh (Hc, Wc[, C]) uint8 array."""
+        self.load(img_src, img_tgt)
+        return self.composite(fill).copy()

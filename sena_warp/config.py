@@ -144,7 +144,23 @@ class Config:
     video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
     video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's
     video_max_median_change_px: float = 8.0  # reject a re-estimate moving M_s by more (median over the overlap)
-    video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly
+    video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly (at least)
+    video_seam_speed_px: float = 2.0  # the seam moves at most this per frame (a blend lasts long enough), but for jumps
+    video_estimate_workers: int = 1  # moving rig: re-estimates run on this many worker threads, off the frame loop
+    seam_prior_weight: float = 0.5  # moving rig: cost per px (per row) of a new seam's distance from the current one
+    # --- Video over time: the per-frame seam and exposure (issue 14) ----------------------------
+    video_seam_band_ratio: float = 0.015  # per-frame seam: band half-width, x the canvas diagonal
+    video_seam_band_min_px: int = 8  # per-frame seam: band half-width at least this
+    video_seam_noise: float = 6.0  # per-frame seam: differences below this (grey levels) are noise, not motion
+    video_seam_stay_cost: float = 0.5  # per-frame seam: cost per px per line of leaving the last frame's seam
+    video_seam_home_cost: float = 0.05  # per-frame seam: cost per px per line of leaving the estimate's seam
+    video_seam_blocked_cost: float = 100.0  # per-frame seam: cost of a band cell outside the overlap
+    video_seam_margin: float = 1.0  # per-frame seam: a new path must be cheaper by this per line to replace the last
+    video_seam_jump_cost: float = 3.0  # per-frame seam: it jumps (faster than video_seam_speed_px) to save this per line
+    video_gain_period_s: float = 0.2  # exposure: gains re-measured on the frames every this many seconds
+    video_gain_stride_px: int = 8  # exposure: the overlap sampled every this many canvas pixels
+    video_gain_settle_s: float = 0.3  # exposure: time constant with which gains follow the measurement
+    video_gain_step_grey: float = 0.5  # exposure: gains alone change the picture by at most this per frame
 
     # --- Execution ----------------------------------------------------------------------------
     device: str = "auto"  # Warp device: "auto", "cpu" or "cuda"

@@ -30,7 +30,7 @@ class Gains:
     """Per-channel affine gains of both views: ``value' = gain * value + bias`` (grey levels).
 
     ``gain_src``, ``bias_src``, ``gain_tgt``, ``bias_tgt``: (C,) float64. ``pixels``: how many overlap
-    pixels the estimate used (0: none, the gains are the identity).
+    pixels the estimate used (0: none, the gains are the identity); ``model``: ``Config.gain_model``.
     """
 
     gain_src: np.ndarray
@@ -38,11 +38,12 @@ class Gains:
     gain_tgt: np.ndarray
     bias_tgt: np.ndarray
     pixels: int
+    model: str
 
     @staticmethod
-    def identity(channels: int) -> "Gains":
+    def identity(channels: int, model: str) -> "Gains":
         ones, zeros = np.ones(channels), np.zeros(channels)
-        return Gains(ones, zeros, ones.copy(), zeros.copy(), 0)
+        return Gains(ones, zeros, ones.copy(), zeros.copy(), 0, model)
 
 
 def agreeing_pixels(values_src: np.ndarray, values_tgt: np.ndarray, cfg: Config) -> np.ndarray:
@@ -85,10 +86,10 @@ def overlap_gains(warped_src: np.ndarray, placed_tgt: np.ndarray, both_valid: np
     channels = src.shape[1]
     keep = agreeing_pixels(src, tgt, cfg) if len(src) else np.zeros(0, bool)
     if keep.sum() < cfg.gain_min_pixels:
-        return Gains.identity(channels)
+        return Gains.identity(channels, "channels")
     gain_src, gain_tgt = brown_lowe_gains(src[keep].mean(axis=0), tgt[keep].mean(axis=0), cfg)
     zeros = np.zeros(channels)
-    return Gains(gain_src, zeros, gain_tgt, zeros.copy(), int(keep.sum()))
+    return Gains(gain_src, zeros, gain_tgt, zeros.copy(), int(keep.sum()), "channels")
 
 
 def opencv_gains(views: CanvasViews) -> Gains:
@@ -100,7 +101,7 @@ def opencv_gains(views: CanvasViews) -> Gains:
     channels = views.src.shape[2]
     gain_src, gain_tgt = (np.asarray(g, np.float64).ravel()[:channels] for g in compensator.getMatGains())
     zeros = np.zeros(channels)
-    return Gains(gain_src, zeros, gain_tgt, zeros.copy(), int(views.both.sum()))
+    return Gains(gain_src, zeros, gain_tgt, zeros.copy(), int(views.both.sum()), "opencv")
 
 
 def view_gains(views: CanvasViews, cfg: Config) -> Gains:
@@ -111,7 +112,7 @@ def view_gains(views: CanvasViews, cfg: Config) -> Gains:
     if cfg.gain_model == "opencv":
         return opencv_gains(views)
     if cfg.gain_model == "none":
-        return Gains.identity(views.src.shape[2])
+        return Gains.identity(views.src.shape[2], "none")
     raise InputError(f"unknown gain model {cfg.gain_model!r}; choose channels, opencv or none")
 
 

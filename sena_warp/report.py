@@ -32,13 +32,13 @@ def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, metrics: 
                      "matches": len(maps.matches)},
         "global_affine": {"model": warp.glob.model, "inliers": warp.glob.n_inliers,
                           "matrix_src_to_tgt": _nums(warp.glob.affine_src_to_tgt)},
-        "warp": warp_figures(warp, cfg),
+        "warp": warp_figures(warp),
         "canvas": {"width": int(pano.image.shape[1]), "height": int(pano.image.shape[0]),
                    "crop_xywh": list(crop_xywh) if crop_xywh is not None else None},
         "zone": {"x0_canvas": _num(zone.x0), "x1_canvas": _num(zone.x1), "fallback": bool(zone.fallback),
                  "clusters": len(zone.clusters), "points": int(len(zone.point_indices))},
-        "gains": {"model": cfg.gain_model, "source": _nums(seam.gains.gain_src), "target": _nums(seam.gains.gain_tgt),
-                  "pixels": seam.gains.pixels},
+        "gains": {"model": seam.gains.model, "source": _nums(seam.gains.gain_src),
+                  "target": _nums(seam.gains.gain_tgt), "pixels": seam.gains.pixels},
         "anchors": {"count": int(len(seam.anchors_tgt_canvas)),
                     "src_canvas": _nums(seam.anchors_src_canvas), "tgt_canvas": _nums(seam.anchors_tgt_canvas),
                     "frame": "working (transposed for a vertical rig)"},
@@ -47,10 +47,10 @@ def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, metrics: 
     }
 
 
-def warp_figures(warp, cfg: Config) -> dict:
+def warp_figures(warp) -> dict:
     """Step 3-5 figures of the warp's model: the fitted lattice (``ffd_model="fit"``) or the paper's
     local affines (``"blend"``), and whether a gate damped it."""
-    figures: dict = {"ffd_model": cfg.ffd_model, "gate_model": cfg.gate_model,
+    figures: dict = {"ffd_model": "fit" if warp.fit is not None else "blend", "gate": warp.gate_canvas is not None,
                      "lattice_nodes": list(warp.lattice.shape[:2])}
     if warp.fit is not None:
         used = warp.fit.weights > 0

@@ -140,6 +140,35 @@ def seam_cost_canvas(warped_src: np.ndarray, placed_tgt: np.ndarray, both: np.nd
     return np.where(both, cost, BLOCKED).astype(np.float32)
 
 
+class BandPath:
+    """The DP of ``kernels/seam_path.py`` for a band of fixed shape, its device arrays allocated once
+    (a video solves the same band every frame)."""
+
+    def __init__(self, rows: int, width: int, segments: int, cfg: Config):
+        device = cfg.device
+        self.cfg = cfg
+        self.shape = (rows, width)
+        self.cost = wp.zeros((rows, width), dtype=float, device=device)
+        self.band_x0 = wp.zeros(rows, dtype=int, device=device)
+        self.segments = [wp.zeros(segments, dtype=int, device=device) for _ in range(4)]
+        self.acc = wp.zeros((segments, 2, width), dtype=float, device=device)
+        self.back = wp.zeros((rows, width), dtype=wp.int8, device=device)
+        self.path = wp.zeros(rows, dtype=int, device=device)
+
+    def solve(self, cost_band: np.ndarray, band_x0: np.ndarray, segments: np.ndarray, max_step: int,
+              step_cost: float) -> np.ndarray:
+        """See :func:`dp_segments`; ``segments`` must have the count given at construction."""
+        self.cost.assign(np.ascontiguousarray(cost_band, np.float32))
+        self.band_x0.assign(np.ascontiguousarray(band_x0, np.int32))
+        segments = np.asarray(segments, np.int32).reshape(-1, 4)
+        for k in range(4):
+            self.segments[k].assign(np.ascontiguousarray(segments[:, k]))
+        inputs = [self.cost, self.band_x0, *self.segments, int(max_step), float(step_cost), self.acc, self.back,
+                  self.path]
+        runtime.launch_rows(seam_dp_kernel, len(segments), 1, inputs, self.cfg.device, self.cfg.cpu_threads)
+        return self.path.numpy()
+
+
 def dp_segments(cost_band: np.ndarray, band_x0: np.ndarray, segments: np.ndarray, max_step: int, step_cost: float,
                 cfg: Config) -> np.ndarray:
     """Minimum-cost paths through a band of rows, one per segment (Warp kernel ``seam_dp_kernel``).
@@ -149,21 +178,9 @@ def dp_segments(cost_band: np.ndarray, band_x0: np.ndarray, segments: np.ndarray
     share their end rows. Returns (R,) int32 canvas x of the path per band row. Runs on ``cfg.device``
     (resolved) with ``cfg.cpu_threads``.
     """
-    device = cfg.device
     rows, width = cost_band.shape
     segments = np.asarray(segments, np.int32).reshape(-1, 4)
-    path = wp.zeros(rows, dtype=int, device=device)
-    inputs = [
-        wp.array(np.ascontiguousarray(cost_band, np.float32), dtype=float, device=device),
-        wp.array(np.ascontiguousarray(band_x0, np.int32), dtype=int, device=device),
-        *(wp.array(np.ascontiguousarray(segments[:, k]), dtype=int, device=device) for k in range(4)),
-        int(max_step), float(step_cost),
-        wp.zeros((len(segments), 2, width), dtype=float, device=device),
-        wp.zeros((rows, width), dtype=wp.int8, device=device),
-        path,
-    ]
-    runtime.launch_rows(seam_dp_kernel, len(segments), 1, inputs, device, cfg.cpu_threads)
-    return path.numpy()
+    return BandPath(rows, width, len(segments), cfg).solve(cost_band, band_x0, segments, max_step, step_cost)
 
 
 def overlap_rows(both: np.ndarray) -> tuple[int, int]:
@@ -268,13 +285,16 @@ def straight_path(anchors_src_canvas: np.ndarray, anchors_tgt_canvas: np.ndarray
 
 
 def seam_line(zone: Zone, views: CanvasViews, pts_src_canvas: np.ndarray, pts_tgt_canvas: np.ndarray,
-              copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray, cfg: Config) -> SeamPath:
+              copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray, cfg: Config,
+              prior_x_canvas: np.ndarray | None = None) -> SeamPath:
     """Steps 8-9's seam of ``cfg.seam_model``: "path" (the module docstring) or "paper" (the keypoint
     chain of ``chain.py`` joined by straight lines).
 
     views: the gain-compensated canvas views; pts_*_canvas: (N, 2) float64 canvas (x, y) of the
     matches the warp follows (source copies warped by the step-6 map, target copies placed), the
     arrays ``zone`` indexes; copies_*_canvas: the same for every match (``separation_cost``).
+    prior_x_canvas: (H,) float64 a seam to stay near (a video's current one; NaN rows: none), each
+    pixel away from it costing ``cfg.seam_prior_weight``.
     """
     grey_src, grey_tgt = views.grey()
     if cfg.seam_model == "paper":
@@ -285,6 +305,9 @@ def seam_line(zone: Zone, views: CanvasViews, pts_src_canvas: np.ndarray, pts_tg
     zone_pts = zone.point_indices
     candidates = zone_pts[brightness_consistent(grey_src, grey_tgt, pts_src_canvas[zone_pts], pts_tgt_canvas[zone_pts], cfg)]
     cost = seam_cost_canvas(views.src, views.tgt, views.both, copies_src_canvas, copies_tgt_canvas, cfg)
+    if prior_x_canvas is not None:
+        away = np.abs(np.arange(cost.shape[1])[None, :] - np.asarray(prior_x_canvas, np.float64)[:, None])
+        cost = np.where(views.both, cost + cfg.seam_prior_weight * np.nan_to_num(away), cost).astype(np.float32)
     margin = cfg.seam_zone_margin * (zone.x1 - zone.x0)
     coarse, rows = coarse_path(cost, views.both, (zone.x0 - margin, zone.x1 + margin), cfg)
     factor = reduction_factor(cost.shape, cfg)

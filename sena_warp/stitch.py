@@ -169,11 +169,12 @@ def estimate_warp(img_src: np.ndarray, img_tgt: np.ndarray, pts_src: np.ndarray,
 
 
 def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndarray, matches_tgt: np.ndarray,
-                  warp: Warp, cfg: Config, clock: StageClock) -> Seam:
+                  warp: Warp, cfg: Config, clock: StageClock, prior_seam_tgt: np.ndarray | None = None) -> Seam:
     """SENA steps 7-9 ("Optimal stitching line", "Partitioning and Reconstruction") in the working frame,
     with each view's gains and the seam blend; ``cfg.device`` resolved. ``matches_*``: every match
     (N, 2), working-frame source / target pixels: where its neighbours support it, the seam does not
-    separate its two copies."""
+    separate its two copies. ``prior_seam_tgt``: a seam to stay near, x per target row in target
+    pixels (NaN: none), e.g. the current seam of a video."""
     canvas = warp.overlap.canvas
     supported = neighbour_supported(matches_src, matches_tgt, cfg.support_neighbours, cfg.support_tol_px,
                                     cfg.support_min)
@@ -190,7 +191,7 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndar
         zone = adequate_zone(pts_src_canvas, pts_tgt_canvas, views.both, *views.grey(), cfg)
     with clock("chain"):
         path = seam_line(zone, views, pts_src_canvas, pts_tgt_canvas, copies_src_canvas,
-                         canvas.tgt_to_canvas(matches_tgt[supported]), cfg)
+                         canvas.tgt_to_canvas(matches_tgt[supported]), cfg, _prior_on_canvas(prior_seam_tgt, canvas))
     with clock("seam_maps"):
         maps = seam_maps(warp.map_src_canvas, canvas, path, cfg)
     with clock("seam_blend"):
@@ -199,12 +200,12 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndar
 
 
 def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
-                  matches: Matches | None = None) -> StitchMaps:
+                  matches: Matches | None = None, prior_seam_tgt: np.ndarray | None = None) -> StitchMaps:
     """All of SENA on one image pair: the maps that stitch it (and every later frame of the same rig).
 
     ``cfg.device`` must be resolved (``runtime.resolve_config``: the job calling this, an image or a
     video stitch, chooses the device once). ``matches`` of (img_a, img_b) found earlier (e.g. while
-    screening video frames) skip step 0.
+    screening video frames) skip step 0; ``prior_seam_tgt`` as ``estimate_seam``'s (working frame).
     """
     clock = StageClock()
     if matches is None:
@@ -214,7 +215,7 @@ def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
     warp = estimate_warp(img_src, img_tgt, pts_src, pts_tgt, cfg, clock)
-    seam = estimate_seam(img_src, img_tgt, pts_src, pts_tgt, warp, cfg, clock)
+    seam = estimate_seam(img_src, img_tgt, pts_src, pts_tgt, warp, cfg, clock, prior_seam_tgt)
     return StitchMaps(
         rig=rig,
         map_src_input=map_from_working(seam.maps.map_src_canvas, rig),
@@ -261,6 +262,18 @@ def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
         out = compositor.apply(img_src, img_tgt)
         coverage = compositor.coverage(img_src.shape, img_tgt.shape)
     return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
+
+
+def _prior_on_canvas(prior_seam_tgt: np.ndarray | None, canvas) -> np.ndarray | None:
+    """A seam given per target row in target pixels, per canvas row in canvas pixels (NaN off the target)."""
+    if prior_seam_tgt is None:
+        return None
+    ox, oy = (int(round(v)) for v in canvas.offset_tgt)
+    prior = np.full(canvas.height, np.nan)
+    rows = np.arange(len(prior_seam_tgt)) + oy
+    inside = (rows >= 0) & (rows < canvas.height)
+    prior[rows[inside]] = np.asarray(prior_seam_tgt, np.float64)[inside] + ox
+    return prior
 
 
 def _diagonal_px(img_src: np.ndarray, img_tgt: np.ndarray) -> float:

@@ -53,9 +53,10 @@ def first_pairs(left: str | os.PathLike, right: str | os.PathLike, offset_s: flo
 
 
 def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str,
-                  matches: Matches | None = None) -> StitchMaps:
-    """SENA maps for one frame pair (left = input a); the BGR conversion happens only here, not per frame."""
-    return estimate_maps(frame_l.to_bgr(), frame_r.to_bgr(), cfg, reference, matches)
+                  matches: Matches | None = None, prior_seam_tgt=None) -> StitchMaps:
+    """SENA maps for one frame pair (left = input a); the BGR conversion happens only here, not per frame.
+    ``prior_seam_tgt``: the seam to stay near (``stitch.estimate_maps``)."""
+    return estimate_maps(frame_l.to_bgr(), frame_r.to_bgr(), cfg, reference, matches, prior_seam_tgt)
 
 
 def screen_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str) -> tuple[Matches, int]:

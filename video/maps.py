@@ -16,14 +16,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..composite import SeamLayout
-from ..gains import Gains
 from ..rig import Rig
 from ..stitch import StitchMaps
 
 # Output pixels no input covers: black in limited-range BT.601, the range H.264 decoders assume.
 BLACK_Y, BLACK_UV = 16, 128
-# BT.601 luma of B, G, R, scaled to the limited range (219 of 255 levels): Y = 16 + LUMA_BGR . (B, G, R).
-LUMA_BGR = np.array([0.114, 0.587, 0.299]) * 219.0 / 255.0
 
 
 @dataclass(frozen=True)
@@ -137,32 +134,19 @@ def filled(positions: np.ndarray) -> np.ndarray:
     return np.interp(lines, lines[known], positions[known]).astype(np.float32)
 
 
+def chroma_lines(positions: np.ndarray) -> np.ndarray:
+    """Seam positions of the half-resolution U/V planes from the luma ones (L,) (L even): chroma line l
+    holds luma lines 2l and 2l + 1, and chroma position p sits at luma position 2p + 0.5
+    (``chroma_positions``)."""
+    pairs = np.asarray(positions, np.float32)[: len(positions) // 2 * 2].reshape(-1, 2).mean(axis=1)
+    return ((pairs - 0.5) * 0.5).astype(np.float32)
+
+
 def chroma_seam(seam: SeamLayout) -> SeamLayout:
-    """The seam of the half-resolution U/V planes: chroma line l holds luma lines 2l and 2l + 1, and
-    chroma position p sits at luma position 2p + 0.5 (``chroma_positions``); widths halve."""
-    pairs = seam.positions[: len(seam.positions) // 2 * 2].reshape(-1, 2).mean(axis=1)
-    return SeamLayout(positions=((pairs - 0.5) * 0.5).astype(np.float32), lines_are_rows=seam.lines_are_rows,
+    """The seam of the half-resolution U/V planes (``chroma_lines``); widths halve."""
+    return SeamLayout(positions=chroma_lines(seam.positions), lines_are_rows=seam.lines_are_rows,
                       band_px=0.5 * seam.band_px, transition_px=0.5 * seam.transition_px,
                       smooth_sigma_px=0.5 * seam.smooth_sigma_px, lf_px=0.5 * seam.lf_px)
-
-
-def yuv_gains(gains: Gains) -> tuple[tuple, tuple]:
-    """The images' BGR gains as gains of the Y plane: ((gain, bias) of the source, of the target) for
-    ``Y' = 16 + g (Y - 16)`` with g the luma-weighted mean of the channel gains (the chroma planes are
-    left as they are)."""
-    def luma(gain: np.ndarray) -> tuple:
-        g = float(np.dot(LUMA_BGR, gain) / LUMA_BGR.sum())
-        return [g], [BLACK_Y * (1.0 - g)]
-    return luma(gains.gain_src), luma(gains.gain_tgt)
-
-
-def luma_offsets(offsets: np.ndarray, positions: int) -> np.ndarray:
-    """(L, 1) float32 Y-plane offsets from (L', 3) BGR offsets, L lines (an estimate's lines beyond the
-    fixed canvas are cut, missing ones take the last)."""
-    y = offsets @ LUMA_BGR
-    out = np.full(positions, y[-1] if len(y) else 0.0, np.float32)
-    out[: min(positions, len(y))] = y[:positions]
-    return out[:, None]
 
 
 def seam_on_canvas(seam_x_working: np.ndarray, rig: Rig, shift_xy: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -23,10 +24,12 @@ from ..imageio import check_output_path
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import resolve_config
 from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
+from .exposure import ExposureTracker
+from .frame_seam import FrameSeam, band_half_width, band_offsets
 from .loop import VideoOptions, run_video
-from .maps import (BLACK_UV, BLACK_Y, PlaneMaps, lerp_maps, luma_offsets, map_change_px, plane_maps, seam_change_px,
-                   target_offset, yuv_gains)
-from .reader import YuvFrame
+from .maps import (BLACK_UV, BLACK_Y, PlaneMaps, chroma_lines, lerp_maps, map_change_px, plane_maps, seam_change_px,
+                   target_offset)
+from .reader import YuvFrame, probe_video
 from .writer import even_size
 
 RIGS = ("static", "moving")
@@ -56,39 +59,53 @@ class SenaFrameCompositor:
 
     Public surface: :meth:`from_videos` (estimate and build), ``output_size`` (width, height),
     :meth:`update` and :meth:`composite_yuv` (what the loop calls), :meth:`source_target` and
-    :meth:`passes` (the roles and the maps a frame is composited with, e.g. for a reference
-    implementation), :meth:`report`. Inside: one :class:`~sena_warp.composite.Compositor` for the Y
-    plane and one for the U/V planes (stacked as two channels), both allocated once; new maps are
-    uploaded into them in place. ``update`` re-estimates and blends for a moving rig and records how
-    much the maps moved for that frame.
+    :meth:`passes` (what a frame is composited with, for the bench's reference implementation),
+    :meth:`report`. Inside: one :class:`~sena_warp.composite.Compositor` for the Y plane and one for
+    the U/V planes (stacked as two channels), both allocated once; every frame the seam is cut anew
+    in its band (``frame_seam``) and the gains follow the cameras' exposure (``exposure``). A moving
+    rig's re-estimates run on a worker thread while frames keep flowing on the current maps; an
+    accepted one is blended in slowly enough that the seam moves at most ``video_seam_speed_px``
+    per frame.
     """
 
-    def __init__(self, first: StitchMaps, first_attempts: list[Attempt], first_pair: int, cfg: Config):
+    def __init__(self, first: StitchMaps, first_attempts: list[Attempt], first_pair: int, fps: float, cfg: Config):
         """From the first estimate ``first`` (made on pair ``first_pair``; ``first_attempts``: every
-        pair tried); ``cfg.device`` resolved."""
+        pair tried) for inputs at ``fps`` frames per second; ``cfg.device`` resolved."""
         self._cfg = cfg
         self._rig = first.rig
         self._reestimate_s = cfg.video_reestimate_s if cfg.video_rig == "moving" else None
         width, height = even_size(first.alpha_input.shape[1], first.alpha_input.shape[0])  # yuv420p: even sides
         shape = (height, width)
+        self._band = band_half_width(shape, cfg)
         self._offset_tgt = target_offset(first.map_tgt_input)
-        self._maps = plane_maps(first, shape, self._offset_tgt)
+        self._maps = self._on_canvas(first, shape)
         self.output_size = (shape[1], shape[0])
         self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.seam_luma, cfg)
         self._chroma = Compositor(self._maps.map_src_chroma, self._maps.map_tgt_chroma, self._maps.seam_chroma, cfg)
-        (gain_src, bias_src), (gain_tgt, bias_tgt) = yuv_gains(first.seam.gains)
-        self._luma.set_gains(1, gain_src, bias_src, gain_tgt, bias_tgt)
-        offsets = first.seam.offsets
-        self._luma.set_offsets(luma_offsets(offsets.src, self._luma.lines), luma_offsets(offsets.tgt, self._luma.lines))
+        self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, self._reestimate_s is None, cfg)
+        self._fps = fps
+        self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
+        self._plane_shapes: tuple[tuple[int, int], tuple[int, int]] | None = None
         self._first_inliers = self._maps.inliers
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": self._first_inliers, "seconds": round(sum(first.seconds.values()), 4)}
-        self._blend: tuple[PlaneMaps, PlaneMaps, int] | None = None  # (start, goal, frames done)
+        self._blend: tuple[PlaneMaps, PlaneMaps, int, int] | None = None  # (start, goal, frames done, frames)
+        self._workers = ThreadPoolExecutor(max(1, cfg.video_estimate_workers), thread_name_prefix="estimate") \
+            if self._reestimate_s is not None else None
+        self._pending: tuple[float, Future] | None = None
         self._last_estimate_s: float | None = None
         self._reestimations = {"attempted": 0, "accepted": 0, "rejected": 0, "rejections": []}
         self._seam_jitter_px: list[float] = []
         self._map_change_px: list[float] = []
-        self._seconds = {"reestimate": 0.0, "maps_upload": 0.0}
+        self._seam_motion_px: list[float] = []
+        self._seconds = {"reestimate": 0.0, "maps_upload": 0.0, "frame_seam": 0.0, "exposure": 0.0}
+
+    def _on_canvas(self, maps: StitchMaps, shape: tuple[int, int]) -> PlaneMaps:
+        """An estimate on the fixed canvas, its plan band wide enough for the per-frame seam."""
+        plane = plane_maps(maps, shape, self._offset_tgt)
+        reach = self._band + plane.seam_luma.band_px
+        return replace(plane, seam_luma=replace(plane.seam_luma, band_px=reach),
+                       seam_chroma=replace(plane.seam_chroma, band_px=0.5 * reach))
 
     @classmethod
     def from_videos(cls, left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
@@ -97,7 +114,7 @@ class SenaFrameCompositor:
         (``estimate.best_first_estimate``); ``offset_s`` as ``VideoOptions.offset_s``, ``reference`` as
         ``stitch_videos``; ``cfg.device`` resolved."""
         maps, pair, attempts = best_first_estimate(left, right, offset_s, cfg, reference)
-        return cls(maps, attempts, pair, cfg)
+        return cls(maps, attempts, pair, float(probe_video(left).fps), cfg)
 
     def source_target(self, item_left, item_right) -> tuple:
         """A (left, right) pair of per-input things (frames, planes, shapes) as (source, target)."""
@@ -110,12 +127,14 @@ class SenaFrameCompositor:
                 PlanePass(maps.map_src_chroma, maps.map_tgt_chroma, maps.alpha_chroma, CHROMA_FILL))
 
     def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
-        """Before compositing a pair: maybe re-estimate, advance a blend, and record the maps' change."""
+        """Before compositing a pair: start, collect or blend in a re-estimate, and record the maps' change."""
         before = self._maps
-        if self._blend is None and self._due(float(frame_l.time_s)):
-            self._reestimate(frame_l, frame_r)
         if self._blend is not None:
             self._advance_blend()
+        elif self._pending is not None and self._pending[1].done():
+            self._collect(frame_l, frame_r)
+        elif self._pending is None and self._due(float(frame_l.time_s)):
+            self._submit(frame_l, frame_r)
         changed = self._maps is not before
         self._seam_jitter_px.append(seam_change_px(before, self._maps) if changed else 0.0)
         self._map_change_px.append(
@@ -129,51 +148,108 @@ class SenaFrameCompositor:
             self._last_estimate_s = time_s
         return time_s - self._last_estimate_s >= self._reestimate_s
 
-    def _reestimate(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
-        t0 = time.perf_counter()
+    def _prior_seam_tgt(self) -> np.ndarray:
+        """The current seam per working-frame target row, in target pixels: where a re-estimate's seam
+        should stay (``stitch.estimate_maps``'s ``prior_seam_tgt``)."""
+        ox, oy = self._offset_tgt[::-1] if self._rig.vertical else self._offset_tgt
+        return self._seam.positions[int(round(oy)):].astype(np.float64) - ox
+
+    def _submit(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         self._last_estimate_s = float(frame_l.time_s)
         self._reestimations["attempted"] += 1
+        # Same roles as the first estimate: the target stays the unwarped view on the fixed canvas.
+        job = self._workers.submit(self._estimate, frame_l, frame_r, self._prior_seam_tgt())
+        self._pending = (self._last_estimate_s, job)
+
+    def _estimate(self, frame_l: YuvFrame, frame_r: YuvFrame, prior: np.ndarray) -> tuple[PlaneMaps | None, str | None]:
+        """On a worker thread: a re-estimate on the fixed canvas, or why it is rejected."""
+        t0 = time.perf_counter()
         shape_src, shape_tgt = (f.y.shape for f in self.source_target(frame_l, frame_r))
         try:
-            # Same roles as the first estimate: the target stays the unwarped view on the fixed canvas.
-            estimate = estimate_pair(frame_l, frame_r, self._cfg, reference=self._rig.target)
-            reason = None if estimate.rig.vertical == self._rig.vertical else "rig orientation changed"
-            candidate = plane_maps(estimate, self._maps.shape, self._offset_tgt)
-            reason = reason or rejection_reason(candidate, self._maps, self._first_inliers, shape_src, shape_tgt,
-                                                self._cfg)
+            estimate = estimate_pair(frame_l, frame_r, self._cfg, self._rig.target, prior_seam_tgt=prior)
+            if estimate.rig.vertical != self._rig.vertical:
+                return None, "rig orientation changed"
+            candidate = self._on_canvas(estimate, self._maps.shape)
+            reason = rejection_reason(candidate, self._maps, self._first_inliers, shape_src, shape_tgt, self._cfg)
+            return (candidate, None) if reason is None else (None, reason)
         except StitchError as exc:
-            reason = str(exc)
-        if reason is None:
-            self._reestimations["accepted"] += 1
-            self._blend = (self._maps, candidate, 0)
-        else:
+            return None, str(exc)
+        finally:
+            self._seconds["reestimate"] += time.perf_counter() - t0
+
+    def _collect(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
+        time_s, job = self._pending
+        self._pending = None
+        candidate, reason = job.result()
+        if reason is not None:
             self._reestimations["rejected"] += 1
-            self._reestimations["rejections"].append({"time_s": round(self._last_estimate_s, 4), "reason": reason})
-        self._seconds["reestimate"] += time.perf_counter() - t0
+            self._reestimations["rejections"].append({"time_s": round(time_s, 4), "reason": reason})
+            return
+        self._reestimations["accepted"] += 1
+        seam_move = float(np.nanmax(np.abs(candidate.seam_luma.positions - self._maps.seam_luma.positions)))
+        frames = max(self._cfg.video_blend_frames, int(np.ceil(seam_move / self._cfg.video_seam_speed_px)), 1)
+        self._blend = (self._maps, candidate, 0, frames)
+        self._advance_blend()
 
     def _advance_blend(self) -> None:
-        start, goal, done = self._blend
+        start, goal, done, frames = self._blend
         done += 1
-        frames = max(self._cfg.video_blend_frames, 1)
         self._maps = lerp_maps(start, goal, done / frames)
-        self._blend = None if done >= frames else (start, goal, done)
+        self._blend = None if done >= frames else (start, goal, done, frames)
         t0 = time.perf_counter()
         # The target maps never change on the fixed canvas; only the source map and the seam move.
         self._luma.set_maps(self._maps.map_src_luma, self._maps.seam_luma.positions)
         self._chroma.set_maps(self._maps.map_src_chroma, self._maps.seam_chroma.positions)
+        self._seam.reset(self._maps.seam_luma.positions)
+        if self._exposure is not None:
+            self._exposure.set_maps(self._maps, *self._plane_shapes)
         self._seconds["maps_upload"] += time.perf_counter() - t0
 
     def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Output (y, u, v) planes of ``output_size``; uncovered pixels are black (Y 16, U = V = 128)."""
+        """Output (y, u, v) planes of ``output_size``; uncovered pixels are black (Y 16, U = V = 128).
+
+        The exposure follows the frame's overlap, the seam is cut anew in its band on the frame's luma
+        difference, and the seam blend's offsets come from the same difference.
+        """
         y_src, y_tgt = self.source_target(y_l, y_r)
-        uv_src, uv_tgt = self.source_target(np.dstack((u_l, v_l)), np.dstack((u_r, v_r)))
-        y = self._luma.apply(y_src, y_tgt, fill=LUMA_FILL)
-        uv = self._chroma.apply(uv_src, uv_tgt, fill=CHROMA_FILL)
-        return y, uv[:, :, 0], uv[:, :, 1]
+        u_src, u_tgt = self.source_target(u_l, u_r)
+        v_src, v_tgt = self.source_target(v_l, v_r)
+        t0 = time.perf_counter()
+        if self._exposure is None:
+            self._plane_shapes = (y_src.shape, y_tgt.shape)
+            self._exposure = ExposureTracker(self._maps, y_src.shape, y_tgt.shape, self._fps, self._cfg)
+        self._exposure.update(y_src, y_tgt, u_src, u_tgt, v_src, v_tgt)
+        (gain_src, bias_src), (gain_tgt, bias_tgt) = self._exposure.luma
+        self._luma.set_gains(1, gain_src, bias_src, gain_tgt, bias_tgt)
+        (cgain_src, cbias_src), (cgain_tgt, cbias_tgt) = self._exposure.chroma
+        self._chroma.set_gains(2, cgain_src, cbias_src, cgain_tgt, cbias_tgt)
+        t1 = time.perf_counter()
+        self._luma.load(y_src, y_tgt)
+        last = self._seam.positions.copy()
+        positions, diff, both = self._seam.next(self._luma)
+        self._seam_motion_px.append(float(np.abs(positions - last).max()))
+        self._luma.set_seam(positions.astype(np.float32))
+        self._chroma.set_seam(chroma_lines(positions.astype(np.float32)))
+        offsets_src, offsets_tgt = band_offsets(positions, self._seam.band_x0, diff, both, self._cfg)
+        self._luma.set_offsets(offsets_src, offsets_tgt)
+        t2 = time.perf_counter()
+        self._seconds["exposure"] += t1 - t0
+        self._seconds["frame_seam"] += t2 - t1
+        y = self._luma.composite(LUMA_FILL).copy()
+        self._chroma.load(np.dstack((u_src, v_src)), np.dstack((u_tgt, v_tgt)))
+        uv = self._chroma.composite(CHROMA_FILL)
+        return y, uv[:, :, 0].copy(), uv[:, :, 1].copy()
+
+    def close(self) -> None:
+        """Stop the re-estimation worker (a pending estimate is dropped)."""
+        if self._workers is not None:
+            self._workers.shutdown(wait=True, cancel_futures=True)
 
     def report(self) -> dict:
-        """Estimation, re-estimation and jitter figures (px) of the run, JSON-ready."""
+        """Estimation, re-estimation, seam and exposure figures of the run, JSON-ready."""
         seam = np.asarray(self._seam_jitter_px or [0.0])
+        motion = np.asarray(self._seam_motion_px or [0.0])
+        history = self._exposure.history if self._exposure is not None else []
         return {
             "rig": {"mode": self._cfg.video_rig, "source": "left" if self._rig.source == "a" else "right",
                     "vertical": self._rig.vertical, "reestimate_s": self._reestimate_s},
@@ -189,6 +265,11 @@ class SenaFrameCompositor:
                 "map_change_p99_px_max": round(max(self._map_change_px, default=0.0), 4),
                 "frames": len(self._seam_jitter_px),
             },
+            "frame_seam": {"band_px": self._band,
+                           "motion_px_mean": round(float(motion.mean()), 4),
+                           "motion_px_p99": round(float(np.percentile(motion, 99)), 4),
+                           "motion_px_max": round(float(motion.max()), 4)},
+            "exposure": {"frames": history},
             "timing_s": {name: round(seconds, 4) for name, seconds in self._seconds.items()},
         }
 
@@ -214,6 +295,10 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
         built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference))
         return built[0]
 
-    report = run_video(left, right, output, factory, options)
+    try:
+        report = run_video(left, right, output, factory, options)
+    finally:
+        for compositor in built:
+            compositor.close()
     report["stitch"] = built[0].report()
     return report

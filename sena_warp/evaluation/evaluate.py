@@ -3,13 +3,18 @@
 For every pair folder of DATA_DIR (one holding ``a.*`` and ``b.*``) it runs
 
 - ``sena``: the whole SENA stitch (``stitch_images``);
+- ``sena_ba``: the same with the inputs swapped (``b a``: the same panorama, issue 13's order invariance);
+- ``sena_paper``: SENA as the paper and ``SENA.md`` write it (``PAPER_SETTINGS``), the ablation of
+  every departure at once;
 - ``affine``: SENA's own global affine ``A_glob`` alone (no local warp, no seam);
 - ``homography``: a global homography from SIFT matches and RANSAC (3 px);
 - ``opencv_panorama`` / ``opencv_scans``: OpenCV's stitcher (``cv2.Stitcher``) in its two modes,
 
 and records per method: success (or why not), time, overlap PSNR/SSIM (UDIS-D protocol of
 ``metrics``), the shape figures (how far the warp is locally from a similarity; how far long lines
-bend) and, for SENA, the seam figures. SENA, affine and homography are compared with the target in
+bend) and, for SENA's runs, the seam figures and the natural-appearance figures of ``naturalness``
+(duplicated / lost points, seam step, bend of the lines the panorama shows, continuity of the lines
+the seam cuts). SENA, affine and homography are compared with the target in
 the target frame (the source warped onto it); OpenCV's stitcher is compared in its own panorama
 frame, both views warped by the camera models it composed with, before its seams and blending.
 Shape figures cover both views of each method's panorama: SENA and the global models leave the
@@ -47,13 +52,19 @@ from sena_warp.warp_map import forward_points
 
 from .baselines import (OPENCV_MODES, affine_map_canvas, homography_forward, homography_to_target, opencv_forward,
                         opencv_stitch, opencv_views, sift_homography)
-from .figures import identity, in_target_frame, map_in_target_frame, overlap_figures, seam_figures, shape_figures
+from .figures import (identity, in_target_frame, map_in_target_frame, natural_figures, overlap_figures, seam_figures,
+                      shape_figures)
 from .metrics import overlap_psnr_ssim
 from .sheets import thumbnail, tile
 
-METHODS = ("sena", "affine", "homography", *OPENCV_MODES)
+SENA_RUNS = ("sena", "sena_ba", "sena_paper")
+METHODS = (*SENA_RUNS, "affine", "homography", *OPENCV_MODES)
+# SENA as the paper has it: every departure of issue 13 undone (docs/evaluation.md, "Ablations").
+PAPER_SETTINGS = dict(ffd_model="blend", gate_model="paper", seam_model="paper", gain_model="none",
+                      seam_blend_ratio=0.0, transition_px=24)
 # The methods that make a panorama (the pictures show them), with their names on the pictures.
-SHEET_METHODS = {"sena": "SENA", "opencv_panorama": "OpenCV PANORAMA", "opencv_scans": "OpenCV SCANS"}
+SHEET_METHODS = {"sena": "SENA", "sena_paper": "SENA (paper)", "opencv_panorama": "OpenCV PANORAMA",
+                 "opencv_scans": "OpenCV SCANS"}
 COLUMNS = 2 + len(SHEET_METHODS)  # a sheet row: both inputs, then those panoramas
 PAIR_THUMB_WH = (360, 240)  # per-pair sheet: thumbnail box (px)
 OVERVIEW_THUMB_WH = (180, 116)  # overview sheet: thumbnail box (px)
@@ -83,6 +94,15 @@ class MethodResult:
     anchor_residual_max_px: float = math.nan
     seam_mad: float = math.nan
     feather_mad: float = math.nan
+    copies: int = 0  # issue 13's figures (naturalness), SENA's runs
+    dup_lost_pct: float = math.nan
+    dup_lost_over_4px: int = 0
+    dup_lost_worst_px: float = math.nan
+    seam_step: float = math.nan
+    visible_bend_max_pct: float = math.nan
+    continuity_px: float = math.nan
+    cut_lines: int = 0
+    order_diff_grey: float = math.nan  # sena_ba: largest |panorama(b, a) - panorama(a, b)|
     panorama: np.ndarray | None = field(default=None, repr=False)  # BGR(A) uint8; not written to the CSV
 
 
@@ -124,19 +144,24 @@ def _image_named(folder: Path, stem: str) -> Path | None:
     return found[0] if len(found) == 1 else None
 
 
-def run_sena(pair: PairImages, pano: Panorama, seconds: float, cfg: Config) -> MethodResult:
-    """SENA's figures from its finished stitch ``pano`` of the pair (which took ``seconds``)."""
-    warp, seam = pano.maps.warp, pano.maps.seam
-    result = MethodResult(pair.name, "sena", True, seconds=seconds, panorama=pano.image,
+def run_sena(pair: PairImages, method: str, cfg: Config) -> tuple[MethodResult, Panorama]:
+    """One of ``SENA_RUNS`` on the pair: the stitch, timed, and its figures."""
+    img_a, img_b = (pair.img_b, pair.img_a) if method == "sena_ba" else (pair.img_a, pair.img_b)
+    run_cfg = cfg.replace(**PAPER_SETTINGS) if method == "sena_paper" else cfg
+    t0 = time.perf_counter()
+    pano = stitch_images(img_a, img_b, run_cfg)
+    result = MethodResult(pair.name, method, True, seconds=time.perf_counter() - t0, panorama=pano.image,
                           width=pano.image.shape[1], height=pano.image.shape[0])
-    result.psnr_db, result.ssim = overlap_figures(pair.img_a, pair.img_b, pano, cfg)
+    warp, seam = pano.maps.warp, pano.maps.seam
+    result.psnr_db, result.ssim = overlap_figures(img_a, img_b, pano, run_cfg)
+    src, tgt = (image_to_working(img, pano.maps.rig) for img in pano.maps.rig.pick(img_a, img_b))
 
     def forward(pts: np.ndarray) -> np.ndarray:
-        return forward_points(seam.maps.map_src_canvas, warp.glob.affine_src_to_tgt, warp.overlap.canvas, pts, cfg)
+        return forward_points(seam.maps.map_src_canvas, warp.glob.affine_src_to_tgt, warp.overlap.canvas, pts, run_cfg)
 
-    _set(result, **shape_figures([(pair.img_src, forward), (pair.img_tgt, identity)]),
-         **seam_figures(pair.img_a, pair.img_b, pano, cfg))
-    return result
+    _set(result, **shape_figures([(src, forward), (tgt, identity)]), **seam_figures(img_a, img_b, pano, run_cfg),
+         **natural_figures(img_a, img_b, pano, run_cfg))
+    return result, pano
 
 
 def run_affine(pair: PairImages, pano: Panorama, cfg: Config) -> MethodResult:
@@ -199,30 +224,39 @@ def read_inputs(folder: Path) -> tuple[list[np.ndarray | None], str]:
 
 def evaluate_pair(folder: Path, img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> list[MethodResult]:
     """Every method on one pair, in ``METHODS`` order; failures recorded, never raised."""
-    pano, sena_error = None, ""
-    t0 = time.perf_counter()
-    try:
-        pano = stitch_images(img_a, img_b, cfg)
-    except Exception as exc:  # noqa: BLE001 - recorded, the run goes on
-        sena_error = failure_message(exc)
-    seconds = time.perf_counter() - t0
+    pair = PairImages(folder.name, img_a, img_b, None, img_a, img_b)
+    results, panoramas = {}, {}
+    for method in SENA_RUNS:
+        try:
+            results[method], panoramas[method] = run_sena(pair, method, cfg)
+        except Exception as exc:  # noqa: BLE001 - recorded, the run goes on
+            results[method] = MethodResult(folder.name, method, error=failure_message(exc))
+    pano = panoramas.get("sena")
+    if pano is not None and "sena_ba" in panoramas:
+        results["sena_ba"].order_diff_grey = order_difference(pano.image, panoramas["sena_ba"].image)
     # SENA's rig orients the global baselines (source = its left view); without it, SIFT's matches do.
     rig = pano.maps.rig if pano is not None else _sift_rig(img_a, img_b, cfg)
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
     pair = PairImages(folder.name, img_a, img_b, rig, img_src, img_tgt)
-    runners = {"sena": lambda: run_sena(pair, pano, seconds, cfg), "affine": lambda: run_affine(pair, pano, cfg),
-               "homography": lambda: run_homography(pair, cfg)}
+    runners = {"affine": lambda: run_affine(pair, pano, cfg), "homography": lambda: run_homography(pair, cfg)}
     runners.update({method: (lambda method=method: run_opencv(pair, method)) for method in OPENCV_MODES})
-    results = []
-    for name in METHODS:
-        if pano is None and name in ("sena", "affine"):
-            results.append(MethodResult(folder.name, name, error=sena_error))
+    for name, runner in runners.items():
+        if pano is None and name == "affine":
+            results[name] = MethodResult(folder.name, name, error=results["sena"].error)
             continue
         try:
-            results.append(runners[name]())
+            results[name] = runner()
         except Exception as exc:  # noqa: BLE001 - recorded, the run goes on
-            results.append(MethodResult(folder.name, name, error=failure_message(exc)))
-    return results
+            results[name] = MethodResult(folder.name, name, error=failure_message(exc))
+    return [results[name] for name in METHODS]
+
+
+def order_difference(pano_ab: np.ndarray, pano_ba: np.ndarray) -> float:
+    """Largest absolute difference (grey levels) between the panoramas of ``a b`` and ``b a``; inf when
+    their sizes differ."""
+    if pano_ab.shape != pano_ba.shape:
+        return math.inf
+    return float(np.abs(pano_ab.astype(np.int16) - pano_ba.astype(np.int16)).max())
 
 
 def _sift_rig(img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> Rig:
@@ -323,10 +357,42 @@ def summary_markdown(rows: list[MethodResult], data_dir: Path, cfg: Config, seco
         r = table[p, "sena"]
         if r.ok:
             lines.append(f"| {p} | {r.anchors} | {r.anchor_residual_px:.3f} | {r.seam_mad:.2f} | {r.feather_mad:.2f} |")
+    lines += natural_markdown(pairs, table)
     failures = [r for r in rows if not r.ok]
     lines += ["", "## Failures", ""]
     lines += [f"- {r.pair}, {r.method}: {r.error}" for r in failures] or ["- none"]
     return "\n".join(lines) + "\n"
+
+
+def natural_markdown(pairs: list[str], table: dict) -> list[str]:
+    """The summary's issue-13 section: the targets per SENA run over all pairs, then each pair."""
+    lines = ["", "## Natural appearance (issue 13)", "",
+             "Duplicated / lost: reliable matches in the overlap whose two copies are > 2 px apart and both "
+             "visible or neither (`naturalness`); seam step in grey levels; bend: largest of the long lines each "
+             "view shows whole (%); continuity: median offset of the lines the seam cuts (px); order: largest "
+             "difference of the `b a` panorama from `a b`'s (grey levels).", "",
+             "| run | pairs with a point > 4 px | pairs > 0.5 % | worst % | seam step median / max | bend max % "
+             "(pairs > 2 %) | continuity median px | seam MAD < feather MAD | order diff max |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for run in SENA_RUNS:
+        done = [table[p, run] for p in pairs if table[p, run].ok]
+        lines.append(
+            f"| {run} | {sum(r.dup_lost_over_4px > 0 for r in done)} | {sum(r.dup_lost_pct > 0.5 for r in done)} | "
+            f"{_fmt(_max(r.dup_lost_pct for r in done), 2)} | {_fmt(_median(r.seam_step for r in done), 2)} / "
+            f"{_fmt(_max(r.seam_step for r in done), 2)} | {_fmt(_max(r.visible_bend_max_pct for r in done), 2)} "
+            f"({sum(r.visible_bend_max_pct > 2 for r in done)}) | {_fmt(_median(r.continuity_px for r in done), 2)} | "
+            f"{sum(r.seam_mad < r.feather_mad for r in done)}/{len(done)} | "
+            f"{_fmt(_max(r.order_diff_grey for r in done), 1)} |")
+    lines += ["", "| pair | run | dup/lost % (> 4 px, worst px) | seam step | bend max % | continuity px (cut lines) |",
+              "|---|---|---:|---:|---:|---:|"]
+    for p in pairs:
+        for run in SENA_RUNS:
+            r = table[p, run]
+            if r.ok:
+                lines.append(f"| {p} | {run} | {r.dup_lost_pct:.2f} ({r.dup_lost_over_4px}, {_fmt(r.dup_lost_worst_px, 1)}) | "
+                             f"{_fmt(r.seam_step, 2)} | {_fmt(r.visible_bend_max_pct, 2)} | "
+                             f"{_fmt(r.continuity_px, 2)} ({r.cut_lines}) |")
+    return lines
 
 
 def pair_line(results: list[MethodResult]) -> str:

@@ -10,13 +10,17 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 
 from sena_warp.config import Config
-from sena_warp.rig import image_to_working
+from sena_warp.gains import compensated_views
+from sena_warp.rig import image_to_working, matches_to_working
 from sena_warp.stitch import Panorama, Warp
-from sena_warp.warp_map import remap_image
+from sena_warp.warp_map import canvas_views, forward_points, remap_image
 from sena_warp.zone import overlap_x_extent
+
+from . import naturalness
 
 from .metrics import (Forward, anchor_residuals_px, forward_anisotropy, line_bend_pct, long_segments,
                       overlap_psnr_ssim, transition_mad)
@@ -114,6 +118,47 @@ def shape_figures(views: list[tuple[np.ndarray, Forward]]) -> dict:
 def identity(pts: np.ndarray) -> np.ndarray:
     """The forward map of a view pasted unwarped (SENA's and the global models' target)."""
     return np.asarray(pts, np.float64)
+
+
+def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
+    """Issue 13's figures of a finished stitch (``naturalness``), in the working frame on the canvas.
+
+    ``copies``: reliable matches whose target copy is in the overlap; ``dup_lost_pct``: of them, %
+    duplicated or lost (copies > 2 px apart); ``dup_lost_over_4px`` how many by more than 4 px,
+    ``dup_lost_worst_px`` the worst; ``seam_step``: grey levels; ``visible_bend_max_pct``: largest bend
+    of a segment its own view shows whole; ``continuity_px``: median offset of the segments the seam
+    cuts, ``cut_lines`` how many. ``cfg.device`` resolved.
+    """
+    maps = pano.maps
+    warp, seam = maps.warp, maps.seam
+    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
+    canvas = warp.overlap.canvas
+    views = compensated_views(canvas_views(img_src, img_tgt, seam.maps.map_src_canvas, canvas, cfg), seam.gains)
+    weight_src, weight_tgt = naturalness.view_weights(seam.maps.alpha_canvas, views.valid_src, views.valid_tgt)
+
+    def forward(pts: np.ndarray) -> np.ndarray:
+        return forward_points(seam.maps.map_src_canvas, warp.glob.affine_src_to_tgt, canvas, pts, cfg)
+
+    pts_src, pts_tgt = matches_to_working(maps.matches.pts_a, maps.matches.pts_b, maps.rig)
+    reliable = naturalness.reliable_matches(pts_src, pts_tgt, warp.glob.affine_src_to_tgt)
+    copies = naturalness.copy_figures(forward(pts_src[reliable]), canvas.tgt_to_canvas(pts_tgt[reliable]),
+                                      weight_src, weight_tgt, views.both)
+    grey = lambda img: cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(np.float32)  # noqa: E731
+    pano_working = image_to_working(pano.image, maps.rig)[:, :, :3]
+    step = naturalness.seam_step(grey(pano_working), grey(views.src), grey(views.tgt), views.valid_src, views.valid_tgt,
+                                 seam.maps.seam_x_canvas)
+    bends, continuity = naturalness.line_figures(naturalness.line_segments(img_src), forward, weight_src,
+                                                 naturalness.line_segments(img_tgt), canvas.tgt_to_canvas, weight_tgt)
+    return {
+        "copies": copies.points,
+        "dup_lost_pct": copies.share_pct,
+        "dup_lost_over_4px": copies.over_strict,
+        "dup_lost_worst_px": copies.worst_px,
+        "seam_step": step,
+        "visible_bend_max_pct": float(bends.max()) if bends.size else math.nan,
+        "continuity_px": float(np.median(continuity)) if continuity.size else math.nan,
+        "cut_lines": int(continuity.size),
+    }
 
 
 def report_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:

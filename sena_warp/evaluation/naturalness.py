@@ -1,0 +1,208 @@
+"""Figures of a natural panorama (issue 13): what a viewer sees twice, not at all, stepped or bent.
+
+All functions work in the pipeline's working frame on the canvas (source left of a seam that runs
+top to bottom, ``seam_x[y]`` per row) on plain arrays, so that SENA's variants are measured alike.
+
+* *Duplicated / lost points*: every reliable match (below) whose target copy lies in the overlap has
+  a source copy and a target copy on the canvas; a copy is *visible* where its view's weight in the
+  panorama is at least ``VISIBLE_WEIGHT``. Copies more than ``COINCIDE_PX`` apart are *duplicated*
+  when both are visible (the point shows twice, or as a ghost inside the transition) and *lost* when
+  neither is.
+* *Seam step*: per row, the panorama's mean luma just left of the seam (``STEP_NEAR_PX`` to
+  ``STEP_FAR_PX``) minus just right of it, less the scene's own change across those pixels (the mean
+  of the same difference in either view alone); averaged over ``STEP_ROWS`` rows (a step is a
+  low-frequency thing), its absolute value's mean over the rows.
+* *Line bend / continuity*: long straight segments of each input (LSD, at least ``MIN_LINE_PX``)
+  mapped to the canvas; a segment the panorama shows from its own view all along gets its bend
+  (largest distance from the chord, % of its length); a segment the seam cuts gets its continuity:
+  the distance at the cut between it and the other view's copy of the line (the nearly parallel
+  segment of the other view that reaches the cut), px. Segments hidden by the other view do not count.
+
+Reliable matches are the pipeline's matches that satisfy the epipolar geometry (a fundamental
+matrix by seeded USAC RANSAC, ``EPIPOLAR_PX``), lie within ``MAX_DISPARITY_PX`` of the global affine
+and are supported by neighbours that move alike (``features.neighbour_supported``: a wrong match on a
+periodic pattern lies on its epipolar line too, a period away): correct correspondences whatever
+their depth, which the warp may or may not align.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from sena_warp.bilinear import sample_bilinear
+from sena_warp.features import neighbour_supported
+
+VISIBLE_WEIGHT = 0.25  # a copy shown at a quarter or more is seen (a ghost in a blend counts)
+COINCIDE_PX = 2.0  # copies closer than this are one point
+STRICT_PX = 4.0  # the issue's second threshold: no point duplicated or lost by more than this
+EPIPOLAR_PX = 1.0  # fundamental-matrix RANSAC threshold of the reliable matches
+EPIPOLAR_SEED = 1  # USAC's random state: the same matches every run
+MAX_DISPARITY_PX = 60.0  # reliable matches lie within this of the global affine (wrong ones can sit on an epipolar line)
+SUPPORT_NEIGHBOURS, SUPPORT_TOL_PX, SUPPORT_MIN = 8, 3.0, 2  # and at least 2 of their 8 neighbours move alike
+STEP_NEAR_PX, STEP_FAR_PX = 3, 10  # the strips either side of the seam that the seam step compares
+STEP_ROWS = 16  # rows averaged before the step's absolute value
+MIN_LINE_PX = 60.0  # shortest segment of the line figures
+MAX_LINES = 80  # the longest this many segments per view are measured
+LINE_SAMPLES = 33  # points per segment mapped to the canvas
+LINE_VISIBLE = 0.5  # a segment point is shown by its view where that view weighs at least this
+PARTNER_ANGLE_DEG = 4.0  # the other view's copy of a cut line is within this angle ...
+PARTNER_GAP_PX = 12.0  # ... and this distance of the cut
+
+
+@dataclass(frozen=True)
+class CopyFigures:
+    """Duplicated / lost points of one panorama: counts over the reliable matches in the overlap."""
+
+    points: int
+    duplicated: int  # both copies visible, more than COINCIDE_PX apart
+    lost: int  # neither copy visible, more than COINCIDE_PX apart
+    over_strict: int  # duplicated or lost by more than STRICT_PX
+    worst_px: float  # largest distance between the copies of a duplicated or lost point (0: none)
+
+    @property
+    def share_pct(self) -> float:
+        """Duplicated or lost points, % of the overlap's reliable points."""
+        return 100.0 * (self.duplicated + self.lost) / max(self.points, 1)
+
+
+def reliable_matches(pts_src: np.ndarray, pts_tgt: np.ndarray, affine_src_to_tgt: np.ndarray) -> np.ndarray:
+    """(N,) bool over matched (N, 2) source / target points: epipolar inliers near the global affine."""
+    pts_src = np.asarray(pts_src, np.float64)
+    pts_tgt = np.asarray(pts_tgt, np.float64)
+    keep = np.zeros(len(pts_src), bool)
+    if len(pts_src) < 8:
+        return keep
+    params = cv2.UsacParams()
+    params.threshold, params.confidence, params.maxIterations = EPIPOLAR_PX, 0.999, 5000
+    params.randomGeneratorState = EPIPOLAR_SEED
+    _, mask = cv2.findFundamentalMat(pts_src, pts_tgt, params)
+    if mask is None:
+        return keep
+    predicted = pts_src @ np.asarray(affine_src_to_tgt)[:, :2].T + np.asarray(affine_src_to_tgt)[:, 2]
+    supported = neighbour_supported(pts_src, pts_tgt, SUPPORT_NEIGHBOURS, SUPPORT_TOL_PX, SUPPORT_MIN)
+    return mask.ravel().astype(bool) & (np.hypot(*(predicted - pts_tgt).T) <= MAX_DISPARITY_PX) & supported
+
+
+def view_weights(alpha_canvas: np.ndarray, valid_src: np.ndarray, valid_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(weight of the source, weight of the target) per canvas pixel, float32 (H, W): what each view
+    contributes to the panorama, given the source alpha and where each view is defined."""
+    alpha = np.where(valid_src, np.where(valid_tgt, alpha_canvas, 1.0), 0.0).astype(np.float32)
+    return alpha, np.where(valid_tgt, 1.0 - alpha, 0.0).astype(np.float32)
+
+
+def copy_figures(copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray, weight_src: np.ndarray,
+                 weight_tgt: np.ndarray, overlap_canvas: np.ndarray) -> CopyFigures:
+    """Duplicated / lost points from each match's two copies (N, 2) canvas (x, y) (NaN: undefined)."""
+    distance = np.hypot(*(np.asarray(copies_src_canvas) - np.asarray(copies_tgt_canvas)).T)
+    in_overlap = sample_bilinear(overlap_canvas.astype(np.float32), copies_tgt_canvas) > 0.5
+    counted = np.isfinite(distance) & in_overlap
+    seen_src = sample_bilinear(weight_src, copies_src_canvas) >= VISIBLE_WEIGHT
+    seen_tgt = sample_bilinear(weight_tgt, copies_tgt_canvas) >= VISIBLE_WEIGHT
+    apart = counted & (distance > COINCIDE_PX)
+    duplicated, lost = apart & seen_src & seen_tgt, apart & ~seen_src & ~seen_tgt
+    bad = duplicated | lost
+    return CopyFigures(points=int(counted.sum()), duplicated=int(duplicated.sum()), lost=int(lost.sum()),
+                       over_strict=int((bad & (distance > STRICT_PX)).sum()),
+                       worst_px=float(distance[bad].max()) if bad.any() else 0.0)
+
+
+def seam_step(pano_grey: np.ndarray, src_grey: np.ndarray, tgt_grey: np.ndarray, valid_src: np.ndarray,
+              valid_tgt: np.ndarray, seam_x: np.ndarray) -> float:
+    """The seam step in grey levels (module docstring); NaN when no row has both views on both strips.
+
+    pano_grey, src_grey, tgt_grey: (H, W) float canvas images (the panorama, each view as it enters the
+    panorama: warped, gain-compensated); valid_*: (H, W) bool; seam_x: (H,) seam x per row.
+    """
+    height, width = pano_grey.shape
+    offsets = np.arange(STEP_NEAR_PX, STEP_FAR_PX + 1)
+    steps = np.full(height, np.nan)
+    for y in range(height):
+        s = seam_x[y]
+        if not np.isfinite(s):
+            continue
+        left, right = np.floor(s - offsets).astype(int), np.ceil(s + offsets).astype(int)
+        if left.min() < 0 or right.max() >= width:
+            continue
+        strips = np.r_[left, right]
+        if not (valid_src[y, strips].all() and valid_tgt[y, strips].all()):
+            continue
+        across = lambda img: img[y, left].mean() - img[y, right].mean()  # noqa: E731
+        steps[y] = across(pano_grey) - 0.5 * (across(src_grey) + across(tgt_grey))
+    known = np.isfinite(steps)
+    if not known.any():
+        return float("nan")
+    window = np.ones(STEP_ROWS)
+    total = np.convolve(np.where(known, steps, 0.0), window, "same")
+    count = np.convolve(known.astype(np.float64), window, "same")
+    smooth = total[known & (count >= STEP_ROWS / 2)] / count[known & (count >= STEP_ROWS / 2)]
+    return float(np.mean(np.abs(smooth))) if smooth.size else float("nan")
+
+
+def line_segments(img: np.ndarray) -> np.ndarray:
+    """(K, 2, 2) float64 LSD segments of a BGR or grey uint8 image at least MIN_LINE_PX long, longest first."""
+    grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
+    found = cv2.createLineSegmentDetector().detect(grey)[0]
+    if found is None:
+        return np.zeros((0, 2, 2))
+    segments = found.reshape(-1, 2, 2).astype(np.float64)
+    length = np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1)
+    order = np.argsort(-length)
+    return segments[order][length[order] >= MIN_LINE_PX][:MAX_LINES]
+
+
+def _mapped(segments: np.ndarray, forward, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Segment points on the canvas (K, LINE_SAMPLES, 2) and whether their own view shows them (K, LINE_SAMPLES)."""
+    t = np.linspace(0.0, 1.0, LINE_SAMPLES)[None, :, None]
+    pts = segments[:, :1] + t * (segments[:, 1:] - segments[:, :1])
+    mapped = forward(pts.reshape(-1, 2)).reshape(pts.shape)
+    shown = (sample_bilinear(weight, mapped.reshape(-1, 2)) >= LINE_VISIBLE).reshape(pts.shape[:2])
+    return mapped, shown & np.isfinite(mapped).all(axis=2)
+
+
+def _direction(points: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    finite = points[np.isfinite(points).all(axis=1)]
+    if len(finite) < 2:
+        return None
+    d = finite[-1] - finite[0]
+    return finite[0], d / max(np.linalg.norm(d), 1e-12)
+
+
+def line_figures(segments_src: np.ndarray, forward_src, weight_src: np.ndarray,
+                 segments_tgt: np.ndarray, forward_tgt, weight_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(bend % of every segment shown whole by its view, continuity px of every cut segment with a partner).
+
+    segments_*: (K, 2, 2) input-frame segments of each view; forward_*: (N, 2) view pixels -> canvas
+    (x, y) (NaN where undefined); weight_*: (H, W) each view's weight in the panorama.
+    """
+    views = [_mapped(segments_src, forward_src, weight_src), _mapped(segments_tgt, forward_tgt, weight_tgt)]
+    bends, continuity = [], []
+    for own, other in ((0, 1), (1, 0)):
+        mapped, shown = views[own]
+        other_mapped, other_shown = views[other]
+        other_lines = [_direction(m) for m in other_mapped]
+        for points, seen in zip(mapped, shown):
+            if seen.all():
+                chord = points[-1] - points[0]
+                length = np.linalg.norm(chord)
+                rel = points - points[0]
+                bends.append(100.0 * np.max(np.abs(rel[:, 0] * chord[1] - rel[:, 1] * chord[0])) / length**2)
+                continue
+            if not seen.any() or (line := _direction(points)) is None:
+                continue
+            switch = int(np.flatnonzero(seen[1:] != seen[:-1])[0])
+            cut = points[switch] if seen[switch] else points[switch + 1]
+            best = None
+            for partner, partner_pts, partner_seen in zip(other_lines, other_mapped, other_shown):
+                if partner is None or not partner_seen.any() or abs(line[1] @ partner[1]) < np.cos(np.radians(PARTNER_ANGLE_DEG)):
+                    continue
+                normal = np.array([-partner[1][1], partner[1][0]])
+                gap = abs((cut - partner[0]) @ normal)
+                reach = np.min(np.linalg.norm(partner_pts[partner_seen] - cut, axis=1))
+                if gap <= PARTNER_GAP_PX and reach <= 3 * PARTNER_GAP_PX and (best is None or gap < best):
+                    best = gap
+            if best is not None:
+                continuity.append(best)
+    return np.asarray(bends), np.asarray(continuity)

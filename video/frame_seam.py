@@ -1,0 +1,96 @@
+"""The seam of every video frame (issue 14): "cached warps, per-frame seam slicing".
+
+The estimate fixes the maps and a seam; each frame the seam is re-optimised inside a band around it
+(``band`` cells each side, ``video_seam_band_ratio`` x the canvas diagonal) on that frame's luma
+difference (the compositor's ``band_difference``: source minus target, gains applied), by the
+dynamic programming of ``seam_path`` with a temporal term: a cell costs its difference beyond the
+noise floor, plus ``video_seam_stay_cost`` per pixel away from the last frame's seam and
+``video_seam_home_cost`` per pixel away from the estimate's. The seam glides: it moves at most
+``video_seam_speed_px`` per line from the last frame's. On a static rig a second path, free in the
+band, is taken instead when the gliding one would cost ``video_seam_jump_cost`` per line more:
+something moved across the seam and the seam steps round it at once. (On a moving rig everything
+shifts a little every frame; there the seam only glides.) While nothing moves the costs only carry noise, and a new path
+replaces the last one only when it is cheaper by ``video_seam_margin`` per line: the seam stays put.
+Only the compositor's seam positions change per frame; its plan stays.
+
+Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from ..composite import Compositor
+from ..config import Config
+from ..partition import running_mean
+from ..seam_path import BandPath
+from sena_warp.kernels.composite import NOT_BOTH
+
+
+def band_half_width(shape: tuple[int, int], cfg: Config) -> int:
+    """Band half-width in luma pixels for a canvas of ``shape`` (H, W)."""
+    return max(cfg.video_seam_band_min_px, int(round(cfg.video_seam_band_ratio * float(np.hypot(*shape)))))
+
+
+class FrameSeam:
+    """The per-frame seam of one luma compositor whose plan keeps both views within ``band`` of the
+    estimate's seam ``home`` (L,) float32 (positions per line); ``jumps``: whether it may leave its
+    gliding path (a static rig)."""
+
+    def __init__(self, home: np.ndarray, band: int, jumps: bool, cfg: Config):
+        self.cfg = cfg
+        self.jumps = jumps
+        self.band = band
+        self.width = 2 * band + 1
+        self._solver = BandPath(len(home), self.width, 1, cfg)
+        self._segment = np.array([[0, len(home) - 1, -1, -1]])
+        self._diff = wp.zeros((len(home), self.width), dtype=float, device=cfg.device)
+        self.reset(home)
+
+    def reset(self, home: np.ndarray) -> None:
+        """A new estimate's seam: the band follows it; the last path is kept where it still fits."""
+        self.home = np.asarray(home, np.float32)
+        self.band_x0 = (np.rint(self.home) - self.band).astype(np.int32)
+        last = getattr(self, "positions", self.home)
+        self.positions = np.clip(np.rint(last), self.band_x0, self.band_x0 + self.width - 1).astype(np.int32)
+
+    def next(self, luma: Compositor) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The seam of the frame loaded in ``luma``: (positions (L,) int32, difference (L, width) float32
+        grey levels, both (L, width) bool where it is defined)."""
+        cfg = self.cfg
+        diff = luma.band_difference(self.band_x0, self.width, self._diff)
+        both = diff < 0.5 * NOT_BOTH
+        change = np.where(both, np.maximum(np.abs(diff) - cfg.video_seam_noise, 0.0), cfg.video_seam_blocked_cost)
+        cells = self.band_x0[:, None] + np.arange(self.width)[None, :]
+        cost = (change + cfg.video_seam_stay_cost * np.abs(cells - self.positions[:, None])
+                + cfg.video_seam_home_cost * np.abs(cells - self.home[:, None]))
+        far = np.abs(cells - self.positions[:, None]) > cfg.video_seam_speed_px
+        glide = self._solver.solve(cost + far * np.float32(cfg.video_seam_blocked_cost * 10), self.band_x0,
+                                   self._segment, cfg.seam_max_step_px, cfg.seam_step_cost)
+        lines = np.arange(len(self.home))
+
+        def along(path: np.ndarray) -> float:
+            return float(change[lines, path - self.band_x0].sum())
+
+        lines_n = len(lines)
+        path = glide
+        if self.jumps:
+            free = self._solver.solve(cost, self.band_x0, self._segment, cfg.seam_max_step_px, cfg.seam_step_cost)
+            path = free if along(glide) - along(free) > cfg.video_seam_jump_cost * lines_n else glide
+        if along(self.positions) - along(path) > cfg.video_seam_margin * lines_n:
+            self.positions = path.astype(np.int32)
+        return self.positions, diff, both
+
+
+def band_offsets(positions: np.ndarray, band_x0: np.ndarray, diff: np.ndarray, both: np.ndarray,
+                 cfg: Config) -> tuple[np.ndarray, np.ndarray]:
+    """The seam blend's low-frequency offsets of one frame (``partition.seam_offsets`` on the band):
+    per line, half the mean difference within ``seam_blend_strip_px`` of the seam, averaged over
+    ``seam_blend_rows`` lines, off the source and onto the target: ((L, 1), (L, 1)) float32."""
+    cells = band_x0[:, None] + np.arange(diff.shape[1])[None, :]
+    strip = both & (np.abs(cells - positions[:, None]) <= cfg.seam_blend_strip_px)
+    count = strip.sum(axis=1)
+    per_line = np.where(strip, diff, 0.0).sum(axis=1) / np.maximum(count, 1)
+    delta = running_mean(per_line[:, None], count > 0, cfg.seam_blend_rows).astype(np.float32)
+    return -0.5 * delta, 0.5 * delta
