@@ -99,7 +99,7 @@ def cmd_video(args: argparse.Namespace) -> int:
         check_output_path(path, (args.left, args.right))  # before decoding: a bad --report must not leave a video
     if args.reestimate is not None and args.rig != "moving":
         raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
-    cfg = resolve_config(_config_from(args).replace(video_rig=args.rig))
+    cfg = resolve_config(_config_from(args).replace(video_rig=args.rig, video_crop=args.crop))
     if args.reestimate is not None:
         cfg = cfg.replace(video_reestimate_s=args.reestimate)
     # NVENC only where the kernels run on a GPU too; the writer falls back to libx264 if it cannot open.
@@ -163,6 +163,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seconds the right video started after the left one (default: 0)")
     p.add_argument("--rig", choices=("static", "moving"), default=Config.video_rig,
                    help="static: maps estimated once; moving: re-estimated now and then (default: %(default)s)")
+    p.add_argument("--crop", action="store_true",
+                   help="crop to the largest rectangle the first estimate covers, fixed for the whole video")
     p.add_argument("--reestimate", type=float, metavar="S",
                    help=f"seconds between re-estimations of a moving rig (default: {Config.video_reestimate_s})")
     p.add_argument("--crf", type=int, help=f"constant quality, lower is better (default: {Config.video_crf})")

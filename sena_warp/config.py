@@ -144,6 +144,7 @@ class Config:
     video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
     video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's
     video_max_median_change_px: float = 8.0  # reject a re-estimate moving M_s by more (median over the overlap)
+    video_crop: bool = False  # crop the output to the largest rectangle the first estimate covers, for the whole video
     video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly (at least)
     video_seam_speed_px: float = 2.0  # the seam moves at most this per frame (a blend lasts long enough), but for jumps
     video_estimate_workers: int = 1  # moving rig: re-estimates run on this many worker threads, off the frame loop

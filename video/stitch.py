@@ -19,7 +19,8 @@ import numpy as np
 
 from ..composite import Compositor
 from ..config import Config
-from ..errors import InputError, StitchError
+from ..crop import largest_inner_rectangle
+from ..errors import InputError, StitchError, VideoError
 from ..imageio import check_output_path
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import resolve_config
@@ -27,8 +28,8 @@ from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_rea
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, band_offsets
 from .loop import VideoOptions, run_video
-from .maps import (BLACK_UV, BLACK_Y, PlaneMaps, chroma_lines, lerp_maps, map_change_px, plane_maps, seam_change_px,
-                   target_offset)
+from .maps import (BLACK_UV, BLACK_Y, PlaneMaps, chroma_lines, lerp_maps, map_change_px, plane_maps, sampled_mask,
+                   seam_change_px, target_offset)
 from .reader import YuvFrame, probe_video
 from .writer import even_size
 
@@ -68,16 +69,20 @@ class SenaFrameCompositor:
     per frame.
     """
 
-    def __init__(self, first: StitchMaps, first_attempts: list[Attempt], first_pair: int, fps: float, cfg: Config):
+    def __init__(self, first: StitchMaps, first_attempts: list[Attempt], first_pair: int, fps: float,
+                 frame_shapes: tuple[tuple[int, int], tuple[int, int]], cfg: Config):
         """From the first estimate ``first`` (made on pair ``first_pair``; ``first_attempts``: every
-        pair tried) for inputs at ``fps`` frames per second; ``cfg.device`` resolved."""
+        pair tried) for inputs at ``fps`` frames per second whose (rows, cols) are ``frame_shapes``
+        (left, right); ``cfg.device`` resolved. With ``cfg.video_crop`` the fixed canvas is the largest
+        rectangle the first estimate covers."""
         self._cfg = cfg
         self._rig = first.rig
         self._reestimate_s = cfg.video_reestimate_s if cfg.video_rig == "moving" else None
-        width, height = even_size(first.alpha_input.shape[1], first.alpha_input.shape[0])  # yuv420p: even sides
+        x0, y0, width, height = fixed_canvas(first, self._rig.pick(*frame_shapes), cfg.video_crop)
         shape = (height, width)
+        self.crop_xywh = (x0, y0, width, height) if cfg.video_crop else None
         self._band = band_half_width(shape, cfg)
-        self._offset_tgt = target_offset(first.map_tgt_input)
+        self._offset_tgt = target_offset(first.map_tgt_input) - np.array([x0, y0], np.float64)
         self._maps = self._on_canvas(first, shape)
         self.output_size = (shape[1], shape[0])
         self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.seam_luma, cfg)
@@ -114,7 +119,9 @@ class SenaFrameCompositor:
         (``estimate.best_first_estimate``); ``offset_s`` as ``VideoOptions.offset_s``, ``reference`` as
         ``stitch_videos``; ``cfg.device`` resolved."""
         maps, pair, attempts = best_first_estimate(left, right, offset_s, cfg, reference)
-        return cls(maps, attempts, pair, float(probe_video(left).fps), cfg)
+        info_l, info_r = probe_video(left), probe_video(right)
+        return cls(maps, attempts, pair, float(info_l.fps), ((info_l.height, info_l.width), (info_r.height, info_r.width)),
+                   cfg)
 
     def source_target(self, item_left, item_right) -> tuple:
         """A (left, right) pair of per-input things (frames, planes, shapes) as (source, target)."""
@@ -255,6 +262,7 @@ class SenaFrameCompositor:
                     "vertical": self._rig.vertical, "reestimate_s": self._reestimate_s},
             "first_estimate": self._first_info,
             "canvas": {"width": self.output_size[0], "height": self.output_size[1],
+                       "crop_xywh": None if self.crop_xywh is None else list(self.crop_xywh),
                        "offset_tgt": [float(v) for v in self._offset_tgt],
                        "seam_x_working": [None if np.isnan(x) else round(float(x), 2)
                                           for x in self._maps.seam_x_working]},
@@ -272,6 +280,22 @@ class SenaFrameCompositor:
             "exposure": {"frames": history},
             "timing_s": {name: round(seconds, 4) for name, seconds in self._seconds.items()},
         }
+
+
+def fixed_canvas(first: StitchMaps, shapes_src_tgt: tuple[tuple[int, int], tuple[int, int]], crop: bool
+                 ) -> tuple[int, int, int, int]:
+    """(x0, y0, width, height) of the video's canvas on the first estimate's, even-sized (yuv420p):
+    all of it, or with ``crop`` the largest rectangle where a view is sampled (``crop.py``)."""
+    if not crop:
+        return (0, 0, *even_size(first.alpha_input.shape[1], first.alpha_input.shape[0]))
+    shape_src, shape_tgt = shapes_src_tgt
+    covered = sampled_mask(first.map_src_input, shape_src) | sampled_mask(first.map_tgt_input, shape_tgt)
+    x, y, width, height = largest_inner_rectangle(covered)
+    x0, y0 = x + x % 2, y + y % 2
+    width, height = even_size(width - (x0 - x), height - (y0 - y))
+    if width < 2 or height < 2:
+        raise VideoError("--crop: the first estimate covers no rectangle to crop to; stitch without --crop")
+    return x0, y0, width, height
 
 
 def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike, cfg: Config,
