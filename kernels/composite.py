@@ -304,3 +304,24 @@ def band_difference_kernel(
                                        steps[3]), gain_tgt[0], bias_tgt[0], 0)
             value = float(vs - vt) / float(ONE20)
     diff[line, j] = value
+
+
+@wp.kernel
+def seam_weights_kernel(
+    row0: int,
+    seam: wp.array(dtype=float),
+    lines_are_rows: int,
+    transition_px: float,
+    smooth_sigma_px: float,
+    lf_px: float,
+    alpha: wp.array2d(dtype=float),
+    lf: wp.array2d(dtype=float),
+):
+    """Per canvas pixel: the source weight and the low-frequency offsets' weight the frame kernel gives it
+    for the seam ``seam`` (where both views are valid), for figures and reference implementations."""
+    i, x = wp.tid()
+    y = row0 + i
+    lp = line_and_position(x, y, lines_are_rows)
+    d = float(lp[1]) - seam[lp[0]]
+    alpha[y, x] = source_alpha(d, transition_px, smooth_sigma_px)
+    lf[y, x] = lf_weight(d, lf_px)

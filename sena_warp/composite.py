@@ -17,7 +17,7 @@ import warp as wp
 from sena_warp.config import Config
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import (COMPOSITE_FRAME_KERNELS, MAX_CHANNELS, band_difference_kernel,
-                                        composite_plan_kernel)
+                                        composite_plan_kernel, seam_weights_kernel)
 from sena_warp.warp_map import as_channels
 
 
@@ -154,6 +154,28 @@ class Compositor:
     def coverage(self, shape_src: tuple, shape_tgt: tuple) -> np.ndarray:
         """(Hc, Wc) uint8 255 where at least one side of images of these shapes is sampled, else 0."""
         return self._buffers_for(tuple(shape_src), tuple(shape_tgt)).coverage.numpy()
+
+    def seam_weights(self) -> tuple[np.ndarray, np.ndarray]:
+        """(alpha, lf) (Hc, Wc) float32 for the current seam: the source weight where both views are
+        valid and the weight of the low-frequency offsets (the frame kernel's rule)."""
+        alpha = wp.empty(self.canvas_shape, dtype=float, device=self.device)
+        lf = wp.empty(self.canvas_shape, dtype=float, device=self.device)
+        layout = self.layout
+        inputs = [self.seam, int(layout.lines_are_rows), float(layout.transition_px), float(layout.smooth_sigma_px),
+                  float(layout.lf_px), alpha, lf]
+        runtime.launch_rows(seam_weights_kernel, *self.canvas_shape, inputs, self.device, self.threads)
+        return alpha.numpy(), lf.numpy()
+
+    def gains(self, channels: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(gain_src, bias_src, gain_tgt, bias_tgt), each (channels,) float64 grey levels, as applied."""
+        self._ensure_defaults(channels)
+        units = (GAIN_ONE, LEVEL, GAIN_ONE, LEVEL)
+        return tuple(np.array(list(v)[:channels], np.float64) / unit for v, unit in zip(self._gains[channels], units))
+
+    def offsets(self, channels: int) -> tuple[np.ndarray, np.ndarray]:
+        """The low-frequency offsets (L, channels) float64 grey levels of each side, as applied."""
+        self._ensure_defaults(channels)
+        return tuple(a.numpy().reshape(self.lines, channels) / LEVEL for a in self._lf[channels])
 
     def load(self, img_src: np.ndarray, img_tgt: np.ndarray) -> None:
         """Upload one pair of uint8 images (H, W, C) or planes (H, W), same C on both sides, for

@@ -112,7 +112,7 @@ class Config:
     seam_anchor_px: float = 2.0  # path: anchors lie within this of the reduced-canvas path (reduced px)
     seam_anchor_spacing_px: float = 6.0  # path: anchors at least this far apart down the seam
     seam_refine_px: int = 3  # path: full-resolution band half-width beyond the reduction factor (2 f + this)
-    correction_smooth: float = 50.0  # path: smoothing of the anchor residual curve (second differences, per 8 rows)
+    correction_smooth: float = 0.3  # path: smoothing of the anchor residual curve (second differences of nodes 8 rows apart)
 
     # --- Step 9: partition and reconstruction -------------------------------------------------
     transition_px: int = 8  # width of the linear alpha ramp across the seam (paper's code: 24; sweep in evaluation.md)
@@ -125,7 +125,7 @@ class Config:
     # --- Exposure compensation (Brown & Lowe 2007; no step of the paper) ------------------------
     gain_model: str = "channels"  # "channels": per-channel gains (gains.py); "opencv": cv2's ChannelsCompensator; "none"
     gain_sigma_n: float = 10.0  # sigma_N: std of the intensity error (grey levels)
-    gain_sigma_g: float = 0.1  # sigma_g: std of the gains' prior around 1
+    gain_sigma_g: float = 0.5  # sigma_g: std of the gains' prior around 1 (Brown & Lowe, OpenCV: 0.1; sweep in evaluation.md)
     gain_outlier_fraction: float = 0.2  # the largest differences (misalignment, moving things) left out
     gain_dark_level: float = 5.0  # pixels at or below this in any channel left out (clipped)
     gain_bright_level: float = 250.0  # pixels at or above this left out (saturated)
@@ -147,7 +147,7 @@ class Config:
     video_crop: bool = False  # crop the output to the largest rectangle the first estimate covers, for the whole video
     video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly (at least)
     video_seam_speed_px: float = 2.0  # the seam moves at most this per frame (a blend lasts long enough), but for jumps
-    video_estimate_workers: int = 1  # moving rig: re-estimates run on this many worker threads, off the frame loop
+    video_estimate_workers: int = 1  # moving rig: re-estimates run on this many threads off the frame loop (0: on it)
     seam_prior_weight: float = 0.5  # moving rig: cost per px (per row) of a new seam's distance from the current one
     # --- Video over time: the per-frame seam and exposure (issue 14) ----------------------------
     video_seam_band_ratio: float = 0.015  # per-frame seam: band half-width, x the canvas diagonal

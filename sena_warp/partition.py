@@ -29,6 +29,7 @@ import warp as wp
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.errors import InputError
+from sena_warp.ffd import cubic_weights
 from sena_warp.kernels import runtime
 from sena_warp.kernels.seam import seam_maps_kernel
 from sena_warp.seam_path import SeamPath
@@ -66,33 +67,37 @@ class SeamMaps:
     anchors_tgt_canvas: np.ndarray
 
 
+def curve_taps(y: np.ndarray, nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 4) node indices and cubic-convolution weights (``ffd.cubic_weights``) of rows ``y`` on a
+    curve with a node every ``CURVE_STEP_ROWS`` rows."""
+    g = np.clip(np.asarray(y, np.float64) / CURVE_STEP_ROWS, 0, nodes - 1)
+    i0 = np.floor(g).astype(np.int64)
+    return np.clip(i0[:, None] + np.arange(-1, 3)[None, :], 0, nodes - 1), cubic_weights(g - i0)
+
+
 def smooth_curve(y_knots: np.ndarray, values: np.ndarray, height: int, smoothing: float) -> np.ndarray:
     """(height,) float64: a smooth curve over rows 0..height-1 that follows ``values`` at ``y_knots``.
 
-    Unknowns every ``CURVE_STEP_ROWS`` rows, linear between them, minimising the squared misfit at the
-    knots plus ``smoothing`` x the squared second differences (a discrete smoothing spline); constant
-    beyond the first and last knot, zero without knots.
+    Node values every ``CURVE_STEP_ROWS`` rows, interpolated bicubically (no kink at the nodes),
+    minimising the squared misfit at the knots plus ``smoothing`` x the squared second differences of
+    the nodes (a discrete smoothing spline); constant beyond the first and last knot, zero without knots.
     """
     y_knots = np.asarray(y_knots, np.float64)
     values = np.asarray(values, np.float64)
     if y_knots.size == 0:
         return np.zeros(height)
     nodes = int(np.ceil(max(height - 1, 1) / CURVE_STEP_ROWS)) + 1
-    g = np.clip(y_knots / CURVE_STEP_ROWS, 0, nodes - 1)
-    i0 = np.clip(np.floor(g).astype(np.int64), 0, nodes - 2)
-    t = g - i0
-    design = np.zeros((len(g), nodes))
-    design[np.arange(len(g)), i0] = 1.0 - t
-    design[np.arange(len(g)), i0 + 1] = t
+    design = np.zeros((len(y_knots), nodes))
+    index, weight = curve_taps(y_knots, nodes)
+    np.add.at(design, (np.arange(len(y_knots))[:, None], index), weight)
     second = np.zeros((nodes - 2, nodes))
     diag = np.arange(nodes - 2)
     second[diag, diag], second[diag, diag + 1], second[diag, diag + 2] = 1.0, -2.0, 1.0
     system = design.T @ design + smoothing * second.T @ second + 1e-9 * np.eye(nodes)
-    curve = np.interp(np.arange(height) / CURVE_STEP_ROWS, np.arange(nodes), np.linalg.solve(system, design.T @ values))
-    rows = np.arange(height)
-    curve[rows < y_knots.min()] = curve[int(np.clip(np.ceil(y_knots.min()), 0, height - 1))]
-    curve[rows > y_knots.max()] = curve[int(np.clip(np.floor(y_knots.max()), 0, height - 1))]
-    return curve
+    solution = np.linalg.solve(system, design.T @ values)
+    rows = np.clip(np.arange(height, dtype=np.float64), y_knots.min(), y_knots.max())  # constant beyond the ends
+    index, weight = curve_taps(rows, nodes)
+    return np.einsum("nk,nk->n", weight, solution[index])
 
 
 def seam_rows(path: SeamPath, height: int, cfg: Config) -> SeamRows:

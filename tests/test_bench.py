@@ -1,7 +1,7 @@
 """Benchmark (issue 6): clip maker, a tiny bench run, and the fairness of the compositing comparison.
 
-The Warp compositor (fixed point) is checked against the float kernel it replaces on the per-frame
-path, and against the OpenCV reference the benchmark times it with, on the same real images and maps.
+The Warp compositor is checked against the OpenCV reference the benchmark times it with, on the same
+real images, maps, seam, gains and offsets.
 """
 
 from __future__ import annotations
@@ -10,30 +10,17 @@ import math
 
 import numpy as np
 import pytest
-import warp as wp
 
 from sena_warp.evaluation.bench import COLUMNS, OpenCVReference, make_clip_pair, pan_window, parse_size, run_bench
 from sena_warp.composite import Compositor
 from sena_warp.config import Config
 from sena_warp.errors import InputError
-from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import composite_kernel
 from sena_warp.video.reader import FrameReader, probe_video
+from sena_warp.video.stitch import PlanePass
+from test_composite import layout
 from test_kernels_remap import scene  # noqa: F401  (a fixture)
 
 INTER_STEPS = 32  # cv2.remap's sub-pixel resolution (INTER_BITS = 5)
-
-
-def float_composite(img_src, img_tgt, map_src, map_tgt, alpha):
-    """The float kernel (``composite_kernel``) on uint8 (H, W, C) images: (out (Hc, Wc, C), coverage)."""
-    hc, wc = alpha.shape
-    out = wp.zeros((hc, wc, img_src.shape[2]), dtype=wp.uint8, device="cpu")
-    coverage = wp.zeros((hc, wc), dtype=wp.uint8, device="cpu")
-    inputs = [wp.array(img_src, dtype=wp.uint8, device="cpu"), wp.array(img_tgt, dtype=wp.uint8, device="cpu"),
-              wp.array(map_src, dtype=wp.vec2, device="cpu"), wp.array(map_tgt, dtype=wp.vec2, device="cpu"),
-              wp.array(alpha, dtype=float, device="cpu"), out, coverage]
-    runtime.launch_rows(composite_kernel, hc, wc, inputs, "cpu", 2)
-    return out.numpy(), coverage.numpy()
 
 
 @pytest.fixture(scope="module")
@@ -100,36 +87,25 @@ def test_bench_sizes_and_missing_data(tmp_path):
 
 @pytest.mark.parametrize("channels", [1, 2])
 def test_opencv_reference_agrees_with_warp_compositor(scene, channels, warp_device):  # noqa: F811
-    """Fairness of the benchmark: both compositors compute the same thing (maps on cv2's 1/32 px grid)."""
-    img_src, img_tgt, map_src, map_tgt, alpha = scene
+    """Fairness of the benchmark: both compositors compute the same thing (maps on cv2's 1/32 px grid),
+    seam, gains and the seam blend's offsets included."""
+    img_src, img_tgt, map_src, map_tgt, _ = scene
     map_src = (np.round(map_src * INTER_STEPS) / INTER_STEPS).astype(np.float32)
     map_src[:40, :40] = np.nan  # a NaN patch: nothing sampled from the source there
     plane_src = np.ascontiguousarray(img_src[:, :, :channels])
     plane_tgt = np.ascontiguousarray(img_tgt[:, :, :channels])
     fill = (16, 128)[:channels]
-    reference = OpenCVReference(map_src, map_tgt, alpha, plane_src.shape[:2], plane_tgt.shape[:2], fill)
-    expected = reference.apply(plane_src, plane_tgt).reshape(*alpha.shape, channels)
-    out, coverage = Compositor(map_src, map_tgt, alpha, Config(device=warp_device, cpu_threads=2)).apply(
-        plane_src, plane_tgt, fill)
-    out = out.reshape(*alpha.shape, channels)
+    comp = Compositor(map_src, map_tgt, layout(scene), Config(device=warp_device, cpu_threads=2))
+    comp.set_gains(channels, [1.1, 1.0][:channels], [-4.0, 2.0][:channels], [0.9, 1.0][:channels], [3.0, -2.0][:channels])
+    lines = comp.lines
+    comp.set_offsets(np.full((lines, channels), -5.0, np.float32), np.full((lines, channels), 5.0, np.float32))
+    out = comp.apply(plane_src, plane_tgt, fill).reshape(*map_src.shape[:2], channels)
+    reference = OpenCVReference(PlanePass.of(comp, map_src, map_tgt, fill), plane_src.shape[:2], plane_tgt.shape[:2])
+    expected = reference.apply(plane_src, plane_tgt).reshape(*map_src.shape[:2], channels)
+    coverage = comp.coverage(plane_src.shape[:2] + (channels,), plane_tgt.shape[:2] + (channels,))
     assert (coverage == 0).any() and (coverage > 0).any()
     assert np.abs(out.astype(int) - expected).max() <= 1
     np.testing.assert_array_equal(out[coverage == 0], np.broadcast_to(fill, out[coverage == 0].shape))
-
-
-def test_fixed_point_matches_float_kernel(scene, warp_device):  # noqa: F811
-    """The per-frame fixed-point path against the float kernel, copy pixels, blends and edges included."""
-    img_src, img_tgt, map_src, map_tgt, alpha = scene
-    h, w = img_src.shape[:2]
-    map_src = map_src.copy()
-    map_src[0, :, 0], map_src[0, :, 1] = np.linspace(0, w - 1, map_src.shape[1]), h - 1  # bottom edge, exactly
-    map_src[1, :, 0], map_src[1, :, 1] = w - 1, np.linspace(0, h - 1, map_src.shape[1])  # right edge, exactly
-    expected, covered = float_composite(img_src, img_tgt, map_src, map_tgt, alpha)
-    out, coverage = Compositor(map_src, map_tgt, alpha, Config(device=warp_device, cpu_threads=2)).apply(img_src, img_tgt)
-    np.testing.assert_array_equal(coverage, covered)
-    assert np.abs(out.astype(int) - expected).max() <= 1
-    # The target map is an integer shift, so where alpha is 0 the output is an exact copy of the target.
-    assert (np.abs(out.astype(int) - expected) == 0).mean() > 0.9
 
 
 def test_bench_without_the_shared_pair_is_one_line_error(tmp_path, capsys):

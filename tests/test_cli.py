@@ -25,11 +25,13 @@ def test_image_writes_transparent_png_report_and_debug(pair, tmp_path, warp_devi
     assert data["global_affine"]["inliers"] >= 100
     assert data["anchors"]["count"] >= 5
     assert data["metrics"]["anchor_residual_median_px"] <= 1.5
-    assert set(data["seconds"]) >= {"features", "global_affine", "ffd", "gate", "zone", "chain", "composite"}
+    assert set(data["seconds"]) >= {"features", "global_affine", "ffd", "gains", "zone", "chain", "seam_blend",
+                                    "composite"}
+    assert data["warp"]["ffd_model"] == "fit" and not data["warp"]["gate"]
     # One picture per stage: the matches side by side, then the stages on the (working-frame) canvas,
-    # which for this horizontal rig is the panorama's own grid. Measured grey-level std of the seven
-    # pictures: 50 (alpha) to 77 (FFD field); a blank or half-drawn picture would be far below 40.
-    names = ["01_matches.jpg", "02_overlap_cells.jpg", "03_ffd_field.jpg", "04_gate.jpg",
+    # which for this horizontal rig is the panorama's own grid (no gate: the fitted lattice needs none).
+    # A blank or half-drawn picture would have a grey-level std far below 40.
+    names = ["01_matches.jpg", "02_overlap_cells.jpg", "03_ffd_field.jpg",
              "05_warped_over_target.jpg", "06_zone_chain_seam.jpg", "07_alpha.jpg"]
     assert sorted(p.name for p in debug.iterdir()) == names
     for name in names:

@@ -1,52 +1,138 @@
-"""Compositor: the per-frame path, against the numpy compositing reference, for images and planes."""
+"""Compositor: the per-frame path along a seam, against a numpy reference, for images and planes.
+
+The reference takes the seam's weights from ``Compositor.seam_weights`` (the kernels' one rule, itself
+checked against its closed form below), samples both views with the host's bilinear rule and applies
+each side's gains and offsets in float64.
+"""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import pytest
 
-from sena_warp.composite import Compositor
+from sena_warp.composite import Compositor, SeamLayout
 from sena_warp.config import Config
+from sena_warp.kernels.composite import NOT_BOTH
 from test_kernels_maps import DEVICES
-from test_kernels_remap import composite_reference, scene  # noqa: F401  (scene is a fixture)
+from test_kernels_remap import remap_reference, scene  # noqa: F401  (scene is a fixture)
+
+
+def layout(scene, lines_are_rows=True, band_px=12.0, lf_px=40.0, wobble=15.0) -> SeamLayout:
+    """A wavy seam down the middle of the scene's canvas (per row, or per column)."""
+    _, _, map_src, _, _ = scene
+    height, width = map_src.shape[:2]
+    lines, across = (height, width) if lines_are_rows else (width, height)
+    positions = 0.5 * across + wobble * np.sin(np.arange(lines) / 17.0)
+    return SeamLayout(positions.astype(np.float32), lines_are_rows, band_px, 8.0, 1.5, lf_px)
+
+
+def reference(comp: Compositor, img_src, img_tgt, map_src, map_tgt):
+    """(values (Hc, Wc, C) float64, covered (Hc, Wc) bool) of the compositing rule."""
+    img_src = img_src if img_src.ndim == 3 else img_src[:, :, None]
+    img_tgt = img_tgt if img_tgt.ndim == 3 else img_tgt[:, :, None]
+    channels = img_src.shape[2]
+    v_src, ok_src = remap_reference(img_src, map_src)
+    v_tgt, ok_tgt = remap_reference(img_tgt, map_tgt)
+    alpha, lf = comp.seam_weights()
+    gain_src, bias_src, gain_tgt, bias_tgt = comp.gains(channels)
+    off_src, off_tgt = comp.offsets(channels)
+    if not comp.layout.lines_are_rows:
+        off_src, off_tgt = off_src[None, :, :], off_tgt[None, :, :]
+    else:
+        off_src, off_tgt = off_src[:, None, :], off_tgt[:, None, :]
+    src = gain_src * v_src + bias_src + lf[..., None] * off_src
+    tgt = gain_tgt * v_tgt + bias_tgt + lf[..., None] * off_tgt
+    a = np.where(ok_src, np.where(ok_tgt, alpha, 1.0), 0.0)[..., None]
+    covered = ok_src | ok_tgt
+    return np.where(covered[..., None], np.clip(a * src + (1 - a) * tgt, 0, 255), 0.0), covered
+
+
+def test_seam_weights_follow_the_smoothed_ramp(scene, warp_device):  # noqa: F811
+    """The source weight is the linear ramp across T convolved with a Gaussian of sigma (closed form)."""
+    _, _, map_src, map_tgt, _ = scene
+    seam = layout(scene)
+    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device))
+    alpha, lf = comp.seam_weights()
+    y = 40
+    d = np.arange(map_src.shape[1]) - seam.positions[y]
+    t, s, half = seam.transition_px, seam.smooth_sigma_px, 0.5 * seam.transition_px
+    phi = lambda z: 0.5 * (1 + np.vectorize(math.erf)(z / (s * math.sqrt(2))))  # noqa: E731
+    pdf = lambda z: np.exp(-0.5 * (z / s) ** 2) / math.sqrt(2 * math.pi)  # noqa: E731
+    part = lambda z: z * phi(z) + s * pdf(z)  # noqa: E731
+    expected = np.clip((part(half - d) - part(-half - d)) / t, 0, 1)
+    np.testing.assert_allclose(alpha[y], expected, atol=1e-5)
+    np.testing.assert_allclose(lf[y], np.clip(1 - np.abs(d) / seam.lf_px, 0, None), atol=1e-6)
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_compositor_matches_reference_and_reuses_buffers(scene, device, warp_device):  # noqa: F811
-    img_src, img_tgt, map_src, map_tgt, alpha = scene
-    comp = Compositor(map_src, map_tgt, alpha, Config(device=device, cpu_threads=2))
-    out, coverage = comp.apply(img_src, img_tgt)
-    expected, covered = composite_reference(img_src, img_tgt, map_src, map_tgt, alpha)
-    assert out.shape == (*alpha.shape, 3) and out.dtype == np.uint8
+@pytest.mark.parametrize("lines_are_rows", [True, False])
+def test_compositor_matches_reference_with_gains_and_offsets(scene, device, lines_are_rows, warp_device):  # noqa: F811
+    img_src, img_tgt, map_src, map_tgt, _ = scene
+    seam = layout(scene, lines_are_rows)
+    comp = Compositor(map_src, map_tgt, seam, Config(device=device, cpu_threads=2))
+    comp.set_gains(3, [1.1, 0.9, 1.0], [-3.0, 2.0, 0.0], [0.95, 1.05, 1.0], [1.0, -1.0, 4.0])
+    lines = len(seam.positions)
+    ramp = np.linspace(-6, 6, lines, dtype=np.float32)[:, None]
+    comp.set_offsets(np.hstack([ramp, -ramp, ramp * 0]), np.hstack([-ramp, ramp, ramp * 0 + 2]))
+    out = comp.apply(img_src, img_tgt)
+    expected, covered = reference(comp, img_src, img_tgt, map_src, map_tgt)
+    coverage = comp.coverage(img_src.shape, img_tgt.shape)
+    assert out.shape == (*map_src.shape[:2], 3) and out.dtype == np.uint8
     np.testing.assert_array_equal(coverage, np.where(covered, 255, 0))
     assert np.abs(out.astype(np.float64) - expected).max() <= 1.0
-
-    # A second frame pair (swapped content) reuses the buffers and leaves the first result intact.
-    first = out.copy()
-    out2, _ = comp.apply(img_tgt[:, ::-1].copy(), img_src[:, ::-1].copy())
-    np.testing.assert_array_equal(out, first)
-    assert not np.array_equal(out2, out)
-    assert comp.planned_shapes == ((img_src.shape, img_tgt.shape),)  # one plan and buffer set for both pairs
-    comp.apply(np.ascontiguousarray(img_src[:, :, 0]), np.ascontiguousarray(img_tgt[:, :, 0]))
-    assert comp.planned_shapes == ((img_src.shape, img_tgt.shape), ((*img_src.shape[:2], 1), (*img_tgt.shape[:2], 1)))
+    assert 0.3 < covered.mean() < 1.0
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_compositor_planes(scene, device, warp_device):  # noqa: F811
-    img_src, img_tgt, map_src, map_tgt, alpha = scene
-    comp = Compositor(map_src, map_tgt, alpha, Config(device=device))
+def test_the_frame_seam_moves_within_its_band_without_a_new_plan(scene, device, warp_device):  # noqa: F811
+    img_src, img_tgt, map_src, map_tgt, _ = scene
+    plane_src, plane_tgt = np.ascontiguousarray(img_src[:, :, 1]), np.ascontiguousarray(img_tgt[:, :, 1])
+    seam = layout(scene, band_px=20.0, lf_px=0.0)
+    comp = Compositor(map_src, map_tgt, seam, Config(device=device))
+    first = comp.apply(plane_src, plane_tgt)
+    comp.set_seam(seam.positions + 10.0)  # inside the band: moves
+    moved = comp.apply(plane_src, plane_tgt)
+    expected, _ = reference(comp, plane_src, plane_tgt, map_src, map_tgt)
+    assert np.abs(moved.astype(np.float64) - expected[:, :, 0]).max() <= 1.0
+    assert not np.array_equal(first, moved) and comp.planned_shapes == ((plane_src.shape + (1,), plane_tgt.shape + (1,)),)
+    comp.set_seam(seam.positions + 100.0)  # beyond the band: held at its edge
+    alpha, _ = comp.seam_weights()
+    rows = np.arange(len(seam.positions))
+    edge = np.rint(seam.positions + seam.band_px - 0.5 * seam.transition_px).astype(int)
+    assert np.all(alpha[rows, edge - 12] > 0.99) and np.all(alpha[rows, edge + 12] < 0.01)
+
+
+def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_device):  # noqa: F811
+    import warp as wp
+
+    img_src, img_tgt, map_src, map_tgt, _ = scene
     plane_src, plane_tgt = np.ascontiguousarray(img_src[:, :, 0]), np.ascontiguousarray(img_tgt[:, :, 0])
-    out, coverage = comp.apply(plane_src, plane_tgt)
-    expected, covered = composite_reference(plane_src[:, :, None], plane_tgt[:, :, None], map_src, map_tgt, alpha)
-    assert out.shape == alpha.shape
-    assert np.abs(out.astype(np.float64) - expected[:, :, 0]).max() <= 1.0
-    np.testing.assert_array_equal(coverage > 0, covered)
+    seam = layout(scene, band_px=10.0)
+    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device))
+    comp.set_gains(1, [1.2], [-5.0], [1.0], [0.0])
+    comp.load(plane_src, plane_tgt)
+    band_x0 = (np.rint(seam.positions) - 8).astype(np.int32)
+    diff = comp.band_difference(band_x0, 17, wp.zeros((len(band_x0), 17), dtype=float, device=warp_device))
+    v_src, ok_src = remap_reference(plane_src[:, :, None], map_src)
+    v_tgt, ok_tgt = remap_reference(plane_tgt[:, :, None], map_tgt)
+    rows = np.arange(len(band_x0))[:, None]
+    cols = band_x0[:, None] + np.arange(17)[None, :]
+    both = ok_src[rows, cols] & ok_tgt[rows, cols]
+    expected = 1.2 * v_src[rows, cols, 0] - 5.0 - v_tgt[rows, cols, 0]
+    np.testing.assert_array_equal(diff < 0.5 * NOT_BOTH, both)
+    assert both.mean() > 0.5
+    assert np.abs(diff[both] - expected[both]).max() < 0.25  # taps in 1/1024 px
 
 
 def test_compositor_rejects_mismatched_inputs(scene, warp_device):  # noqa: F811
-    img_src, img_tgt, map_src, map_tgt, alpha = scene
+    img_src, img_tgt, map_src, map_tgt, _ = scene
+    seam = layout(scene)
     with pytest.raises(ValueError, match="share one"):
-        Compositor(map_src[:-1], map_tgt, alpha, Config(device=warp_device))
-    comp = Compositor(map_src, map_tgt, alpha, Config(device=warp_device))
+        Compositor(map_src[:-1], map_tgt, seam, Config(device=warp_device))
+    with pytest.raises(ValueError, match="one position per line"):
+        Compositor(map_src, map_tgt, SeamLayout(seam.positions[:-1], True, 12.0, 8.0, 1.5, 0.0), Config(device=warp_device))
+    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device))
     with pytest.raises(ValueError, match="channels"):
         comp.apply(img_src, np.ascontiguousarray(img_tgt[:, :, 0]))

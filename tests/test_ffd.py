@@ -1,4 +1,4 @@
-"""Step 4 host path: ffd_field_canvas on a real pair's geometry."""
+"""Step 4 host path: the paper's blended lattice on a real pair's geometry, the cubic taps, the fitted lattice."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ import pytest
 
 from sena_warp.affine import apply_affine, invert_affine
 from sena_warp.config import Config
-from sena_warp.ffd import ffd_field_canvas
+from sena_warp.canvas import Canvas
+from sena_warp.ffd import field_from_lattice, fitted_lattice, lattice_taps, smoothed_blend_lattice
 from test_kernels_maps import scene_geometry
 
 CFG = Config(device="cpu")
@@ -20,10 +21,9 @@ def geo(udisd_pair):
 
 
 def field_of(geo, affines, cfg=CFG):
-    return ffd_field_canvas(
-        geo["canvas"], geo["affine_src_to_tgt"], affines, geo["centres_tgt"][: len(affines)], geo["conf"][: len(affines)],
-        geo["sigma_f"], cfg,
-    )
+    lattice = smoothed_blend_lattice(geo["canvas"], geo["affine_src_to_tgt"], affines, geo["centres_tgt"][: len(affines)],
+                                     geo["conf"][: len(affines)], geo["sigma_f"], cfg)
+    return field_from_lattice(lattice, geo["canvas"])
 
 
 def test_local_affines_equal_to_global_give_zero_field(geo):
@@ -81,11 +81,12 @@ def test_fit_recovers_an_affine_field_and_drops_wrong_matches():
     affine_src_to_tgt = np.array([[1.0, 0.0, -100.0], [0.0, 1.0, 0.0]])
     pts_tgt = rng.uniform([10, 10], [390, 390], (300, 2))
     correction = lambda p: np.stack([0.01 * p[:, 0] + 2.0, -0.005 * p[:, 1] + 1.0], 1)  # noqa: E731
-    pts_src = pts_tgt + 100.0 + correction(pts_tgt + 100.0 - 100.0)
+    offset = np.array([100.0, 0.0])  # the canvas offset o of the target; A_glob^-1 t = t + o here
+    pts_src = pts_tgt + offset + correction(pts_tgt)
     pts_src[:10] += 30.0  # wrong matches, still within fit_match_px of A_glob
     fit = fitted_lattice(canvas, affine_src_to_tgt, pts_src, pts_tgt, 500.0, fit_cfg())
     assert np.all(fit.weights[:10] == 0) and np.all(fit.weights[10:] > 0.9)
     field = field_from_lattice(fit.lattice, canvas)
     far = np.array([[30, 200], [560, 300]])  # canvas points outside the matches (source-only, target-only)
-    expected = correction(far - 100.0)
+    expected = correction(far - offset)
     np.testing.assert_allclose(field[far[:, 1], far[:, 0]], expected, atol=0.05)

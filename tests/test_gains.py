@@ -50,14 +50,17 @@ def test_overlap_gains_undo_an_exposure_difference_on_a_real_image():
     img = read_image(BUNDLED / "udisd_test_000001" / "a.jpg")
     factor = np.array([0.8, 0.85, 0.9])
     views = views_with_exposure(img, factor)
+    def mean_step(g) -> np.ndarray:
+        """Per channel |mean source - mean target| after the gains (grey levels)."""
+        return np.abs(compensated(views.src, g.gain_src, g.bias_src).astype(float).mean(axis=(0, 1))
+                      - compensated(views.tgt, g.gain_tgt, g.bias_tgt).mean(axis=(0, 1)))
+
     gains = overlap_gains(views.src, views.tgt, views.both, CFG)
-    before = np.abs(views.src.astype(float) - views.tgt).mean(axis=(0, 1))
-    after = np.abs(compensated(views.src, gains.gain_src, gains.bias_src).astype(float)
-                   - compensated(views.tgt, gains.gain_tgt, gains.bias_tgt)).mean(axis=(0, 1))
-    assert np.all(after < 0.25 * before)
-    np.testing.assert_allclose(gains.gain_tgt / gains.gain_src, 1 / factor, rtol=0.03)
-    cv_gains = opencv_gains(views)
-    np.testing.assert_allclose(cv_gains.gain_tgt / cv_gains.gain_src, 1 / factor, rtol=0.05)
+    before = np.abs(views.src.astype(float).mean(axis=(0, 1)) - views.tgt.mean(axis=(0, 1)))
+    assert np.all(before > 10) and np.all(mean_step(gains) < 1.0)  # measured: 21/10/13 -> 0.6/0.7/0.2
+    np.testing.assert_allclose(gains.gain_tgt / gains.gain_src, 1 / factor, rtol=0.02)
+    # The reference to beat: OpenCV's compensator (sigma_g 0.1, every pixel) leaves several levels.
+    assert np.all(mean_step(opencv_gains(views)) > 2 * mean_step(gains))
 
 
 def test_too_few_agreeing_pixels_give_the_identity():

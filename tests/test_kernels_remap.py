@@ -8,7 +8,6 @@ import warp as wp
 
 from sena_warp.bilinear import sample_bilinear
 from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import composite_kernel
 from sena_warp.kernels.remap import remap_kernel
 from test_kernels_maps import DEVICES, scene_geometry, smooth_field, source_map_reference
 
@@ -19,14 +18,6 @@ def remap_reference(img: np.ndarray, map_canvas: np.ndarray) -> tuple[np.ndarray
     values = sample_bilinear(img, map_canvas.reshape(-1, 2)).reshape(*map_canvas.shape[:2], img.shape[2])
     valid = np.isfinite(values[..., 0])
     return np.where(valid[..., None], values, 0.0), valid
-
-
-def composite_reference(img_src, img_tgt, map_src, map_tgt, alpha):
-    """Float64 reference of the compositing rule: (values (Hc, Wc, C), covered bool (Hc, Wc))."""
-    v_src, ok_src = remap_reference(img_src, map_src)
-    v_tgt, ok_tgt = remap_reference(img_tgt, map_tgt)
-    a = np.where(ok_src, np.where(ok_tgt, np.clip(alpha, 0, 1), 1.0), 0.0)[..., None]
-    return a * v_src + (1 - a) * v_tgt, ok_src | ok_tgt
 
 
 @pytest.fixture(scope="module")
@@ -63,28 +54,3 @@ def test_remap_kernel_matches_numpy(scene, device, channels, warp_device):
     assert 0.2 < expected_valid.mean() < 0.9  # part of the canvas is outside the source
     assert np.abs(out.astype(np.float64) - expected).max() <= 1.0
     assert out[~expected_valid].max() == 0
-
-
-@pytest.mark.parametrize("device", DEVICES)
-@pytest.mark.parametrize("channels", [3, 1])
-def test_composite_kernel_matches_numpy(scene, device, channels, warp_device):
-    img_src, img_tgt, map_src, map_tgt, alpha = scene
-    if channels == 1:
-        img_src, img_tgt = (np.ascontiguousarray(i[:, :, 2:3]) for i in (img_src, img_tgt))
-    hc, wc = alpha.shape
-    out = wp.zeros((hc, wc, channels), dtype=wp.uint8, device=device)
-    coverage = wp.zeros((hc, wc), dtype=wp.uint8, device=device)
-    inputs = [
-        wp.array(img_src, dtype=wp.uint8, device=device),
-        wp.array(img_tgt, dtype=wp.uint8, device=device),
-        wp.array(map_src, dtype=wp.vec2, device=device),
-        wp.array(map_tgt, dtype=wp.vec2, device=device),
-        wp.array(alpha, dtype=float, device=device),
-        out,
-        coverage,
-    ]
-    runtime.launch_rows(composite_kernel, hc, wc, inputs, device, 2)
-    expected, covered = composite_reference(img_src, img_tgt, map_src, map_tgt, alpha)
-    np.testing.assert_array_equal(coverage.numpy(), np.where(covered, 255, 0))
-    assert 0.5 < covered.mean() < 1.0
-    assert np.abs(out.numpy().astype(np.float64) - expected).max() <= 1.0

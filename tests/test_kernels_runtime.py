@@ -67,7 +67,7 @@ warmed = runtime.loaded()
 cfg = Config(device="cpu")
 img_a, img_b = (read_image(sys.argv[1] + name) for name in ("/a.jpg", "/b.jpg"))
 maps = stitch_images(img_a, img_b, cfg).maps
-compositor = Compositor(maps.map_src_input, maps.map_tgt_input, maps.alpha_input, cfg)
+compositor = Compositor(maps.map_src_input, maps.map_tgt_input, maps.seam_input, cfg)
 for channels in (1, 2):
     compositor.apply(np.ascontiguousarray(img_a[:, :, :channels]), np.ascontiguousarray(img_b[:, :, :channels]))
 print(json.dumps({"before": sorted(before), "warmed": sorted(warmed), "after": sorted(runtime.loaded()),

@@ -8,12 +8,14 @@ import pytest
 
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
-from sena_warp.errors import GeometryError
 from sena_warp.evaluation.metrics import anchor_residuals_px, transition_mad
 from sena_warp.imageio import read_image
-from sena_warp.partition import seam_maps, seam_rows
+from sena_warp.partition import seam_maps, seam_offsets, seam_rows, smooth_curve
+from sena_warp.seam_path import straight_path
+from sena_warp.warp_map import CanvasViews
 
 DEVICE = "cpu"  # the host modules below run their kernels on Config(device=DEVICE)
+PAPER = dict(seam_model="paper")  # straight seam, linear anchor correction
 
 
 def _affine_map(height, width):
@@ -25,21 +27,45 @@ def _affine_map(height, width):
 def test_seam_rows_interpolate_anchors():
     tgt = np.array([[30.0, 0.0], [40.0, 50.0], [20.0, 99.0]])
     src = tgt + np.array([[1.0, 2.0], [3.0, 6.0], [1.0, 2.0]])
-    rows = seam_rows(src, tgt, 120)
+    rows = seam_rows(straight_path(src, tgt, 120), 120, Config(device=DEVICE, **PAPER))
     assert rows.seam_x[25] == pytest.approx(35.0)
     assert rows.seam_x[50] == pytest.approx(40.0)
     assert rows.seam_x[110] == pytest.approx(20.0)  # constant below the last anchor
     assert rows.src_row_y[25] == pytest.approx(25.0 + 4.0)
     assert rows.shift_x[25] == pytest.approx(2.0)
-    with pytest.raises(GeometryError):
-        seam_rows(src[::-1], tgt[::-1], 120)
+
+
+def test_smooth_correction_follows_the_anchors_without_kinks():
+    """Ours: a smoothing spline through the anchor residuals, not a polyline with a kink at each anchor."""
+    y = np.array([20.0, 60.0, 100.0, 140.0])
+    values = np.array([1.0, 3.0, -1.0, 2.0])
+    curve = smooth_curve(y, values, 200, Config().correction_smooth)
+    linear = np.interp(np.arange(200), y, values)
+    assert np.abs(curve[y.astype(int)] - values).max() < 0.15  # measured 0.09 px at the largest swing
+    assert np.abs(np.diff(curve, 2)).max() < 0.6 * np.abs(np.diff(linear, 2)).max()  # measured 0.54
+    assert curve[0] == curve[19] and curve[199] == curve[141]  # constant beyond the ends
+    np.testing.assert_array_equal(smooth_curve(np.zeros(0), np.zeros(0), 50, 10.0), np.zeros(50))
+
+
+def test_seam_offsets_meet_halfway_and_vanish_when_off():
+    height, width = 60, 100
+    src = np.full((height, width, 3), 110, np.uint8)
+    tgt = np.full((height, width, 3), 100, np.uint8)
+    valid = np.ones((height, width), bool)
+    views = CanvasViews(src, tgt, valid, valid)
+    offsets = seam_offsets(views, np.full(height, 50.0), 500.0, Config())
+    np.testing.assert_allclose(offsets.src, -5.0, atol=1e-5)
+    np.testing.assert_allclose(offsets.tgt, 5.0, atol=1e-5)
+    assert offsets.fade_px == pytest.approx(Config().seam_blend_ratio * 500.0)
+    off = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_ratio=0.0))
+    assert np.all(off.src == 0) and np.all(off.tgt == 0) and off.fade_px == 0
 
 
 def test_seam_maps_alpha_and_target_map():
     canvas = Canvas(width=120, height=100, offset_tgt=(30.0, 4.0))
     tgt = np.array([[50.0, 0.0], [70.0, 60.0], [60.0, 99.0]])
-    cfg = Config(device=DEVICE, transition_px=20, seam_smooth_sigma_px=0.0)
-    maps = seam_maps(_affine_map(100, 120), canvas, tgt, tgt, cfg)
+    cfg = Config(device=DEVICE, transition_px=20, seam_smooth_sigma_px=0.0, **PAPER)
+    maps = seam_maps(_affine_map(100, 120), canvas, straight_path(tgt, tgt, 100), cfg)
     np.testing.assert_allclose(maps.seam_x_canvas, np.interp(np.arange(100), tgt[:, 1], tgt[:, 0]), atol=1e-4)
     xs = np.arange(120)
     for y in (0, 30, 60, 80):
@@ -57,8 +83,8 @@ def test_seam_maps_alpha_and_target_map():
 def test_smoothing_only_near_the_ramp_ends():
     canvas = Canvas(width=120, height=10, offset_tgt=(0.0, 0.0))
     tgt = np.array([[60.0, 0.0], [60.0, 9.0]])
-    cfg = Config(device=DEVICE, transition_px=20, seam_smooth_sigma_px=1.5)
-    alpha = seam_maps(_affine_map(10, 120), canvas, tgt, tgt, cfg).alpha_canvas[5]
+    cfg = Config(device=DEVICE, transition_px=20, seam_smooth_sigma_px=1.5, **PAPER)
+    alpha = seam_maps(_affine_map(10, 120), canvas, straight_path(tgt, tgt, 10), cfg).alpha_canvas[5]
     plain = np.clip(0.5 - (np.arange(120) - 60.0) / 20, 0, 1)
     assert np.abs(alpha - plain).max() > 0.01  # the corners are rounded
     far = np.abs(np.abs(np.arange(120) - 60.0) - 10) > 6  # > 4 sigma from both ramp ends
@@ -74,8 +100,8 @@ def test_vertical_offset_anchors_meet_and_far_source_keeps_its_shape():
     map_before = _affine_map(height, width)
     tgt = np.array([[120.0, 5.0], [126.3, 40.2], [118.7, 90.6], [123.0, 150.0]])
     src = tgt + np.array([[0.5, 3.0], [0.8, 4.5], [-1.2, 2.5], [0.0, 3.5]])
-    cfg = Config(device=DEVICE, transition_px=24, seam_fade_px=40.0)
-    maps = seam_maps(map_before, canvas, src, tgt, cfg)
+    cfg = Config(device=DEVICE, transition_px=24, seam_fade_px=40.0, **PAPER)
+    maps = seam_maps(map_before, canvas, straight_path(src, tgt, height), cfg)
     residual_before = anchor_residuals_px(map_before, map_before, src, tgt)
     residual_after = anchor_residuals_px(map_before, maps.map_src_canvas, src, tgt)
     assert residual_before.min() > 2.0
@@ -99,8 +125,8 @@ def test_real_image_shifted_source_meets_target_in_the_transition(bundled_dir):
     map_identity = np.stack([xs, ys], -1)
     tgt = np.array([[250.0, 0.0], [262.0, 200.0], [245.0, 511.0]])
     src = tgt + [0.0, 3.0]
-    cfg = Config(device=DEVICE, transition_px=24)
-    maps = seam_maps(map_identity, Canvas(width, height, (0.0, 0.0)), src, tgt, cfg)
+    cfg = Config(device=DEVICE, transition_px=24, **PAPER)
+    maps = seam_maps(map_identity, Canvas(width, height, (0.0, 0.0)), straight_path(src, tgt, height), cfg)
 
     def remap(img, m):
         return cv2.remap(img, m[..., 0], m[..., 1], cv2.INTER_LINEAR)

@@ -3,7 +3,21 @@ import pytest
 
 from sena_warp.config import Config
 from sena_warp.evaluation.metrics import overlap_psnr_ssim
+from sena_warp.gains import compensated
 from sena_warp.stitch import stitch_images
+
+
+def beyond_seam_px(maps) -> int:
+    """Distance from the seam past which the target shows alone, with its gains only: the transition,
+    its smoothing and the seam blend's fade."""
+    cfg = Config()
+    return int(np.ceil(0.5 * cfg.transition_px + 3 * cfg.seam_smooth_sigma_px + maps.seam.offsets.fade_px)) + 2
+
+
+def target_as_shown(maps, img_tgt):
+    """The target with its gains: what the panorama shows of it away from the seam."""
+    gains = maps.seam.gains
+    return compensated(img_tgt, gains.gain_tgt, gains.bias_tgt)
 
 
 @pytest.fixture(scope="module")
@@ -21,13 +35,14 @@ def test_panorama_covers_both_inputs_once(pano, udisd_pair):
 
 def test_target_is_pasted_unwarped_right_of_the_seam(pano, udisd_pair):
     maps = pano.maps
-    img_tgt = maps.rig.pick(*udisd_pair)[1]
+    img_tgt = target_as_shown(maps, maps.rig.pick(*udisd_pair)[1])
     ox, oy = (int(round(v)) for v in maps.warp.overlap.canvas.offset_tgt)
     seam_x = maps.seam.maps.seam_x_canvas
     rows = np.arange(oy + 20, oy + img_tgt.shape[0] - 20)
-    x = int(np.nanmax(seam_x[rows])) + Config().transition_px + 5
+    x = int(np.nanmax(seam_x[rows])) + beyond_seam_px(maps)
     region = pano.image[rows, x:ox + img_tgt.shape[1] - 5, :3]
     expect = img_tgt[rows - oy, x - ox:img_tgt.shape[1] - 5]
+    assert region.shape[1] > 50
     assert np.abs(region.astype(int) - expect).max() <= 1
 
 
@@ -62,12 +77,19 @@ def test_vertical_rig_is_stitched_like_the_transposed_horizontal_one(pano, udisd
     # XFeat sees other keypoints on transposed images, so A_glob differs slightly: sizes within 2 %.
     assert abs(h / pano.image.shape[1] - 1) < 0.02 and abs(w / pano.image.shape[0] - 1) < 0.02
     # Below the seam the (top/bottom) target is pasted unwarped: the maps came back transposed right.
-    img_tgt = maps.rig.pick(img_a, img_b)[1]
+    img_tgt = target_as_shown(maps, maps.rig.pick(img_a, img_b)[1])
     # The working frame swaps x and y: the target's input-frame offset is (columns oy, rows ox).
     ox, oy = (int(round(v)) for v in maps.warp.overlap.canvas.offset_tgt)
-    seam_row = int(np.nanmax(maps.seam.maps.seam_x_canvas)) + Config().transition_px + 5
+    seam_row = int(np.nanmax(maps.seam.maps.seam_x_canvas)) + beyond_seam_px(maps)
     h_t, w_t = img_tgt.shape[:2]
     region = vertical.image[seam_row:ox + h_t - 5, oy + 5:oy + w_t - 5, :3]
     expect = img_tgt[seam_row - ox:h_t - 5, 5:w_t - 5]
     assert region.shape == expect.shape and region.shape[0] > 50
     assert np.abs(region.astype(int) - expect).max() <= 1
+
+
+def test_the_input_order_does_not_change_the_panorama(pano, udisd_pair, warp_device):
+    """'a b' and 'b a' give the same roles, the same maps and the same pixels (issue 13)."""
+    swapped = stitch_images(udisd_pair[1], udisd_pair[0], Config(device=warp_device))
+    assert swapped.maps.rig.source == "a"  # the same image (b of the original order) is the source
+    np.testing.assert_array_equal(swapped.image, pano.image)

@@ -22,7 +22,9 @@ from sena_warp.video.loop import VideoOptions
 from sena_warp.errors import GeometryError
 from sena_warp.video import estimate
 from sena_warp.video.estimate import best_first_estimate, rejection_reason
-from sena_warp.video.maps import PlaneMaps, chroma_positions, lerp_maps, map_change_px, seam_change_px, target_map
+from sena_warp.composite import SeamLayout
+from sena_warp.video.maps import (PlaneMaps, chroma_positions, chroma_seam, lerp_maps, map_change_px, seam_change_px,
+                                 target_map)
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import YuvFrame
 from sena_warp.video.stitch import stitch_videos
@@ -51,7 +53,8 @@ def target_region_diff(out: YuvFrame, tgt: YuvFrame, report: dict, cfg: Config) 
     for row, seam_x in enumerate(canvas["seam_x_working"]):
         if seam_x is None or not oy <= row < oy + h:
             continue
-        first_col = int(math.ceil(seam_x)) + cfg.transition_px + AWAY_FROM_SEAM_PX
+        band = report["stitch"]["frame_seam"]["band_px"]  # the frame's seam is within this of the estimate's
+        first_col = int(math.ceil(seam_x)) + band + cfg.transition_px + AWAY_FROM_SEAM_PX
         last_col = min(ox + w, canvas["width"])
         diffs.append(out.y[row, first_col:last_col].astype(np.int16)
                      - tgt.y[row - oy, first_col - ox:last_col - ox].astype(np.int16))
@@ -161,20 +164,33 @@ def test_office_static_rig_seam_never_moves(clips, tmp_path):
 
 
 def test_moving_rig_reestimates_blends_and_reports_the_jitter(clips, tmp_path):
-    cfg = FAST.replace(video_rig="moving", video_reestimate_s=0.5)
+    # On the loop's thread (no worker), so that what happens when does not depend on the machine's speed.
+    cfg = FAST.replace(video_rig="moving", video_reestimate_s=0.5, video_estimate_workers=0)
     report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "m.mp4", cfg,
                            VideoOptions.from_config(cfg, progress=False))
     re = report["stitch"]["reestimations"]
-    # Left times 0 .. 59/30 s: due at 0.5, 1.0, 1.5 s (attempts are not made while a blend runs); the
-    # hand-held rig moves little in 2 s, so every re-estimate is plausible (measured: 3 accepted).
-    assert (re["attempted"], re["accepted"], re["rejected"], re["rejections"]) == (3, 3, 0, [])
-    # The blends move the seam and the map (measured: seam jitter mean 2.65 px, max 7.50 px; largest
-    # p99 map change 1.53 px per frame), and by less than a rejected estimate may move the map.
-    jitter = report["stitch"]["jitter"]
+    # Left times 0 .. 59/30 s: due at 0.5 s, collected the next frame, blended in over at least
+    # video_blend_frames frames (no attempt while a blend runs), due again 0.5 s after the last one; the
+    # hand-held rig moves little in 2 s, so every re-estimate is plausible (measured: 3 of 3).
+    assert re["attempted"] == 3 and (re["accepted"], re["rejected"]) == (3, 0)
+    # The blend moves the estimate's seam, never faster than video_seam_speed_px per frame, and the
+    # map by less than a rejected estimate may move it; the per-frame seam glides likewise.
+    jitter, frame_seam = report["stitch"]["jitter"], report["stitch"]["frame_seam"]
     assert jitter["frames"] == 60
-    assert 1.0 < jitter["seam_jitter_px_mean"] < 5.0 and 3.0 < jitter["seam_jitter_px_max"] < 15.0
-    assert 0.5 < jitter["map_change_p99_px_max"] < cfg.video_max_median_change_px
+    assert 0.0 < jitter["seam_jitter_px_max"] <= cfg.video_seam_speed_px + 1e-3
+    assert 0.0 < jitter["map_change_p99_px_max"] < cfg.video_max_median_change_px
+    assert frame_seam["motion_px_max"] <= cfg.video_seam_speed_px
     assert report["frames_out"] == 60 and "maps_update" in report["timing_s"]
+
+
+def test_reestimates_on_the_worker_do_not_hold_up_the_frames(clips, tmp_path):
+    """With a worker the loop only starts and collects re-estimates: its per-frame update time stays far
+    below the re-estimates' own time (measured on this machine: 0.08 s against 2.5 s)."""
+    cfg = FAST.replace(video_rig="moving", video_reestimate_s=0.3, video_estimate_workers=1)
+    report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "w.mp4", cfg,
+                           VideoOptions.from_config(cfg, progress=False))
+    assert report["frames_out"] == 60 and report["stitch"]["reestimations"]["attempted"] >= 1
+    assert report["timing_s"]["maps_update"] < 0.25 * report["stitch"]["timing_s"]["reestimate"]
 
 
 def test_copy_at_another_frame_rate_is_paired_by_time_and_stitched(clips, tmp_path):
@@ -238,8 +254,10 @@ def synthetic_maps(shift_px: float, inliers: int, shape=(40, 60)) -> PlaneMaps:
     map_tgt = target_map(shape, np.array([10.0, 0.0]))
     map_src = map_tgt + np.float32([shift_px + 20.0, 0.0])
     alpha = np.full(shape, 0.5, np.float32)
+    seam = np.full(shape[0], 30.0 + shift_px, np.float32)
+    seam_luma = SeamLayout(seam, True, 10.0, 8.0, 1.5, 0.0)
     return PlaneMaps(map_src, map_tgt, alpha, chroma_positions(map_src), chroma_positions(map_tgt),
-                     alpha[::2, ::2].copy(), np.full(shape[0], 30.0 + shift_px, np.float32), inliers)
+                     alpha[::2, ::2].copy(), seam_luma, chroma_seam(seam_luma), seam, inliers)
 
 
 def test_reestimates_with_few_inliers_or_a_large_map_change_are_rejected():
@@ -258,5 +276,6 @@ def test_blend_moves_maps_and_seam_linearly_and_takes_the_goal_where_the_start_h
     np.testing.assert_allclose(half.map_src_luma[5, 5], start.map_src_luma[5, 5] + [4.0, 0.0])
     np.testing.assert_allclose(half.map_src_luma[0, 0], goal.map_src_luma[0, 0])
     assert seam_change_px(start, half) == pytest.approx(4.0)
+    np.testing.assert_allclose(half.seam_luma.positions, 34.0)
     assert map_change_px(start, half, (40, 60), 99.0) == pytest.approx(4.0)
     assert half.inliers == 320

@@ -11,7 +11,7 @@ import pytest
 from sena_warp.affine import apply_affine
 from sena_warp.bilinear import sample_bilinear
 from sena_warp.config import Config
-from sena_warp.ffd import ffd_field_canvas
+from sena_warp.ffd import field_from_lattice, smoothed_blend_lattice
 from sena_warp.gate import gate_canvas, guard_field
 from sena_warp.warp_map import forward_points, remap_image, source_map_canvas
 from test_kernels_maps import scene_geometry, source_map_reference
@@ -26,9 +26,8 @@ def pipeline(udisd_pair):
     img_src, img_tgt = udisd_pair
     geo = scene_geometry(img_src.shape, img_tgt.shape)
     canvas = geo["canvas"]
-    field = ffd_field_canvas(
-        canvas, geo["affine_src_to_tgt"], geo["affines_src_to_tgt"], geo["centres_tgt"], geo["conf"], geo["sigma_f"], cfg
-    )
+    field = field_from_lattice(smoothed_blend_lattice(canvas, geo["affine_src_to_tgt"], geo["affines_src_to_tgt"],
+                                                      geo["centres_tgt"], geo["conf"], geo["sigma_f"], cfg), canvas)
     ys, xs = np.nonzero(geo["overlap_mask_canvas"])
     pick = np.random.default_rng(2).choice(xs.size, size=400, replace=False)
     inliers_canvas = np.stack([xs[pick], ys[pick]], axis=1).astype(np.float64)

@@ -41,18 +41,39 @@ CHROMA_FILL = (BLACK_UV, BLACK_UV)  # output U, V likewise
 
 @dataclass(frozen=True)
 class PlanePass:
-    """One of the two compositing passes of :meth:`SenaFrameCompositor.composite_yuv`, on the output grid.
+    """One of the two compositing passes of :meth:`SenaFrameCompositor.composite_yuv`, on the output grid,
+    as the last frame was composited.
 
     ``map_src`` / ``map_tgt``: (Hc, Wc, 2) float32 (x, y) sample positions in the source / target
-    plane, NaN where nothing may be sampled; ``alpha``: (Hc, Wc) float32 source weight; ``fill``: the
-    output value per channel where neither plane is sampled. The luma pass samples the Y planes, the
-    chroma pass the U and V planes stacked as two channels (``np.dstack((u, v))``), at half resolution.
+    plane, NaN where nothing may be sampled; ``alpha``: (Hc, Wc) float32 source weight where both are
+    sampled; ``gains``: (gain_src, bias_src, gain_tgt, bias_tgt), each (C,); ``offsets_src`` /
+    ``offsets_tgt``: (Hc, Wc, C) float32 the seam blend's offsets per pixel; ``fill``: the output value
+    per channel where neither plane is sampled. The luma pass samples the Y planes, the chroma pass
+    the U and V planes stacked as two channels (``np.dstack((u, v))``), at half resolution.
     """
 
     map_src: np.ndarray
     map_tgt: np.ndarray
     alpha: np.ndarray
+    gains: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    offsets_src: np.ndarray
+    offsets_tgt: np.ndarray
     fill: tuple[int, ...]
+
+    @staticmethod
+    def of(compositor: Compositor, map_src: np.ndarray, map_tgt: np.ndarray, fill: tuple[int, ...]) -> "PlanePass":
+        """The pass ``compositor`` makes with its current seam, gains and offsets."""
+        channels = len(fill)
+        alpha, lf = compositor.seam_weights()
+        per_line_src, per_line_tgt = compositor.offsets(channels)
+        rows = compositor.layout.lines_are_rows
+
+        def spread(per_line: np.ndarray) -> np.ndarray:
+            lines = per_line[:, None, :] if rows else per_line[None, :, :]
+            return (lf[:, :, None] * lines).astype(np.float32)
+
+        return PlanePass(map_src, map_tgt, alpha, compositor.gains(channels), spread(per_line_src),
+                         spread(per_line_tgt), fill)
 
 
 class SenaFrameCompositor:
@@ -95,8 +116,8 @@ class SenaFrameCompositor:
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": self._first_inliers, "seconds": round(sum(first.seconds.values()), 4)}
         self._blend: tuple[PlaneMaps, PlaneMaps, int, int] | None = None  # (start, goal, frames done, frames)
-        self._workers = ThreadPoolExecutor(max(1, cfg.video_estimate_workers), thread_name_prefix="estimate") \
-            if self._reestimate_s is not None else None
+        self._workers = ThreadPoolExecutor(cfg.video_estimate_workers, thread_name_prefix="estimate") \
+            if self._reestimate_s is not None and cfg.video_estimate_workers > 0 else None
         self._pending: tuple[float, Future] | None = None
         self._last_estimate_s: float | None = None
         self._reestimations = {"attempted": 0, "accepted": 0, "rejected": 0, "rejections": []}
@@ -128,10 +149,10 @@ class SenaFrameCompositor:
         return self._rig.pick(item_left, item_right)
 
     def passes(self) -> tuple[PlanePass, PlanePass]:
-        """(luma, chroma): the maps the next :meth:`composite_yuv` composites with."""
+        """(luma, chroma): the maps, seam, gains and offsets the last :meth:`composite_yuv` composited with."""
         maps = self._maps
-        return (PlanePass(maps.map_src_luma, maps.map_tgt_luma, maps.alpha_luma, LUMA_FILL),
-                PlanePass(maps.map_src_chroma, maps.map_tgt_chroma, maps.alpha_chroma, CHROMA_FILL))
+        return (PlanePass.of(self._luma, maps.map_src_luma, maps.map_tgt_luma, LUMA_FILL),
+                PlanePass.of(self._chroma, maps.map_src_chroma, maps.map_tgt_chroma, CHROMA_FILL))
 
     def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         """Before compositing a pair: start, collect or blend in a re-estimate, and record the maps' change."""
@@ -165,7 +186,11 @@ class SenaFrameCompositor:
         self._last_estimate_s = float(frame_l.time_s)
         self._reestimations["attempted"] += 1
         # Same roles as the first estimate: the target stays the unwarped view on the fixed canvas.
-        job = self._workers.submit(self._estimate, frame_l, frame_r, self._prior_seam_tgt())
+        if self._workers is not None:
+            job = self._workers.submit(self._estimate, frame_l, frame_r, self._prior_seam_tgt())
+        else:  # no worker: on the loop's thread, a frame waits for it (reproducible, for tests and batch runs)
+            job = Future()
+            job.set_result(self._estimate(frame_l, frame_r, self._prior_seam_tgt()))
         self._pending = (self._last_estimate_s, job)
 
     def _estimate(self, frame_l: YuvFrame, frame_r: YuvFrame, prior: np.ndarray) -> tuple[PlaneMaps | None, str | None]:

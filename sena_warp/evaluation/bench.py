@@ -162,36 +162,51 @@ def stitch_in_child(left: Path, right: Path, output: Path, device: str) -> dict:
 
 
 class OpenCVReference:
-    """The compositing rule with OpenCV: remap both sides, alpha-blend, fill where nothing is sampled.
+    """The compositing rule with OpenCV: remap both sides, each side's gains and offsets, alpha-blend,
+    fill where nothing is sampled.
 
-    Maps as for :class:`~sena_warp.composite.Compositor` ((Hc, Wc, 2) float32 (x, y), NaN = none;
-    alpha (Hc, Wc) float32); ``shape_src`` / ``shape_tgt`` = (rows, cols) of the planes. Everything
-    that depends only on the maps (fixed-point maps, blend weights with validity folded in, the
-    uncovered pixels) is done once here, as the Warp path does once per map set.
+    ``plane``: a :class:`~sena_warp.video.stitch.PlanePass` (maps (Hc, Wc, 2) float32 (x, y), NaN =
+    none; alpha; gains; per-pixel offsets; fill); ``shape_src`` / ``shape_tgt`` = (rows, cols) of the
+    planes. Everything that depends only on the maps (fixed-point maps, blend weights with validity
+    folded in, the uncovered pixels) is done once here, as the Warp path does once per map set.
     """
 
-    def __init__(self, map_src, map_tgt, alpha, shape_src, shape_tgt, fill):
+    def __init__(self, plane, shape_src, shape_tgt):
         from sena_warp.video.maps import sampled_mask
 
-        valid_src, valid_tgt = sampled_mask(map_src, shape_src), sampled_mask(map_tgt, shape_tgt)
-        a = np.where(valid_src, np.where(valid_tgt, np.clip(alpha, 0.0, 1.0), 1.0), 0.0)
+        valid_src, valid_tgt = sampled_mask(plane.map_src, shape_src), sampled_mask(plane.map_tgt, shape_tgt)
+        a = np.where(valid_src, np.where(valid_tgt, np.clip(plane.alpha, 0.0, 1.0), 1.0), 0.0)
         self.weight_src = a.astype(np.float32)
         self.weight_tgt = np.where(valid_tgt, 1.0 - a, 0.0).astype(np.float32)
-        self.maps_src = self._fixed_maps(map_src)
-        self.maps_tgt = self._fixed_maps(map_tgt)
+        self.maps_src = self._fixed_maps(plane.map_src)
+        self.maps_tgt = self._fixed_maps(plane.map_tgt)
         self.uncovered = np.flatnonzero(~(valid_src | valid_tgt))
-        self.fill = np.asarray(fill, dtype=np.uint8)
+        self.fill = np.asarray(plane.fill, dtype=np.uint8)
+        gain_src, bias_src, gain_tgt, bias_tgt = plane.gains
+        self.affine_src = (gain_src.astype(np.float32), (bias_src + plane.offsets_src).astype(np.float32))
+        self.affine_tgt = (gain_tgt.astype(np.float32), (bias_tgt + plane.offsets_tgt).astype(np.float32))
 
     @staticmethod
     def _fixed_maps(map_canvas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         outside = np.where(np.isnan(map_canvas), -1.0, map_canvas).astype(np.float32)  # NaN: sample nothing
         return cv2.convertMaps(outside[:, :, 0], outside[:, :, 1], cv2.CV_16SC2)
 
+    @staticmethod
+    def _adjusted(sampled: np.ndarray, affine: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+        """``gain * sampled + offset`` per channel, float32, in the shape of the offsets (Hc, Wc, C)."""
+        gain, offset = affine
+        scale = tuple(float(g) for g in gain) + (0.0,) * (4 - len(gain))  # an OpenCV scalar: one factor per channel
+        return cv2.add(cv2.multiply(sampled.reshape(offset.shape).astype(np.float32), scale), offset)
+
     def apply(self, img_src: np.ndarray, img_tgt: np.ndarray) -> np.ndarray:
         """uint8 (Hc, Wc[, C]) composite of two uint8 (H, W[, C]) images."""
         sampled_src = cv2.remap(img_src, *self.maps_src, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
         sampled_tgt = cv2.remap(img_tgt, *self.maps_tgt, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-        out = cv2.blendLinear(sampled_src, sampled_tgt, self.weight_src, self.weight_tgt)
+        shape = sampled_src.shape
+        adjusted_src = self._adjusted(sampled_src, self.affine_src)
+        adjusted_tgt = self._adjusted(sampled_tgt, self.affine_tgt)
+        out = cv2.blendLinear(adjusted_src, adjusted_tgt, self.weight_src, self.weight_tgt)
+        out = np.clip(out + 0.5, 0, 255).astype(np.uint8).reshape(shape)
         out.reshape(len(self.weight_src.ravel()), -1)[self.uncovered] = self.fill
         return out
 
@@ -208,9 +223,8 @@ class OpenCVFrameReference:
     def __init__(self, compositor, shape_y_src: tuple[int, int], shape_y_tgt: tuple[int, int]):
         luma, chroma = compositor.passes()
         self.source_target = compositor.source_target
-        self.luma = OpenCVReference(luma.map_src, luma.map_tgt, luma.alpha, shape_y_src, shape_y_tgt, luma.fill)
-        self.chroma = OpenCVReference(chroma.map_src, chroma.map_tgt, chroma.alpha, chroma_shape(shape_y_src),
-                                      chroma_shape(shape_y_tgt), chroma.fill)
+        self.luma = OpenCVReference(luma, shape_y_src, shape_y_tgt)
+        self.chroma = OpenCVReference(chroma, chroma_shape(shape_y_src), chroma_shape(shape_y_tgt))
 
     def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r):
         y_src, y_tgt = self.source_target(y_l, y_r)
@@ -252,13 +266,14 @@ def compare_compositing(left: Path, right: Path, cfg: Config, settings: BenchSet
         frame_l, frame_r = next(iter(reader_l)), next(iter(reader_r))
     planes = (frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
     shape_src, shape_tgt = (f.y.shape for f in compositor.source_target(frame_l, frame_r))
-    reference = OpenCVFrameReference(compositor, shape_src, shape_tgt)
     warp_ms, warp_cpu_ms = time_calls(lambda: compositor.composite_yuv(*planes), settings.kernel_repeats,
                                       settings.kernel_warmup)
+    # The reference composites with what the last frame was composited with: seam, gains, offsets.
+    out = compositor.composite_yuv(*planes)
+    reference = OpenCVFrameReference(compositor, shape_src, shape_tgt)
     opencv_ms, opencv_cpu_ms = time_calls(lambda: reference.composite_yuv(*planes), settings.kernel_repeats,
                                           settings.kernel_warmup)
-    diff = max(int(np.abs(a.astype(np.int16) - b).max())
-               for a, b in zip(compositor.composite_yuv(*planes), reference.composite_yuv(*planes)))
+    diff = max(int(np.abs(a.astype(np.int16) - b).max()) for a, b in zip(out, reference.composite_yuv(*planes)))
     return {"warp_ms": warp_ms, "opencv_ms": opencv_ms, "ratio": warp_ms / opencv_ms, "warp_cpu_ms": warp_cpu_ms,
             "opencv_cpu_ms": opencv_cpu_ms, "cpu_ratio": warp_cpu_ms / opencv_cpu_ms, "max_diff": diff}
 
