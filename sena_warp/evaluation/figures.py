@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from sena_warp.config import Config
-from sena_warp.gains import compensated_views
+from sena_warp.gains import compensated, compensated_views
 from sena_warp.rig import image_to_working, matches_to_working
 from sena_warp.stitch import Panorama, Warp
 from sena_warp.warp_map import canvas_views, forward_points, remap_image
@@ -65,11 +65,15 @@ def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Conf
     ``seam_mad``: mean |src - tgt| (grey levels) of the seam-corrected source and the placed target
     where both are valid within T/2 of the seam (T = ``transition_px``: where the alpha blends);
     ``feather_mad``: the same for the step-6 source over the overlap's whole x-extent, the band a
-    plain linear feather across the overlap would blend in. ``cfg.device`` resolved.
+    plain linear feather across the overlap would blend in. Both views with their gains, as the
+    panorama shows them. ``cfg.device`` resolved.
     """
     maps = pano.maps
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
     warp, seam = maps.warp, maps.seam
+    gains = seam.gains
+    img_src = compensated(img_src, gains.gain_src, gains.bias_src)
+    img_tgt = compensated(img_tgt, gains.gain_tgt, gains.bias_tgt)
     placed_tgt, valid_tgt = remap_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
     seam_src, valid_seam_src = remap_image(img_src, seam.maps.map_src_canvas, cfg)
     step6_src, valid_step6_src = remap_image(img_src, warp.map_src_canvas, cfg)
