@@ -112,7 +112,7 @@ class Config:
     seam_anchor_px: float = 2.0  # path: anchors lie within this of the reduced-canvas path (reduced px)
     seam_anchor_spacing_px: float = 6.0  # path: anchors at least this far apart down the seam
     seam_refine_px: int = 3  # path: full-resolution band half-width beyond the reduction factor (2 f + this)
-    correction_smooth: float = 0.3  # path: smoothing of the anchor residual curve (second differences of nodes 8 rows apart)
+    correction_smooth: float = 50.0  # path: smoothing of the anchor residual curve (second differences of nodes 8 rows apart)
 
     # --- Step 9: partition and reconstruction -------------------------------------------------
     transition_px: int = 8  # width of the linear alpha ramp across the seam (paper's code: 24; sweep in evaluation.md)

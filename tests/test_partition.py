@@ -36,13 +36,20 @@ def test_seam_rows_interpolate_anchors():
 
 
 def test_smooth_correction_follows_the_anchors_without_kinks():
-    """Ours: a smoothing spline through the anchor residuals, not a polyline with a kink at each anchor."""
+    """Ours: a smoothing spline through the anchor residuals, not a polyline with a kink at each anchor.
+
+    Residuals that swing by 4 px between anchors 40 rows apart (far more than real anchors do) are
+    followed loosely by the default smoothing, tightly by a light one; both bend far less than the polyline.
+    """
     y = np.array([20.0, 60.0, 100.0, 140.0])
     values = np.array([1.0, 3.0, -1.0, 2.0])
-    curve = smooth_curve(y, values, 200, Config().correction_smooth)
     linear = np.interp(np.arange(200), y, values)
-    assert np.abs(curve[y.astype(int)] - values).max() < 0.15  # measured 0.09 px at the largest swing
-    assert np.abs(np.diff(curve, 2)).max() < 0.6 * np.abs(np.diff(linear, 2)).max()  # measured 0.54
+    tight = smooth_curve(y, values, 200, 0.3)
+    curve = smooth_curve(y, values, 200, Config().correction_smooth)
+    assert np.abs(tight[y.astype(int)] - values).max() < 0.15  # measured 0.09 px
+    assert np.abs(np.diff(tight, 2)).max() < 0.6 * np.abs(np.diff(linear, 2)).max()  # measured 0.54
+    assert np.abs(np.diff(curve, 2)).max() < 0.1 * np.abs(np.diff(linear, 2)).max()  # measured 0.08
+    assert np.abs(curve[y.astype(int)] - values).max() < 2.0  # measured 1.84 px at this swing
     assert curve[0] == curve[19] and curve[199] == curve[141]  # constant beyond the ends
     np.testing.assert_array_equal(smooth_curve(np.zeros(0), np.zeros(0), 50, 10.0), np.zeros(50))
 

@@ -11,7 +11,10 @@ top to bottom, ``seam_x[y]`` per row) on plain arrays, so that SENA's variants a
 * *Seam step*: per row, the panorama's mean luma just left of the seam (``STEP_NEAR_PX`` to
   ``STEP_FAR_PX``) minus just right of it, less the scene's own change across those pixels (the mean
   of the same difference in either view alone); averaged over ``STEP_ROWS`` rows (a step is a
-  low-frequency thing), its absolute value's mean over the rows.
+  low-frequency thing), its absolute value's mean over the rows. Rows where the two views disagree
+  about that change by more than ``STEP_AGREE_GREY`` show different things there (parallax, something
+  that moved): a brightness step cannot be told from the content on them, and they are left out (the
+  duplicated / lost points and the continuity measure them).
 * *Line bend / continuity*: long straight segments of each input (LSD, at least ``MIN_LINE_PX``)
   mapped to the canvas; a segment the panorama shows from its own view all along gets its bend
   (largest distance from the chord, % of its length); a segment the seam cuts gets its continuity:
@@ -44,6 +47,7 @@ MAX_DISPARITY_PX = 60.0  # reliable matches lie within this of the global affine
 SUPPORT_NEIGHBOURS, SUPPORT_TOL_PX, SUPPORT_MIN = 8, 3.0, 2  # and at least 2 of their 8 neighbours move alike
 STEP_NEAR_PX, STEP_FAR_PX = 3, 10  # the strips either side of the seam that the seam step compares
 STEP_ROWS = 16  # rows averaged before the step's absolute value
+STEP_AGREE_GREY = 10.0  # rows whose views' own change across the strips differs by more are left out
 MIN_LINE_PX = 60.0  # shortest segment of the line figures
 MAX_LINES = 80  # the longest this many segments per view are measured
 LINE_SAMPLES = 33  # points per segment mapped to the canvas
@@ -130,6 +134,8 @@ def seam_step(pano_grey: np.ndarray, src_grey: np.ndarray, tgt_grey: np.ndarray,
         if not (valid_src[y, strips].all() and valid_tgt[y, strips].all()):
             continue
         across = lambda img: img[y, left].mean() - img[y, right].mean()  # noqa: E731
+        if abs(across(src_grey) - across(tgt_grey)) > STEP_AGREE_GREY:
+            continue
         steps[y] = across(pano_grey) - 0.5 * (across(src_grey) + across(tgt_grey))
     known = np.isfinite(steps)
     if not known.any():
