@@ -64,7 +64,7 @@ class Config:
 
     # --- Step 5: seam guard (gate G) ----------------------------------------------------------
     ramp_min_px: float = 40.0  # b = max(ramp_min_px, ramp_diag_ratio * image diagonal)
-    ramp_diag_ratio: float = 0.10
+    ramp_diag_ratio: float = 0.10  # b as a fraction of the larger image diagonal
     sigma_d_ratio: float = 24.0 / 512.0  # sigma_d: density blur, as a fraction of the image's long side
     gamma_p: float = 1.2  # gamma_p: ramp steepness exponent
     gamma_min: float = 0.9  # gamma_min: gate floor where matches are sparse (SENA.md: 0.30; sweep)
@@ -106,8 +106,20 @@ class Config:
 
     # --- Execution ----------------------------------------------------------------------------
     device: str = "auto"  # Warp device: "auto", "cpu" or "cuda"
-    cpu_threads: int = 0  # row-band launch threads on CPU; 0 = one per core
+    cpu_threads: int = 0  # threads of the Warp CPU row bands, onnxruntime and the video codecs; 0 = one per core
 
     def replace(self, **changes) -> "Config":
         """A copy with some fields changed (unknown names raise TypeError)."""
         return dataclasses.replace(self, **changes)
+
+
+# The values a text setting may take; the CLI's choices and the settings-file checks read them here.
+CHOICES: dict[str, tuple[str, ...]] = {
+    "features": ("xfeat", "sift"),
+    "video_codec": ("libx264", "h264_nvenc"),
+    "video_preset": ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower",
+                     "veryslow", "placebo"),
+    "video_audio": ("left", "right", "none"),
+    "video_rig": ("static", "moving"),
+    "device": ("auto", "cpu", "cuda"),
+}
