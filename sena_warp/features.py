@@ -12,11 +12,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .config import Config
+from .config import CHOICES, Config
 from .errors import InputError
 from .xfeat import detect_xfeat
 
-DETECTORS = ("xfeat", "sift")
+DETECTORS = CHOICES["features"]
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from .global_affine import GlobalAffine, fit_global_affine, near_model
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
 from .partition import SeamMaps, seam_maps
+from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .warp_map import forward_points, remap_image, source_map_canvas
 from .zone import Zone, adequate_zone
@@ -38,16 +39,22 @@ from sena_warp.kernels import runtime
 
 
 class StageClock:
-    """Wall-clock seconds per stage, in the order the stages first ran: ``with clock("gate"): ...``."""
+    """Wall-clock seconds per stage, in the order the stages first ran: ``with clock("gate"): ...``.
+
+    Each stage is announced as a step (``progress.stage``) and its time logged at DEBUG (shown with -v).
+    """
 
     def __init__(self) -> None:
         self.seconds: dict[str, float] = {}
 
     @contextmanager
     def __call__(self, name: str) -> Iterator[None]:
+        stage(name, step=True)
         t0 = time.perf_counter()
         yield
-        self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+        elapsed = time.perf_counter() - t0
+        self.seconds[name] = self.seconds.get(name, 0.0) + elapsed
+        LOGGER.debug("%s: %.3f s", name, elapsed)
 
 
 @dataclass(frozen=True)
@@ -181,10 +188,14 @@ def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     The Warp device of ``cfg`` ("auto", "cpu" or "cuda") is resolved here, once for the whole stitch.
     """
     cfg = runtime.resolve_config(cfg)
-    maps = estimate_maps(img_a, img_b, cfg, reference)
     clock = StageClock()
+    with clock("load_kernels"):  # a first run's compile gets its own time, not a stage's
+        runtime.prewarm(cfg.device)
+    stage("estimating maps")
+    maps = estimate_maps(img_a, img_b, cfg, reference)
     clock.seconds.update(maps.seconds)
     img_src, img_tgt = maps.rig.pick(img_a, img_b)
+    stage("compositing")
     with clock("composite"):
         compositor = Compositor(maps.map_src_input, maps.map_tgt_input, maps.alpha_input, cfg)
         out, coverage = compositor.apply(img_src, img_tgt)

@@ -41,8 +41,11 @@ def stream_spans(path) -> dict:
 
 
 def run_cli(argv, capfd, warp_device):
-    """(exit code, stderr lines, stdout) of ``sena-warp argv`` on the session's Warp device."""
+    """(exit code, stderr lines, stdout) of ``sena-warp argv -q`` on the session's Warp device.
+
+    ``-q``: stderr holds the warnings and errors only, not the progress lines.
+    """
     capfd.readouterr()
-    rc = main([*map(str, argv), "--device", warp_device])
+    rc = main([*map(str, argv), "-q", "--device", warp_device])
     captured = capfd.readouterr()
     return rc, captured.err.splitlines(), captured.out

@@ -32,7 +32,7 @@ def evaluated(bundled_dir, tmp_path_factory):
     cv2.imwrite(str(data / "featureless" / "b.png"), cv2.imread(str(data / "featureless" / "a.jpg")) * 0 + 128)
     (data / "not_a_pair").mkdir()
     out = tmp_path_factory.mktemp("out") / "eval"
-    rows = run_eval(data, out, CFG, progress=False)
+    rows = run_eval(data, out, CFG)
     return data, out, {(r.pair, r.method): r for r in rows}
 
 

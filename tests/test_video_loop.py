@@ -7,6 +7,7 @@ long as the video, frames paired by time (also across frame rates), nothing left
 from __future__ import annotations
 
 import json
+import logging
 import threading
 import wave
 from fractions import Fraction
@@ -17,7 +18,8 @@ import numpy as np
 import pytest
 
 from sena_warp.errors import InputError, VideoError
-from sena_warp.video.loop import VideoOptions, run_video, write_report
+from sena_warp.report import write_json
+from sena_warp.video.loop import VideoOptions, run_video
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import YuvFrame, probe_video
 from sena_warp.video.writer import VideoWriter, choose_codec
@@ -62,7 +64,7 @@ class FailsAt(SideBySide):
         return super().composite_yuv(*planes)
 
 
-QUIET = VideoOptions(progress=False)
+QUIET = VideoOptions()
 
 
 @pytest.fixture(scope="module")
@@ -117,7 +119,7 @@ def test_office_yuv422_is_converted_and_missing_audio_is_noted(clips, tmp_path):
 def test_offset_shifts_the_second_input(clips, tmp_path):
     # Right camera "started" 0.25 s late = 6 frames at 24 fps: the first 6 left frames have no partner.
     report = run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "o.mp4", SideBySide,
-                       VideoOptions(progress=False, offset_s=0.25))
+                       VideoOptions(offset_s=0.25))
     assert report["frames_out"] == 42
     assert report["pairing"]["unpaired_ticks_start"] == 6 and report["pairing"]["leftover_other"] == 6
 
@@ -145,7 +147,7 @@ def test_30fps_against_24fps_copy_is_paired_by_time(clips, right_24fps, tmp_path
 
 def test_24fps_ticks_against_30fps_drop_frames_and_copy_the_right_audio(clips, right_24fps, tmp_path):
     out = tmp_path / "mix.mp4"
-    options = VideoOptions(progress=False, audio="right")
+    options = VideoOptions(audio="right")
     report = run_video(right_24fps, clips / "rooftop_left.mp4", out, SideBySide, options)
     # ticks j/24 pair up to the 30 fps clip's end (59/30 s + half a frame): j <= 47, then 2 left over.
     assert report["frames_out"] == 48 and report["pairing"]["leftover_ticks"] == 2
@@ -201,19 +203,20 @@ def test_odd_output_size_is_cropped_even_and_nvenc_falls_back_with_a_note(clips,
     assert codec == "libx264" and "no_such_encoder" in note
 
 
-def test_progress_line_only_when_asked(clips, tmp_path, capsys):
-    run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "a.mp4", SideBySide, QUIET)
-    assert capsys.readouterr().err == ""
-    run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "b.mp4", SideBySide,
-              VideoOptions(progress=True))
-    err = capsys.readouterr().err
-    assert "48/48 frames" in err and "fps" in err and err.endswith("\n")
+def test_library_is_silent_and_counts_frames_on_the_logger(clips, tmp_path, capsys, caplog):
+    with caplog.at_level(logging.INFO, logger="sena_warp"):
+        run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "a.mp4", SideBySide, QUIET)
+    assert capsys.readouterr().err == ""  # no handler configured: nothing on stderr
+    stages = [r.stage for r in caplog.records if hasattr(r, "stage")]
+    assert stages == ["opening videos", "estimating maps", "stitching frames"]
+    last = [r for r in caplog.records if hasattr(r, "count")][-1]
+    assert (last.done, last.count.total, last.final) == (48, 48, True)
 
 
 def test_report_json_round_trips(clips, tmp_path):
     report = run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "o.mp4", SideBySide,
-                       VideoOptions(progress=False, audio="none"))
-    write_report(report, tmp_path / "report.json")
+                       VideoOptions(audio="none"))
+    write_json(tmp_path / "report.json", report)
     assert json.loads((tmp_path / "report.json").read_text()) == report
     assert report["output_fps"] > 0 and report["notes"] == []
 

@@ -64,7 +64,7 @@ def target_region_diff(out: YuvFrame, tgt: YuvFrame, report: dict, cfg: Config) 
 def rooftop_static(clips, tmp_path_factory):
     out = tmp_path_factory.mktemp("rooftop") / "static.mp4"
     report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", out, CFG,
-                           VideoOptions.from_config(CFG, progress=False))
+                           VideoOptions.from_config(CFG))
     return out, report
 
 
@@ -109,7 +109,7 @@ def test_full_shared_videos_give_every_frame_at_the_input_rate_with_the_audio(sh
     folder, left, right = pair
     left, right = shared_dir / "videos" / folder / left, shared_dir / "videos" / folder / right
     out = tmp_path / "full.mp4"
-    report = stitch_videos(left, right, out, FAST, VideoOptions.from_config(FAST, progress=False))
+    report = stitch_videos(left, right, out, FAST, VideoOptions.from_config(FAST))
     assert report["frames_out"] == frames and report["dropped"] == 0
     assert len(decoded_frames(out)) == frames
     spans = stream_spans(out)
@@ -146,7 +146,7 @@ def test_first_estimate_falls_back_to_the_next_best_pair_when_the_best_fails_lat
 def test_office_static_rig_seam_never_moves(clips, tmp_path):
     out = tmp_path / "office.mp4"
     report = stitch_videos(clips / "office_cam1.mp4", clips / "office_cam2.mp4", out, FAST,
-                           VideoOptions.from_config(FAST, progress=False))
+                           VideoOptions.from_config(FAST))
     assert report["frames_out"] == 48
     spans = stream_spans(out)
     assert spans["video"][0] == 48 and set(np.diff(spans["video"][1])) == {Fraction(1, 24)}
@@ -163,7 +163,7 @@ def test_office_static_rig_seam_never_moves(clips, tmp_path):
 def test_moving_rig_reestimates_blends_and_reports_the_jitter(clips, tmp_path):
     cfg = FAST.replace(video_rig="moving", video_reestimate_s=0.5)
     report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "m.mp4", cfg,
-                           VideoOptions.from_config(cfg, progress=False))
+                           VideoOptions.from_config(cfg))
     re = report["stitch"]["reestimations"]
     # Left times 0 .. 59/30 s: due at 0.5, 1.0, 1.5 s (attempts are not made while a blend runs); the
     # hand-held rig moves little in 2 s, so every re-estimate is plausible (measured: 3 accepted).
@@ -187,7 +187,7 @@ def test_copy_at_another_frame_rate_is_paired_by_time_and_stitched(clips, tmp_pa
             writer.write(frames[i].y, frames[i].u, frames[i].v, pts=j)
     out = tmp_path / "mix.mp4"
     report = stitch_videos(clips / "rooftop_left.mp4", right_24, out, FAST,
-                           VideoOptions.from_config(FAST, progress=False))
+                           VideoOptions.from_config(FAST))
     # ticks k/30 (k < 60) take 24 fps frame round(0.8 k): 0..47 each used, 12 twice; 48, 49 left over.
     assert report["frames_out"] == 60
     assert (report["repeated"], report["dropped"], report["pairing"]["leftover_other"]) == (12, 0, 2)

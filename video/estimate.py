@@ -46,8 +46,8 @@ def first_pairs(left: str | os.PathLike, right: str | os.PathLike, offset_s: flo
     """
     span = cfg.video_estimate_pairs * cfg.video_estimate_spacing
     right_period_s = 1 / probe_video(right).fps
-    with FrameReader(left, Fraction(0), cfg.video_queue_frames) as reader_l, \
-            FrameReader(right, Fraction(str(offset_s)), cfg.video_queue_frames) as reader_r:
+    with FrameReader(left, Fraction(0), cfg.video_queue_frames, cfg.cpu_threads) as reader_l, \
+            FrameReader(right, Fraction(str(offset_s)), cfg.video_queue_frames, cfg.cpu_threads) as reader_r:
         pairs = pair_by_time(reader_l, reader_r, right_period_s, attrgetter("time_s"))
         return [(i, fl, fr) for i, (fl, fr) in zip(range(span), pairs) if i % cfg.video_estimate_spacing == 0]
 

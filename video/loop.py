@@ -8,10 +8,8 @@ never go through RGB on the hot path.
 
 from __future__ import annotations
 
-import json
 import os
 import queue
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -22,15 +20,15 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from ..config import Config
+from ..config import CHOICES, Config
 from ..errors import InputError, VideoError
 from ..imageio import atomic_output
-from ..progress import Progress
+from ..progress import LOGGER, Count, stage
 from .pairing import PairingStats, pair_by_time
 from .reader import FrameReader, VideoInfo, YuvFrame, probe_video
 from .writer import VideoWriter
 
-AUDIO_SOURCES = ("left", "right", "none")
+AUDIO_SOURCES = CHOICES["video_audio"]
 _POLL_S = 0.1  # how often a blocked producer re-checks that the encoder thread is still alive
 
 
@@ -63,7 +61,7 @@ class VideoOptions:
 
     ``offset_s`` shifts the right (second) input's clock: its frame at time t is paired as if it
     were at t + offset_s (+0.5: the right camera started 0.5 s after the left one). ``audio``: whose
-    audio to copy. ``progress``: None = a progress line only when stderr is a terminal.
+    audio to copy. ``threads``: decoder and encoder threads (0: FFmpeg chooses).
     """
 
     offset_s: float = 0.0
@@ -72,13 +70,13 @@ class VideoOptions:
     crf: int = Config.video_crf
     preset: str = Config.video_preset
     queue_frames: int = Config.video_queue_frames
-    progress: bool | None = None
+    threads: int = Config.cpu_threads
 
     @classmethod
     def from_config(cls, cfg: Config, **changes) -> "VideoOptions":
-        """Options taking their encoder and queue settings from ``cfg``."""
+        """Options taking their encoder, queue and thread settings from ``cfg``."""
         base = dict(audio=cfg.video_audio, codec=cfg.video_codec, crf=cfg.video_crf,
-                    preset=cfg.video_preset, queue_frames=cfg.video_queue_frames)
+                    preset=cfg.video_preset, queue_frames=cfg.video_queue_frames, threads=cfg.cpu_threads)
         return cls(**{**base, **changes})
 
 
@@ -87,7 +85,7 @@ def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
         "path": str(info.path), "width": info.width, "height": info.height, "fps": float(info.fps),
         "pix_fmt": info.pix_fmt, "converted_from": reader.converted_from, "offset_s": float(reader.offset_s),
         "frames_decoded": reader.decoded, "damaged": reader.damaged, "decode_wait_s": round(reader.wait_s, 4),
-        "decode_s": round(reader.decode_s, 4),
+        "decode_s": round(reader.decode_s, 4), "decoder_threads": reader.decoder_threads,
     }
 
 
@@ -109,19 +107,20 @@ def run_video(
     t_run = time.perf_counter()
     if options.audio not in AUDIO_SOURCES:
         raise InputError(f"audio source {options.audio!r} unknown; use one of {', '.join(AUDIO_SOURCES)}")
+    stage("opening videos")
     infos = {"left": probe_video(left), "right": probe_video(right)}
     offsets = {"left": Fraction(0), "right": Fraction(str(options.offset_s))}
     notes: list[str] = []
     audio_side = None if options.audio == "none" else options.audio
     if audio_side is not None and not infos[audio_side].has_audio:
-        notes.append(f"{audio_side} input has no audio: output has none")
+        _note(notes, f"{audio_side} input has no audio: output has none")
         audio_side = None
     rate = infos["left"].fps
     stats = PairingStats()
     timing = {"compositor_setup": 0.0, "composite": 0.0, "encode": 0.0}
 
-    with FrameReader(left, offsets["left"], options.queue_frames) as reader_l, \
-            FrameReader(right, offsets["right"], options.queue_frames) as reader_r:
+    with FrameReader(left, offsets["left"], options.queue_frames, options.threads) as reader_l, \
+            FrameReader(right, offsets["right"], options.queue_frames, options.threads) as reader_r:
         pairs = pair_by_time(reader_l, reader_r, 1 / infos["right"].fps, attrgetter("time_s"), stats)
         first = next(pairs, None)
         if first is None:
@@ -129,25 +128,34 @@ def run_video(
                 f"{left} and {right}: no frames overlap in time with offset {options.offset_s} s; check --offset"
             )
         t0 = time.perf_counter()
+        stage("estimating maps")
         compositor = compositor_factory(*first)
         timing["compositor_setup"] = time.perf_counter() - t0
         width, height = compositor.output_size
         with atomic_output(output, inputs=(left, right)) as tmp, \
-                VideoWriter(tmp, width, height, rate, options.codec, options.crf, options.preset) as writer:
+                VideoWriter(tmp, width, height, rate, options.codec, options.crf, options.preset,
+                            options.threads) as writer:
             if writer.note:
-                notes.append(writer.note)
+                _note(notes, writer.note)
             if audio_side is not None:
                 # Audio time in its file -> output clock: the same shift as that input's video frames.
                 side = infos[audio_side]
                 writer.add_audio(side.path, side.start_time_s - offsets[audio_side] + first[0].time_s)
-            show = sys.stderr.isatty() if options.progress is None else options.progress
+            stage("stitching frames")
             expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
-            progress = Progress(expected, show, sys.stderr, "sena-warp video", "frames", "fps")
-            _encode_pairs(chain([first], pairs), compositor, writer, progress, timing, options.queue_frames)
+            _encode_pairs(chain([first], pairs), compositor, writer, Count("frames", expected, "fps"), timing,
+                          options.queue_frames)
     timing["total"] = time.perf_counter() - t_run
     timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
-    notes += _input_notes(infos, {"left": reader_l, "right": reader_r}, stats)
+    for note in _input_notes(infos, {"left": reader_l, "right": reader_r}, stats):
+        _note(notes, note)
     return _report(infos, (reader_l, reader_r), writer, stats, timing, notes, output, audio_side)
+
+
+def _note(notes: list[str], text: str) -> None:
+    """Keep ``text`` in the report's notes and say it now, as one warning line."""
+    notes.append(text)
+    LOGGER.warning(text)
 
 
 def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], stats: PairingStats) -> list[str]:
@@ -234,7 +242,7 @@ class EncodeThread:
             self._thread.join(_POLL_S)
 
 
-def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Progress, timing: dict,
+def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Count, timing: dict,
                   queue_frames: int) -> None:
     """Composite every ``(left, right)`` pair and encode it on :class:`EncodeThread`.
 
@@ -286,15 +294,10 @@ def _report(infos, readers, writer: VideoWriter, stats: PairingStats, timing: di
         "inputs": {"left": _input_summary(infos["left"], reader_l), "right": _input_summary(infos["right"], reader_r)},
         "output": {
             "path": str(output), "width": writer.width, "height": writer.height, "fps": float(writer.rate),
-            "codec": writer.codec, "audio": audio_side or "none",
+            "encoder": writer.encoder_settings(), "audio": audio_side or "none",
             "audio_mode": None if audio is None else ("copy" if audio.remux else "aac"),
             "audio_span_s": None if audio is None else [audio.first_s, audio.end_s],
         },
         "notes": notes,
     }
 
-
-def write_report(report: dict, path: str | os.PathLike) -> None:
-    """Write a run's report as indented JSON (atomically, like every output)."""
-    with atomic_output(path) as tmp:
-        tmp.write_text(json.dumps(report, indent=2) + "\n")

@@ -141,11 +141,16 @@ class FrameReader:
     are skipped and counted in ``damaged``; any other failure is re-raised in the iterating thread.
     ``wait_s`` accumulates the time the consumer spent blocked waiting for frames; ``decode_s`` the
     decoder thread's time decoding and copying planes out (not its waits on a full queue).
+    ``threads``: FFmpeg decoder threads (``Config.cpu_threads``; 0 lets FFmpeg choose); once decoding
+    has started, ``decoder_threads`` is the count the decoder was opened with.
     """
 
-    def __init__(self, path: str | os.PathLike, offset_s: Fraction = Fraction(0), queue_frames: int = 8):
+    def __init__(self, path: str | os.PathLike, offset_s: Fraction = Fraction(0), queue_frames: int = 8,
+                 threads: int = 0):
         self.path = Path(path)
         self.offset_s = Fraction(offset_s)
+        self.threads = threads
+        self.decoder_threads: int | None = None
         self.decoded = 0
         self.damaged = 0
         self.converted_from: str | None = None  # source pixel format when it was not yuv420p
@@ -199,6 +204,7 @@ class FrameReader:
             stream = self._container.streams.video[0]
             # Let FFmpeg decode with frame and slice threads; set before the codec opens.
             stream.thread_type = "AUTO"
+            stream.thread_count = self.threads
             time_base = Fraction(stream.time_base)
             start_pts = stream.start_time or 0
             period_pts = 1 / (Fraction(stream.average_rate or stream.guessed_rate) * time_base)
@@ -213,6 +219,7 @@ class FrameReader:
                 finally:
                     self.decode_s += time.perf_counter() - t0
                 for frame in frames:
+                    self.decoder_threads = stream.codec_context.thread_count
                     if frame.is_corrupt:  # FFmpeg concealed errors in it: skip rather than stitch garbage
                         self.damaged += 1
                         continue

@@ -162,6 +162,7 @@ class VideoWriter:
     ``width``/``height`` are cropped to even values (see :func:`even_size`); :meth:`write` takes
     planes at least that large. Frame pts are in units of ``1 / rate`` and must increase.
     Use as a context manager: a clean exit flushes the encoder; an exception just closes the file.
+    ``threads``: encoder threads (``Config.cpu_threads``; 0 lets the encoder choose, x264: 1.5 per core).
     """
 
     def __init__(
@@ -173,12 +174,14 @@ class VideoWriter:
         codec: str = FALLBACK_CODEC,
         crf: int = Config.video_crf,
         preset: str = Config.video_preset,
+        threads: int = Config.cpu_threads,
     ):
         self.path = Path(path)
         self.width, self.height = even_size(width, height)
         if self.width < 2 or self.height < 2:
             raise VideoError(f"{self.path}: output frame {width}x{height} is too small to encode")
         self.rate = Fraction(rate)
+        self.requested_codec = codec
         self.codec, self.note = choose_codec(codec, self.width, self.height, self.rate)
         try:
             self.container = av.open(str(self.path), mode="w")
@@ -190,10 +193,18 @@ class VideoWriter:
         self.stream.width, self.stream.height = self.width, self.height
         self.stream.pix_fmt = PIX_FMT
         self.stream.time_base = self.stream.codec_context.time_base = 1 / self.rate
+        self.stream.codec_context.thread_count = threads  # before the encoder opens on the first frame
+        self.crf, self.preset = crf, preset
         self.audio: AudioCopier | None = None
         self.frames = 0
         self._last_pts: int | None = None
         self._finished = False
+
+    def encoder_settings(self) -> dict:
+        """The encoder as opened: codec (and the one asked for), quality, preset and thread count."""
+        preset = self.preset if self.codec == FALLBACK_CODEC else None  # NVENC has no x264 preset
+        return {"codec": self.codec, "requested": self.requested_codec, "crf": self.crf, "preset": preset,
+                "threads": self.stream.codec_context.thread_count, "pix_fmt": PIX_FMT}
 
     def add_audio(self, source: str | os.PathLike, shift_s: Fraction) -> AudioCopier:
         """Copy ``source``'s audio (output time = its time - ``shift_s``); call before :meth:`write`."""

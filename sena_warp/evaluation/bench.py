@@ -132,7 +132,7 @@ def transcode_baseline(left: Path, right: Path, output: Path, cfg: Config) -> di
     """Decode both, place side by side, encode with the stitcher's settings; frames, seconds, fps."""
     from sena_warp.video.loop import VideoOptions, run_video
 
-    report = run_video(left, right, output, SideBySide, VideoOptions.from_config(cfg, audio="none", progress=False))
+    report = run_video(left, right, output, SideBySide, VideoOptions.from_config(cfg, audio="none"))
     seconds = report["timing_s"]["total"]
     return {"frames": report["frames_out"], "seconds": seconds, "fps": report["frames_out"] / seconds,
             "size": (report["output"]["width"], report["output"]["height"])}

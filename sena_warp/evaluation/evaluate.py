@@ -40,7 +40,7 @@ from sena_warp.errors import InputError, StitchError
 from sena_warp.features import match_images
 from sena_warp.imageio import atomic_output, check_output_folder, make_folder, read_image, write_image
 from sena_warp.kernels.runtime import resolve_config
-from sena_warp.progress import Progress
+from sena_warp.progress import Count, echo
 from sena_warp.rig import Rig, detect_rig, image_to_working
 from sena_warp.stitch import Panorama, stitch_images
 from sena_warp.warp_map import forward_points
@@ -335,8 +335,7 @@ def pair_line(results: list[MethodResult]) -> str:
     return f"{results[0].pair}: " + ", ".join(parts)
 
 
-def run_eval(data_dir: str | os.PathLike, out_dir: str | os.PathLike, cfg: Config, progress: bool | None = None
-             ) -> list[MethodResult]:
+def run_eval(data_dir: str | os.PathLike, out_dir: str | os.PathLike, cfg: Config) -> list[MethodResult]:
     """Evaluate every pair of ``data_dir`` into ``out_dir`` (see the module docstring); the rows of results.csv.
 
     The Warp device of ``cfg`` is resolved once, here, for every pair and method.
@@ -346,11 +345,10 @@ def run_eval(data_dir: str | os.PathLike, out_dir: str | os.PathLike, cfg: Confi
     folders = pair_folders(data_dir)
     out_dir = check_output_folder(out_dir)
     sheets_dir = make_folder(Path(out_dir) / "sheets")
-    show = sys.stderr.isatty() if progress is None else progress
-    bar = Progress(len(folders), show, sys.stderr, "sena-warp eval", "pairs")
+    bar = Count("pairs", len(folders))
     rows, overview = [], []
     for done, folder in enumerate(folders):
-        bar.update(done, force=True)
+        bar.update(done)
         images, read_error = read_inputs(folder)
         if read_error:
             results = [MethodResult(folder.name, name, error=read_error) for name in METHODS]
@@ -362,9 +360,7 @@ def run_eval(data_dir: str | os.PathLike, out_dir: str | os.PathLike, cfg: Confi
         for r in results:
             r.panorama = None  # drawn; memory stays flat over many pairs
         rows += results
-        if show:
-            sys.stderr.write("\r\x1b[K")  # clear the progress line before the pair's own line
-        print(pair_line(results), flush=True)
+        echo(pair_line(results))
     bar.close(len(folders))
     write_csv(Path(out_dir) / "results.csv", rows)
     write_image(Path(out_dir) / "overview.jpg", tile(overview, COLUMNS),
@@ -376,9 +372,10 @@ def run_eval(data_dir: str | os.PathLike, out_dir: str | os.PathLike, cfg: Confi
 
 def cmd_eval(args: argparse.Namespace) -> int:
     """``sena-warp eval``: evaluate, then print where the results are."""
-    cfg = Config(features=args.features, device=args.device)
-    rows = run_eval(args.data_dir, args.out, cfg, args.progress or None)
+    from sena_warp.jobs import job_config
+
+    rows = run_eval(args.data_dir, args.out, job_config(args.settings))
     stitched = sum(r.ok for r in rows if r.method == "sena")
-    print(f"{args.out}: results.csv, summary.md, overview.jpg, sheets/ ({stitched}/{len(rows) // len(METHODS)} "
+    echo(f"{args.out}: results.csv, summary.md, overview.jpg, sheets/ ({stitched}/{len(rows) // len(METHODS)} "
           f"pairs stitched by SENA)")
     return 0
