@@ -141,9 +141,11 @@ def summary_line(kind: str, report: dict) -> str:
                 f"{report['features']['matches']} matches, {report['global_affine']['inliers']} inliers, "
                 f"{report['anchors']['count']} anchors, overlap PSNR {m['overlap_psnr_db']} dB, "
                 f"{report['timing_s']['total']:.2f} s")
-    out, st = report["output"], report["stitch"]
+    out, st, timing = report["output"], report["stitch"], report["timing_s"]
+    after_estimate_s = timing["total"] - timing["compositor_setup"]
+    steady = f", {report['frames_out'] / after_estimate_s:.1f} fps after the first estimate" if after_estimate_s > 0 else ""
     return (f"{out['width']}x{out['height']} px, {report['frames_out']} frames at {out['fps']:g} fps "
             f"({out['encoder']['codec']}), source={st['rig']['source']}, {st['first_estimate']['inliers']} inliers, "
             f"re-estimations {st['reestimations']['accepted']} accepted / {st['reestimations']['rejected']} rejected, "
             f"seam jitter {st['jitter']['seam_jitter_px_mean']} px, dropped {report['dropped']}, "
-            f"repeated {report['repeated']}, {report['output_fps']} fps")
+            f"repeated {report['repeated']}, {report['output_fps']} fps overall{steady}")
