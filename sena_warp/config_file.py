@@ -47,6 +47,7 @@ AT_MOST = {
     "xfeat_detection_threshold": 1.0, "min_cossim": 1.0, "sift_ratio": 1.0, "ransac_confidence": 1.0,
     "gamma_min": 1.0, "video_min_inlier_ratio": 1.0, "video_crf": 51,
 }
+KIND_WORDS = {int: "a whole number", float: "a number", str: "text"}
 SECTION_MARK = "# ---"  # a comment line opening a group of fields in config.py
 
 
@@ -96,16 +97,16 @@ def check_value(name: str, value, where: str):
     An int is accepted for a float field (TOML ``2`` for ``2.0``) and returned as a float.
     """
     kind = field_types()[name]
-    shown = json.dumps(value) if isinstance(value, str) else value
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
     if not isinstance(value, kind) or isinstance(value, bool):
-        raise InputError(f"{where}: {name} = {shown} is not {'a number' if kind is float else 'an ' + kind.__name__}"
-                         f" (default: {_toml_value(getattr(Config, name))})")
+        shown = json.dumps(value) if isinstance(value, (str, bool, int, float)) else repr(value)
+        raise InputError(f"{where}: {name} = {shown} is not {KIND_WORDS[kind]} (default: "
+                         f"{_toml_value(getattr(Config, name))})")
     if kind is str:
         allowed = CHOICES.get(name)
         if allowed is not None and value not in allowed:
-            raise InputError(f"{where}: {name} = {shown} is not one of {', '.join(allowed)}")
+            raise InputError(f"{where}: {name} = {json.dumps(value)} is not one of {', '.join(allowed)}")
         return value
     if not math.isfinite(value):
         raise InputError(f"{where}: {name} = {value} must be a finite number")

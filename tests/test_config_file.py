@@ -62,8 +62,9 @@ def test_a_settings_file_changes_fields_and_options_win_over_it(capsys, tmp_path
 
 @pytest.mark.parametrize("text, words", [
     ("grid_xx = 8\n", ["unknown setting 'grid_xx'", "did you mean 'grid_x'?", "valid: features, xfeat_max_side"]),
-    ("grid_x = 8.5\n", ["grid_x = 8.5 is not an int", "default: 6"]),
-    ("grid_x = true\n", ["grid_x = True is not an int"]),
+    ("grid_x = 8.5\n", ["grid_x = 8.5 is not a whole number", "default: 6"]),
+    ("grid_x = true\n", ["grid_x = true is not a whole number"]),
+    ("features = 3\n", ['features = 3 is not text (default: "xfeat")']),
     ('alpha = "big"\n', ['alpha = "big" is not a number']),
     ('features = "orb"\n', ['features = "orb" is not one of xfeat, sift']),
     ("grid_x = 0\n", ["grid_x = 0 must be > 0"]),
