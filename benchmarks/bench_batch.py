@@ -13,16 +13,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
+import os
 import shutil
 import subprocess
 import sys
 import time
-from datetime import date
 from fractions import Fraction
 from pathlib import Path
 
 import av
+
+from sena_warp.bench import machine_line
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"
@@ -75,6 +76,7 @@ def run(jobs: Path, out: Path, argv: list[str]) -> dict:
                           text=True)
     summary = json.loads((out / "summary.json").read_text())
     summary["process_s"] = time.perf_counter() - t0  # includes start-up (and Ray's)
+    summary["load_1min"] = os.getloadavg()[0]  # other work on the machine at the end of the run
     if done.returncode not in (0, 7):
         raise SystemExit(f"batch failed ({done.returncode}): {done.stderr}")
     return summary
@@ -94,14 +96,16 @@ def main() -> int:
     for set_name, jobs in sets.items():
         for runner, argv in RUNNERS.items():
             s = run(jobs, work / "out" / f"{jobs.name}_{argv[1]}_{argv[-1]}", argv)
-            rows.append((set_name, runner, s["ok"], s["failed"], s["wall_s"], s["process_s"], s["jobs_per_hour"]))
+            rows.append((set_name, runner, s["ok"], s["failed"], s["wall_s"], s["process_s"], s["jobs_per_hour"],
+                         s["load_1min"]))
             print(f"{set_name:24} {runner:28} ok {s['ok']:3} failed {s['failed']:2}  wall {s['wall_s']:7.1f} s  "
-                  f"process {s['process_s']:7.1f} s  {s['jobs_per_hour']:7.0f} jobs/h", flush=True)
+                  f"process {s['process_s']:7.1f} s  {s['jobs_per_hour']:7.0f} jobs/h  load {s['load_1min']:.1f}",
+                  flush=True)
     if args.markdown:
-        lines = [f"Machine: {platform.node()}, {platform.processor() or platform.machine()}, measured {date.today()}",
-                 "", "| jobs | runner | ok | failed | batch wall s | process s | jobs per hour |",
-                 "|---|---|---:|---:|---:|---:|---:|"]
-        lines += [f"| {a} | {b} | {c} | {d} | {e:.1f} | {f:.1f} | {g:.0f} |" for a, b, c, d, e, f, g in rows]
+        lines = [f"Machine: {machine_line()}", "",
+                 "| jobs | runner | ok | failed | batch wall s | process s | jobs per hour | load (1 min) after |",
+                 "|---|---|---:|---:|---:|---:|---:|---:|"]
+        lines += [f"| {a} | {b} | {c} | {d} | {e:.1f} | {f:.1f} | {g:.0f} | {h:.1f} |" for a, b, c, d, e, f, g, h in rows]
         Path(args.markdown).write_text("\n".join(lines) + "\n")
     return 0
 
