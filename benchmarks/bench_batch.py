@@ -23,7 +23,7 @@ from pathlib import Path
 
 import av
 
-from sena_warp.bench import machine_line
+from sena_warp.evaluation.bench import machine_line
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"
