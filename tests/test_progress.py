@@ -24,8 +24,7 @@ VIDEO_STAGES = ["opening videos", "estimating maps", "stitching frames"]
 
 @pytest.fixture(scope="module")
 def pair(bundled_dir):
-    d = bundled_dir / "udisd_test_000001"
-    return str(d / "a.jpg"), str(d / "b.jpg")
+    return [str(bundled_dir / "udisd_test_000001" / name) for name in ("a.jpg", "b.jpg")]
 
 
 @pytest.fixture(scope="module")
