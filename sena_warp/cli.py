@@ -1,20 +1,46 @@
 """The ``sena-warp`` command line: one subcommand per job.
 
 Every expected failure is a :class:`~sena_warp.errors.StitchError`; it is printed as one line
-(``sena-warp: error: ...``) and the process exits with that error's code (see the README).
+(``sena-warp: error: ...``) and the process exits with that error's code (see the README); so is a
+malformed command line (exit 2). SIGINT, SIGTERM and SIGHUP end a run as Ctrl-C does, with 128 + the
+signal's number. Each command plans all its outputs first (``sena_warp.outputs``): they are checked
+before any input is read and written together at the end.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
+import signal
 import sys
+import threading
 import time
 
 from . import __version__
 from .config import Config
 from .errors import InputError, StitchError
+from .outputs import OutputPlan
+
+VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
+HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT, SIGTERM or SIGHUP, raised in the main thread as Ctrl-C is, so every output's temporary
+    is removed on the way out; the exit code is 128 + the signal's number."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line like every other error of the command (exit 2)."""
+
+    def error(self, message: str):
+        self.exit(InputError.exit_code, f"sena-warp: error: {message} (see {self.prog} --help)\n")
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -22,19 +48,45 @@ def _add_common(p: argparse.ArgumentParser) -> None:
                    help="feature detector (default: %(default)s)")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default=Config.device,
                    help="where the Warp kernels run (default: %(default)s)")
+    p.add_argument("--max-megapixels", type=float, default=Config.max_input_megapixels, metavar="MP",
+                   help="refuse inputs larger than this, before decoding them (default: %(default)g; see README)")
 
 
-def _config_from(args: argparse.Namespace) -> Config:
-    return Config(features=args.features, device=args.device)
+def _add_overwrite(p: argparse.ArgumentParser) -> None:
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("-y", "--overwrite", dest="overwrite", action="store_const", const="overwrite",
+                       default="refuse", help="replace outputs that exist (default: refuse them)")
+    group.add_argument("-n", "--no-overwrite", dest="overwrite", action="store_const", const="skip",
+                       help="do nothing when an output exists (exit 0)")
+
+
+def config_from(args: argparse.Namespace) -> Config:
+    """The Config of the options every stitching command shares (InputError for a bad value)."""
+    if not args.max_megapixels > 0:
+        raise InputError(f"--max-megapixels {args.max_megapixels:g} must be a positive number")
+    return Config(features=args.features, device=args.device, max_input_megapixels=args.max_megapixels)
+
+
+def checked(plan: OutputPlan) -> bool:
+    """Check ``plan`` (raises on a broken rule); False, after saying so, when -n found an existing output."""
+    existing = plan.check()
+    for path in existing:
+        print(f"{path}: exists, skipped (-n)")
+    return not existing
 
 
 def cmd_match(args: argparse.Namespace) -> int:
     from .features import match_images
-    from .imageio import read_image, write_image
+    from .imageio import IMAGE_SUFFIXES, read_image, write_image
     from .debug import draw_matches
 
-    cfg = _config_from(args)
-    img_a, img_b = read_image(args.image_a), read_image(args.image_b)
+    cfg = config_from(args)
+    plan = OutputPlan((args.image_a, args.image_b), args.overwrite)
+    if args.output:
+        plan.add(args.output, "-o", suffixes=IMAGE_SUFFIXES)
+    if not checked(plan):
+        return 0
+    img_a, img_b = (read_image(path, cfg.max_input_megapixels) for path in (args.image_a, args.image_b))
     t0 = time.perf_counter()
     matches = match_images(img_a, img_b, cfg)
     elapsed = time.perf_counter() - t0
@@ -45,9 +97,10 @@ def cmd_match(args: argparse.Namespace) -> int:
         "matches": len(matches),
         "time_s": round(elapsed, 3),
     }
-    print(json.dumps(summary))
     if args.output:
-        write_image(args.output, draw_matches(img_a, img_b, matches), inputs=(args.image_a, args.image_b))
+        with plan:
+            write_image(args.output, draw_matches(img_a, img_b, matches), plan=plan)
+    print(json.dumps(summary))
     return 0
 
 
@@ -57,28 +110,33 @@ def cmd_image(args: argparse.Namespace) -> int:
 
     from .crop import largest_inner_rectangle
     from .debug import dump_stages
-    from .imageio import check_output_folder, check_output_path, read_image, write_image
+    from .imageio import IMAGE_SUFFIXES, read_image_masked, write_image
     from .report import image_report, write_json
     from .stitch import stitch_images
 
-    cfg = resolve_config(_config_from(args))  # once: the stitch, the debug pictures and the report share it
-    inputs = (args.image_a, args.image_b)
-    _check_output_suffix(args.output, (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp"))
-    for path in filter(None, (args.output, args.report)):
-        check_output_path(path, inputs)  # before the stitch: a bad path must not leave a panorama behind
+    cfg = resolve_config(config_from(args))  # once: the stitch, the debug pictures and the report share it
+    plan = OutputPlan((args.image_a, args.image_b), args.overwrite)
+    plan.add(args.output, "-o", suffixes=IMAGE_SUFFIXES)
+    if args.report:
+        plan.add(args.report, "--report")
     if args.debug:
-        check_output_folder(args.debug)
-    img_a, img_b = read_image(args.image_a), read_image(args.image_b)
-    pano = stitch_images(img_a, img_b, cfg, reference=args.reference)
+        plan.add(args.debug, "--debug", folder=True)
+    if not checked(plan):  # before the stitch: a bad --report must not cost a stitch or leave a panorama
+        return 0
+    (img_a, transparent_a), (img_b, transparent_b) = (read_image_masked(path, cfg.max_input_megapixels)
+                                                      for path in (args.image_a, args.image_b))
+    pano = stitch_images(img_a, img_b, cfg, reference=args.reference, transparent=(transparent_a, transparent_b))
     crop = largest_inner_rectangle(pano.image[:, :, 3]) if args.crop else None
     image = pano.image if crop is None else pano.image[crop[1]:crop[1] + crop[3], crop[0]:crop[0] + crop[2]]
-    write_image(args.output, image, inputs=inputs)
-    if args.debug:
-        dump_stages(args.debug, img_a, img_b, pano, cfg)
     # The front end measures the stitch for its report; the pipeline itself never imports the evaluation.
     report = image_report(pano, img_a, img_b, report_figures(img_a, img_b, pano, cfg), crop)
-    if args.report:
-        write_json(args.report, report)
+    with plan:  # every output or none
+        write_image(args.output, image, plan=plan)
+        if args.debug:
+            with plan.writing(args.debug) as folder:
+                dump_stages(folder, img_a, img_b, pano, cfg)
+        if args.report:
+            write_json(args.report, report, plan)
     m = report["metrics"]
     print(f"{args.output}: {image.shape[1]}x{image.shape[0]} px, source={report['rig']['source']}, "
           f"{report['features']['matches']} matches, {report['global_affine']['inliers']} inliers, "
@@ -90,46 +148,44 @@ def cmd_image(args: argparse.Namespace) -> int:
 def cmd_video(args: argparse.Namespace) -> int:
     from sena_warp.kernels.runtime import resolve_config
     from sena_warp.video.loop import VideoOptions, write_report
-    from sena_warp.video.stitch import stitch_videos
+    from sena_warp.video.stitch import check_rig_settings, stitch_videos
 
-    from .imageio import check_output_path
-
-    _check_output_suffix(args.output, (".mp4", ".mov", ".mkv"))
-    for path in filter(None, (args.output, args.report)):
-        check_output_path(path, (args.left, args.right))  # before decoding: a bad --report must not leave a video
     if args.reestimate is not None and args.rig != "moving":
         raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
-    cfg = resolve_config(_config_from(args).replace(video_rig=args.rig))
+    cfg = resolve_config(config_from(args).replace(video_rig=args.rig))
     if args.reestimate is not None:
         cfg = cfg.replace(video_reestimate_s=args.reestimate)
+    check_rig_settings(cfg)
     # NVENC only where the kernels run on a GPU too; the writer falls back to libx264 if it cannot open.
     codec = args.codec or ("h264_nvenc" if cfg.device == "cuda" else cfg.video_codec)
     options = VideoOptions.from_config(cfg, offset_s=args.offset, audio=args.audio, codec=codec,
                                        crf=cfg.video_crf if args.crf is None else args.crf,
-                                       preset=args.preset or cfg.video_preset, progress=args.progress or None)
-    report = stitch_videos(args.left, args.right, args.output, cfg, options, reference=args.reference)
+                                       preset=args.preset or cfg.video_preset, progress=args.progress or None,
+                                       strict=args.strict)
+    plan = OutputPlan((args.left, args.right), args.overwrite)
+    plan.add(args.output, "-o", suffixes=VIDEO_SUFFIXES)
     if args.report:
-        write_report(report, args.report)
+        plan.add(args.report, "--report")
+    if not checked(plan):  # before decoding: a bad --report must not cost a stitch or leave a video
+        return 0
+    with plan:  # every output or none
+        report = stitch_videos(args.left, args.right, args.output, cfg, options, reference=args.reference, plan=plan)
+        if args.report:
+            write_report(report, args.report, plan)
+    if report["warnings"]:
+        print(f"sena-warp: warning: {'; '.join(report['warnings'])}", file=sys.stderr)
     out, st = report["output"], report["stitch"]
     print(f"{args.output}: {out['width']}x{out['height']} px, {report['frames_out']} frames at {out['fps']:g} fps "
           f"({out['codec']}), source={st['rig']['source']}, {st['first_estimate']['inliers']} inliers, "
           f"re-estimations {st['reestimations']['accepted']} accepted / {st['reestimations']['rejected']} rejected, "
           f"seam jitter {st['jitter']['seam_jitter_px_mean']} px, dropped {report['dropped']}, "
-          f"repeated {report['repeated']}, {report['output_fps']} fps")
+          f"repeated {report['repeated']}, damaged {sum(report['damaged'].values())}, {report['output_fps']} fps"
+          + (", with the warning above" if report["warnings"] else ""))
     return 0
 
 
-def _check_output_suffix(path: str, allowed: tuple[str, ...]) -> None:
-    from pathlib import Path
-
-    from .errors import OutputError
-
-    if Path(path).suffix.lower() not in allowed:
-        raise OutputError(f"{path}: unsupported output type; use one of {', '.join(allowed)}")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="sena-warp",
         description="Parallax-tolerant two-camera stitching (SENA) for image pairs and paired videos.",
     )
@@ -141,6 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("image_b")
     p.add_argument("-o", "--output", help="write a picture of the matches (.jpg/.png)")
     _add_common(p)
+    _add_overwrite(p)
     p.set_defaults(run=cmd_match)
 
     p = sub.add_parser("image", help="stitch two images into a panorama")
@@ -153,6 +210,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reference", choices=("auto", "a", "b"), default="auto",
                    help="input kept unwarped (default: auto = the right or bottom view)")
     _add_common(p)
+    _add_overwrite(p)
     p.set_defaults(run=cmd_image)
 
     p = sub.add_parser("video", help="stitch two synchronised videos")
@@ -175,7 +233,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reference", choices=("auto", "a", "b"), default="auto",
                    help="input kept unwarped: a = left, b = right (default: auto = the right or bottom view)")
     p.add_argument("--progress", action="store_true", help="show progress on stderr even when it is not a terminal")
+    p.add_argument("--strict", action="store_true",
+                   help="fail (exit 5) on damaged frames or a truncated input instead of replacing them with a warning")
     _add_common(p)
+    _add_overwrite(p)
     p.set_defaults(run=cmd_video)
 
     p = sub.add_parser("bench", help="frame-rate benchmark: transcode baseline vs stitch, per stage, kernel")
@@ -190,6 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also measure the peak RSS of 1080p stitches of these lengths in seconds (e.g. 10 60)")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default=Config.device,
                    help="where the Warp kernels run (default: %(default)s)")
+    _add_overwrite(p)
     p.set_defaults(run=_lazy("evaluation.bench", "cmd_bench"))
 
     p = sub.add_parser("eval", help="quality evaluation: SENA vs global affine, homography, OpenCV's stitcher")
@@ -197,6 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR", help="folder for results.csv, summary.md and the sheets")
     p.add_argument("--progress", action="store_true", help="show progress on stderr even when it is not a terminal")
     _add_common(p)
+    _add_overwrite(p)
     p.set_defaults(run=_lazy("evaluation.evaluate", "cmd_eval"))
     return parser
 
@@ -208,16 +271,44 @@ def _lazy(module: str, function: str):
     return run
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+@contextlib.contextmanager
+def _signals_as_interrupts():
+    """While the command runs, SIGINT, SIGTERM and SIGHUP raise :class:`Interrupted` (once: a second
+    signal must not break the clean-up of the first). Only the main thread can set handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+
+    def interrupt(signum, frame):
+        if not received:
+            received.append(signum)
+            raise Interrupted(signum)
+
+    previous = {signum: signal.signal(signum, interrupt) for signum in HANDLED_SIGNALS}
     try:
-        return args.run(args)
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def main(argv: list[str] | None = None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a malformed command line (said on one line)
+        return int(exc.code or 0)
+    try:
+        with _signals_as_interrupts():
+            return args.run(args)
     except StitchError as exc:
         print(f"sena-warp: error: {exc}", file=sys.stderr)
         return exc.exit_code
-    except KeyboardInterrupt:
-        print("sena-warp: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        by = "" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"
+        print(f"sena-warp: interrupted{by}", file=sys.stderr)
+        return 128 + signum
 
 
 if __name__ == "__main__":

@@ -14,6 +14,11 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Config:
+    # --- Inputs (no paper symbol) -------------------------------------------------------------
+    max_input_megapixels: float = 100.0  # refuse a larger input, from its header before decoding (memory; README)
+    alpha_margin_px: int = 8  # keypoints this close to a fully transparent pixel are dropped (their patch sees no scene)
+    scale_hint_ratio: float = 4.0  # inputs whose sizes differ more than this: a failed stitch names the ratio
+
     # --- Step 0: features -------------------------------------------------------------------
     features: str = "xfeat"  # detector: "xfeat" (ONNX backbone) or "sift"
     xfeat_max_side: int = 1024  # working resolution: long side in px (rounded down to /32)
@@ -103,6 +108,7 @@ class Config:
     video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's
     video_max_median_change_px: float = 8.0  # reject a re-estimate moving M_s by more (median over the overlap)
     video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly
+    video_blank_max_std: float = 2.0  # luma standard deviation below which a frame is blank (e.g. a black start)
 
     # --- Execution ----------------------------------------------------------------------------
     device: str = "auto"  # Warp device: "auto", "cpu" or "cuda"

@@ -12,7 +12,7 @@ import os
 import numpy as np
 
 from .affine import similarity_deviation
-from .imageio import atomic_output
+from .outputs import OutputPlan, atomic_output
 from .stitch import Panorama
 
 ROUND = 4
@@ -47,8 +47,9 @@ def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, metrics: 
     }
 
 
-def write_json(path: str | os.PathLike, data: dict) -> None:
-    with atomic_output(path) as tmp:
+def write_json(path: str | os.PathLike, data: dict, plan: OutputPlan | None = None) -> None:
+    """``data`` as indented JSON, atomically (with ``plan``: committed with its other outputs)."""
+    with atomic_output(path, plan=plan) as tmp:
         tmp.write_text(json.dumps(data, indent=2) + "\n")
 
 

@@ -9,6 +9,7 @@ never go through RGB on the hot path.
 from __future__ import annotations
 
 import json
+import math
 import os
 import queue
 import sys
@@ -24,13 +25,18 @@ import numpy as np
 
 from ..config import Config
 from ..errors import InputError, VideoError
-from ..imageio import atomic_output
+from ..imageio import check_size
+from ..outputs import OutputPlan, atomic_output, staged
 from ..progress import Progress
 from .pairing import PairingStats, pair_by_time
 from .reader import FrameReader, VideoInfo, YuvFrame, probe_video
 from .writer import VideoWriter
 
 AUDIO_SOURCES = ("left", "right", "none")
+CRF_RANGE = (0, 51)  # libx264 crf and nvenc cq
+X264_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow",
+                "placebo")
+VFR_SPREAD = Fraction(3, 2)  # longest / shortest frame interval above this: a variable frame rate (noted)
 _POLL_S = 0.1  # how often a blocked producer re-checks that the encoder thread is still alive
 
 
@@ -63,7 +69,10 @@ class VideoOptions:
 
     ``offset_s`` shifts the right (second) input's clock: its frame at time t is paired as if it
     were at t + offset_s (+0.5: the right camera started 0.5 s after the left one). ``audio``: whose
-    audio to copy. ``progress``: None = a progress line only when stderr is a terminal.
+    audio to copy. ``progress``: None = a progress line only when stderr is a terminal. ``strict``:
+    a damaged frame, a truncated input or audio left out fails the run (VideoError) instead of a
+    warning. ``max_megapixels``: larger frames are refused. Values are checked here (InputError),
+    before any file is opened.
     """
 
     offset_s: float = 0.0
@@ -73,21 +82,37 @@ class VideoOptions:
     preset: str = Config.video_preset
     queue_frames: int = Config.video_queue_frames
     progress: bool | None = None
+    strict: bool = False
+    max_megapixels: float = Config.max_input_megapixels
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.offset_s):
+            raise InputError(f"offset {self.offset_s} s is not a time; give a finite number of seconds (--offset)")
+        if self.audio not in AUDIO_SOURCES:
+            raise InputError(f"audio source {self.audio!r} unknown; use one of {', '.join(AUDIO_SOURCES)}")
+        if not CRF_RANGE[0] <= self.crf <= CRF_RANGE[1]:
+            raise InputError(f"crf {self.crf} is outside {CRF_RANGE[0]}-{CRF_RANGE[1]} (--crf; lower is better, "
+                             f"default {Config.video_crf})")
+        if self.preset not in X264_PRESETS:
+            raise InputError(f"preset {self.preset!r} unknown; use one of {', '.join(X264_PRESETS)} (--preset)")
 
     @classmethod
     def from_config(cls, cfg: Config, **changes) -> "VideoOptions":
         """Options taking their encoder and queue settings from ``cfg``."""
         base = dict(audio=cfg.video_audio, codec=cfg.video_codec, crf=cfg.video_crf,
-                    preset=cfg.video_preset, queue_frames=cfg.video_queue_frames)
+                    preset=cfg.video_preset, queue_frames=cfg.video_queue_frames,
+                    max_megapixels=cfg.max_input_megapixels)
         return cls(**{**base, **changes})
 
 
 def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
+    span = reader.damaged_span_s
     return {
         "path": str(info.path), "width": info.width, "height": info.height, "fps": float(info.fps),
-        "pix_fmt": info.pix_fmt, "converted_from": reader.converted_from, "offset_s": float(reader.offset_s),
-        "frames_decoded": reader.decoded, "damaged": reader.damaged, "decode_wait_s": round(reader.wait_s, 4),
-        "decode_s": round(reader.decode_s, 4),
+        "rotation_deg": info.rotation_deg, "pix_fmt": info.pix_fmt, "converted_from": reader.converted_from,
+        "offset_s": float(reader.offset_s), "frames_decoded": reader.decoded, "damaged": reader.damaged,
+        "damaged_span_s": None if span is None else [round(float(t), 4) for t in span],
+        "decode_wait_s": round(reader.wait_s, 4), "decode_s": round(reader.decode_s, 4),
     }
 
 
@@ -97,19 +122,29 @@ def run_video(
     output: str | os.PathLike,
     compositor_factory: CompositorFactory,
     options: VideoOptions,
+    plan: OutputPlan | None = None,
 ) -> dict:
     """Stitch two videos frame pair by frame pair into ``output``; return the run's report.
 
-    Output frames follow the left input's frames (its rate and times); each is paired with the
-    right frame nearest in time (see ``pairing.py``). The output appears under its name only once
-    complete. Report keys: ``frames_in``, ``frames_out``, ``dropped``, ``repeated``, ``damaged``
-    (per input), ``pairing`` (all counts), ``timing_s`` (decode_wait, compositor_setup, composite,
-    encode, total; maps_update when the compositor has ``update``), ``output_fps``, ``inputs``, ``output``, ``notes``.
+    Output frames follow the left input's frames (its times, exactly: also a variable frame rate);
+    each is paired with the right frame nearest in time (see ``pairing.py``). The output appears
+    under its name only once complete (with ``plan``: when the plan commits). Report keys:
+    ``frames_in``, ``frames_out``, ``dropped``, ``repeated``, ``damaged`` (per input), ``pairing``
+    (all counts), ``timing_s`` (decode_wait, compositor_setup, composite, encode, total; maps_update
+    when the compositor has ``update``), ``output_fps``, ``inputs``, ``output``, ``notes``, and
+    ``warnings``: what a user must hear about (damaged frames, a truncated input, audio left out),
+    one sentence each; with ``options.strict`` those raise VideoError instead.
     """
+    with staged(plan, output, (left, right)) as plan:  # the output is checked before any input is opened
+        return _run(left, right, output, compositor_factory, options, plan)
+
+
+def _run(left, right, output, compositor_factory: CompositorFactory, options: VideoOptions,
+         plan: OutputPlan) -> dict:
     t_run = time.perf_counter()
-    if options.audio not in AUDIO_SOURCES:
-        raise InputError(f"audio source {options.audio!r} unknown; use one of {', '.join(AUDIO_SOURCES)}")
     infos = {"left": probe_video(left), "right": probe_video(right)}
+    for info in infos.values():
+        check_size(str(info.path), info.width, info.height, options.max_megapixels, "a frame")
     offsets = {"left": Fraction(0), "right": Fraction(str(options.offset_s))}
     notes: list[str] = []
     audio_side = None if options.audio == "none" else options.audio
@@ -120,8 +155,8 @@ def run_video(
     stats = PairingStats()
     timing = {"compositor_setup": 0.0, "composite": 0.0, "encode": 0.0}
 
-    with FrameReader(left, offsets["left"], options.queue_frames) as reader_l, \
-            FrameReader(right, offsets["right"], options.queue_frames) as reader_r:
+    with FrameReader(left, offsets["left"], options.queue_frames, options.strict) as reader_l, \
+            FrameReader(right, offsets["right"], options.queue_frames, options.strict) as reader_r:
         pairs = pair_by_time(reader_l, reader_r, 1 / infos["right"].fps, attrgetter("time_s"), stats)
         first = next(pairs, None)
         if first is None:
@@ -132,37 +167,65 @@ def run_video(
         compositor = compositor_factory(*first)
         timing["compositor_setup"] = time.perf_counter() - t0
         width, height = compositor.output_size
-        with atomic_output(output, inputs=(left, right)) as tmp, \
-                VideoWriter(tmp, width, height, rate, options.codec, options.crf, options.preset) as writer:
-            if writer.note:
-                notes.append(writer.note)
+        # The output clock is the left input's own time base, so every frame keeps its input time.
+        with plan.writing(output) as tmp, VideoWriter(tmp, width, height, rate, options.codec, options.crf,
+                                                      options.preset, infos["left"].time_base) as writer:
+            warnings = []
             if audio_side is not None:
                 # Audio time in its file -> output clock: the same shift as that input's video frames.
                 side = infos[audio_side]
-                writer.add_audio(side.path, side.start_time_s - offsets[audio_side] + first[0].time_s)
+                if writer.add_audio(side.path, side.start_time_s - offsets[audio_side] + first[0].time_s) is None:
+                    audio_side = None
+                    warnings.append(writer.notes[-1])  # the audio left out: a user must hear it
+            notes += writer.notes
             show = sys.stderr.isatty() if options.progress is None else options.progress
             expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
             progress = Progress(expected, show, sys.stderr, "sena-warp video", "frames", "fps")
             _encode_pairs(chain([first], pairs), compositor, writer, progress, timing, options.queue_frames)
+            readers = {"left": reader_l, "right": reader_r}
+            warnings += _input_warnings(infos, readers)
+            if warnings and options.strict:
+                raise VideoError(f"{'; '.join(warnings)} (--strict)")
     timing["total"] = time.perf_counter() - t_run
     timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
-    notes += _input_notes(infos, {"left": reader_l, "right": reader_r}, stats)
-    return _report(infos, (reader_l, reader_r), writer, stats, timing, notes, output, audio_side)
+    notes += _input_notes(infos, readers, stats)
+    return _report(infos, (reader_l, reader_r), writer, stats, timing, notes, warnings, output, audio_side)
 
 
 def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], stats: PairingStats) -> list[str]:
-    """What the report's reader should know about the inputs: rates that differ, an input that ended early."""
+    """What the report's reader should know about the inputs: rates that differ or vary, rotations."""
     notes = []
     rate_l, rate_r = infos["left"].fps, infos["right"].fps
     if rate_l != rate_r:
         notes.append(f"frame rates differ (left {float(rate_l):g} fps, right {float(rate_r):g} fps): frames paired "
                      f"by time at the left rate; {stats.dropped} right frames dropped, {stats.repeated} repeated")
     for side, reader in readers.items():
+        if reader.interval_range_s is not None and reader.interval_range_s[0] > 0:
+            low, high = reader.interval_range_s
+            if high > VFR_SPREAD * low:
+                kept = "the output keeps its frame times" if side == "left" else "paired to the left frames by time"
+                notes.append(f"{side} input has a variable frame rate (frames {1000 * float(low):.0f} to "
+                             f"{1000 * float(high):.0f} ms apart): {kept}")
+        if infos[side].rotation_deg:
+            notes.append(f"{side} input is displayed turned {infos[side].rotation_deg} degrees (display matrix): "
+                         f"stitched upright")
+    return notes
+
+
+def _input_warnings(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]) -> list[str]:
+    """Damaged frames and truncated inputs, one sentence each (see ``reader.py`` for the policy)."""
+    warnings = []
+    for side, reader in readers.items():
+        if reader.damaged:
+            span = reader.damaged_span_s
+            where = f" between {float(span[0]):.2f} s and {float(span[1]):.2f} s" if span is not None else ""
+            warnings.append(f"{side} input has {reader.damaged} damaged frames{where}, each replaced by the last "
+                            f"good frame (--strict fails instead)")
         declared = infos[side].frame_count
         if declared and reader.decoded + reader.damaged < declared:
-            notes.append(f"{side} input ended after {reader.decoded + reader.damaged} of the {declared} frames "
-                         f"its header declares: truncated? Stitched up to where it ends")
-    return notes
+            warnings.append(f"{side} input ended after {reader.decoded + reader.damaged} of the {declared} frames "
+                            f"its header declares (truncated?): stitched up to where it ends")
+    return warnings
 
 
 class EncodeThread:
@@ -180,6 +243,10 @@ class EncodeThread:
         self._queue: queue.Queue = queue.Queue(maxsize=max(queue_frames, 1))
         self._error: BaseException | None = None
         self._stop = threading.Event()
+        # Set when the thread is done. Waited on instead of Thread.join: a signal that interrupts a
+        # join marks the thread stopped while it still runs (CPython 3.11), and the file would be
+        # closed under the encoder.
+        self._done = threading.Event()
         self._thread = threading.Thread(target=self._run, name="encode", daemon=True)
         self._thread.start()
 
@@ -195,9 +262,11 @@ class EncodeThread:
                 self.seconds += time.perf_counter() - t0
         except BaseException as exc:  # handed to the producer, which re-raises it
             self._error = exc
+        finally:
+            self._done.set()
 
     def _put(self, item) -> None:
-        while self._thread.is_alive():
+        while not self._done.is_set():
             try:
                 self._queue.put(item, timeout=_POLL_S)
                 return
@@ -217,7 +286,7 @@ class EncodeThread:
     def finish(self) -> None:
         """Wait until every queued frame is encoded, then flush the encoder."""
         self._put(None)
-        self._thread.join()
+        self._done.wait()
         self._raise_error()
         t0 = time.perf_counter()
         self.writer.finish()
@@ -226,12 +295,12 @@ class EncodeThread:
     def abandon(self) -> None:
         """Stop after the frame being encoded, dropping the queue (a failed or interrupted run)."""
         self._stop.set()
-        while self._thread.is_alive():
+        while not self._done.is_set():
             try:
                 self._queue.get_nowait()
             except queue.Empty:
                 self._queue.put(None)
-            self._thread.join(_POLL_S)
+            self._done.wait(_POLL_S)
 
 
 def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Progress, timing: dict,
@@ -256,8 +325,8 @@ def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progr
             planes = compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
             timing["composite"] += time.perf_counter() - t0
             t_first = frame_l.time_s if t_first is None else t_first
-            # The left frame's own time on the 1/fps grid; forced to increase should rounding collide.
-            last_pts = max(last_pts + 1, round((frame_l.time_s - t_first) * writer.rate))
+            # The left frame's own time in the writer's time base; forced to increase should rounding collide.
+            last_pts = max(last_pts + 1, round((frame_l.time_s - t_first) / writer.time_base))
             encoder.write(planes, last_pts)
             progress.update(writer.frames)
         encoder.finish()
@@ -270,7 +339,7 @@ def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progr
 
 
 def _report(infos, readers, writer: VideoWriter, stats: PairingStats, timing: dict, notes: list[str],
-            output, audio_side: str | None) -> dict:
+            warnings: list[str], output, audio_side: str | None) -> dict:
     """The run's report as plain JSON-ready values (see :func:`run_video`)."""
     reader_l, reader_r = readers
     audio = writer.audio
@@ -291,10 +360,12 @@ def _report(infos, readers, writer: VideoWriter, stats: PairingStats, timing: di
             "audio_span_s": None if audio is None else [audio.first_s, audio.end_s],
         },
         "notes": notes,
+        "warnings": warnings,
     }
 
 
-def write_report(report: dict, path: str | os.PathLike) -> None:
-    """Write a run's report as indented JSON (atomically, like every output)."""
-    with atomic_output(path) as tmp:
+def write_report(report: dict, path: str | os.PathLike, plan: OutputPlan | None = None) -> None:
+    """Write a run's report as indented JSON (atomically, like every output; with ``plan``: committed
+    with its other outputs)."""
+    with atomic_output(path, plan=plan) as tmp:
         tmp.write_text(json.dumps(report, indent=2) + "\n")
