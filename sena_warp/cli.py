@@ -304,6 +304,10 @@ def main(argv: list[str] | None = None) -> int:
     except StitchError as exc:
         print(f"sena-warp: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except MemoryError:  # a raised --max-megapixels, or a machine busy with other work
+        print("sena-warp: error: out of memory; lower --max-megapixels, downscale the inputs or free some memory",
+              file=sys.stderr)
+        return StitchError.exit_code
     except KeyboardInterrupt as exc:
         signum = getattr(exc, "signum", signal.SIGINT)
         by = "" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"

@@ -148,7 +148,7 @@ def test_corruption_in_the_middle_is_replaced_counted_and_warned(clips, dirs, ca
     assert damaged > 0 and report["damaged"]["left"] == 0
     assert decoded + damaged == CLIP_FRAMES["rooftop_right"]
     first, last = report["inputs"]["right"]["damaged_span_s"]
-    assert report["warnings"] == [f"right input has {damaged} damaged frames between {first:.2f} s and {last:.2f} s, "
+    assert report["warnings"] == [f"right input has {damaged} damaged frames between {first:.2f} s and {last:.2f} s: "
                                   f"each replaced by the last good frame (--strict fails instead)"]
     # Every left frame is output, each right one paired at its own time.
     assert report["frames_out"] == CLIP_FRAMES["rooftop_left"]

@@ -267,7 +267,7 @@ def test_damaged_frames_are_replaced_by_the_last_good_one_up_to_the_next_key_fra
     # Every tick is kept (the timing holds) and paired as usual.
     assert report["frames_out"] == 60 and report["dropped"] == report["repeated"] == 0
     assert report["warnings"] == [f"left input has {60 - first_lost} damaged frames between "
-                                  f"{first_lost / 30:.2f} s and {59 / 30:.2f} s, each replaced by the last good "
+                                  f"{first_lost / 30:.2f} s and {59 / 30:.2f} s: each replaced by the last good "
                                   f"frame (--strict fails instead)"]
     out = decoded_frames(tmp_path / "out.mp4")
     in_l = decoded_frames(left)

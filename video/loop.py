@@ -170,22 +170,23 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
         # The output clock is the left input's own time base, so every frame keeps its input time.
         with plan.writing(output) as tmp, VideoWriter(tmp, width, height, rate, options.codec, options.crf,
                                                       options.preset, infos["left"].time_base) as writer:
-            warnings = []
+            problems = []  # (what is the matter, what was done about it): warnings, or errors with --strict
             if audio_side is not None:
                 # Audio time in its file -> output clock: the same shift as that input's video frames.
                 side = infos[audio_side]
                 if writer.add_audio(side.path, side.start_time_s - offsets[audio_side] + first[0].time_s) is None:
                     audio_side = None
-                    warnings.append(writer.notes[-1])  # the audio left out: a user must hear it
+                    problems.append((writer.audio_refusal, "the output has no audio"))
             notes += writer.notes
             show = sys.stderr.isatty() if options.progress is None else options.progress
             expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
             progress = Progress(expected, show, sys.stderr, "sena-warp video", "frames", "fps")
             _encode_pairs(chain([first], pairs), compositor, writer, progress, timing, options.queue_frames)
             readers = {"left": reader_l, "right": reader_r}
-            warnings += _input_warnings(infos, readers)
-            if warnings and options.strict:
-                raise VideoError(f"{'; '.join(warnings)} (--strict)")
+            problems += _input_problems(infos, readers)
+            if problems and options.strict:
+                raise VideoError("; ".join(what for what, _ in problems) + "; nothing written (--strict)")
+    warnings = [f"{what}: {done}" for what, done in problems]
     timing["total"] = time.perf_counter() - t_run
     timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
     notes += _input_notes(infos, readers, stats)
@@ -212,20 +213,20 @@ def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], s
     return notes
 
 
-def _input_warnings(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]) -> list[str]:
-    """Damaged frames and truncated inputs, one sentence each (see ``reader.py`` for the policy)."""
-    warnings = []
+def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]) -> list[tuple[str, str]]:
+    """Damaged frames and truncated inputs: (what is the matter, what was done), see ``reader.py``."""
+    problems = []
     for side, reader in readers.items():
         if reader.damaged:
             span = reader.damaged_span_s
             where = f" between {float(span[0]):.2f} s and {float(span[1]):.2f} s" if span is not None else ""
-            warnings.append(f"{side} input has {reader.damaged} damaged frames{where}, each replaced by the last "
-                            f"good frame (--strict fails instead)")
+            problems.append((f"{side} input has {reader.damaged} damaged frames{where}",
+                             "each replaced by the last good frame (--strict fails instead)"))
         declared = infos[side].frame_count
         if declared and reader.decoded + reader.damaged < declared:
-            warnings.append(f"{side} input ended after {reader.decoded + reader.damaged} of the {declared} frames "
-                            f"its header declares (truncated?): stitched up to where it ends")
-    return warnings
+            problems.append((f"{side} input ended after {reader.decoded + reader.damaged} of the {declared} frames "
+                             f"its header declares (truncated?)", "stitched up to where it ends"))
+    return problems
 
 
 class EncodeThread:

@@ -218,6 +218,7 @@ class VideoWriter:
         self.time_base = Fraction(time_base) if time_base is not None else 1 / self.rate
         self.codec, note = choose_codec(codec, self.width, self.height, self.rate)
         self.notes = [note] if note else []  # fallbacks the report should mention
+        self.audio_refusal: str | None = None  # why the audio was left out (see add_audio)
         self._options = encoder_options(self.codec, crf, preset)
         self._open()
         self.audio: AudioCopier | None = None
@@ -239,10 +240,11 @@ class VideoWriter:
     def add_audio(self, source: str | os.PathLike, shift_s: Fraction) -> AudioCopier | None:
         """Copy ``source``'s audio (output time = its time - ``shift_s``); call before :meth:`write`.
 
-        Copied or re-encoded to AAC as :class:`AudioCopier` decides; when neither is possible (a
-        channel layout AAC cannot take, or the muxer refuses the stream) the video is written without
-        audio. Either fallback is said in ``notes``. The file's header is written here, so the
-        muxer's answer comes before any frame. Returns the copier, or None without audio.
+        Copied or re-encoded to AAC as :class:`AudioCopier` decides (a re-encode is said in
+        ``notes``); when neither is possible (a channel layout AAC cannot take, or the muxer refuses
+        the stream) the video is written without audio. The file's header is written here, so the
+        muxer's answer comes before any frame. Returns the copier, or None without audio (and
+        ``audio_refusal`` says why).
         """
         try:
             copier = AudioCopier(source, self.container, shift_s)
@@ -260,7 +262,7 @@ class VideoWriter:
                 return copier
         self.container.close()
         self._open()
-        self.notes.append(f"{reason}; the output has no audio")
+        self.audio_refusal = reason
         return None
 
     def __enter__(self) -> "VideoWriter":
