@@ -16,7 +16,7 @@ from dataclasses import dataclass
 class Config:
     # --- Inputs (no paper symbol) -------------------------------------------------------------
     max_input_megapixels: float = 100.0  # refuse a larger input, from its header before decoding (memory; README)
-    alpha_margin_px: int = 8  # keypoints this close to a fully transparent pixel are dropped (their patch sees no scene)
+    alpha_margin_px: int = 8  # keypoints this close to a fully transparent pixel are dropped (no scene there)
     scale_hint_ratio: float = 4.0  # inputs whose sizes differ more than this: a failed stitch names the ratio
 
     # --- Step 0: features -------------------------------------------------------------------

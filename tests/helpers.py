@@ -17,6 +17,8 @@ from sena_warp.imageio import read_image
 from sena_warp.video.reader import FrameReader, YuvFrame, probe_video
 from sena_warp.video.writer import VideoWriter
 
+ERROR_PREFIX = "sena-warp: error: "
+
 
 def read_pair(folder: Path) -> tuple[np.ndarray, np.ndarray]:
     """(img_a, img_b) uint8 BGR (H, W, 3) of a pair folder holding one a.* and one b.* image."""
@@ -51,6 +53,14 @@ def run_cli(argv, capfd, warp_device):
     rc = main([*map(str, argv), "--device", warp_device])
     captured = capfd.readouterr()
     return rc, captured.err.splitlines(), captured.out
+
+
+def assert_one_line_error(err_lines, *words):
+    """``err_lines`` (stderr as lines) is exactly one error line, no traceback, holding every word."""
+    assert len(err_lines) == 1, err_lines
+    assert err_lines[0].startswith(ERROR_PREFIX) and "Traceback" not in err_lines[0], err_lines
+    for word in words:
+        assert word in err_lines[0], (word, err_lines[0])
 
 
 def index_first(src, dst):
@@ -98,7 +108,8 @@ def png_claiming(width: int, height: int) -> bytes:
     def chunk(kind: bytes, body: bytes) -> bytes:
         return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
     ihdr = struct.pack(">IIBBBBB", width, height, 16, 0, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(bytes(1000))) + chunk(b"IEND", b"")
+    data = chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(bytes(1000))) + chunk(b"IEND", b"")
+    return b"\x89PNG\r\n\x1a\n" + data
 
 
 def tiff_orientation(value: int) -> bytes:

@@ -129,7 +129,8 @@ def test_one_folder_rule_parents_are_never_made(tmp_path, name, folder):
     assert make_folder(tmp_path / "made", "--work").is_dir()
 
 
-@pytest.mark.parametrize("name", ["p" * 240 + ".png", "p" * 251 + ".png", "é" * 125 + ".png", "x" * 200 + "." + "y" * 50])
+@pytest.mark.parametrize("name", ["p" * 240 + ".png", "p" * 251 + ".png", "é" * 125 + ".png",
+                                  "x" * 200 + "." + "y" * 50])
 def test_temporary_names_fit_in_255_bytes_for_any_output_name(tmp_path, name):
     assert len(os.fsencode(name)) <= NAME_MAX_BYTES
     prefix, suffix = temp_affixes(tmp_path / name, folder=False)

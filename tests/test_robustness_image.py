@@ -24,9 +24,8 @@ from sena_warp.features import Matches
 from sena_warp.imageio import read_image, to_bgr8
 from sena_warp.outputs import atomic_output
 from sena_warp.stitch import stitch_images
-from helpers import run_cli
+from helpers import assert_one_line_error, run_cli
 
-ERROR_PREFIX = "sena-warp: error: "
 
 
 @pytest.fixture(scope="module")
@@ -38,13 +37,6 @@ def pair(bundled_dir):
 @pytest.fixture(scope="module")
 def img_a(pair):
     return cv2.imread(pair[0], cv2.IMREAD_COLOR)
-
-
-def assert_one_line_error(err_lines, *words):
-    assert len(err_lines) == 1, err_lines
-    assert err_lines[0].startswith(ERROR_PREFIX)
-    for word in words:
-        assert word in err_lines[0], (word, err_lines[0])
 
 
 def cut_in_half(src, dst):

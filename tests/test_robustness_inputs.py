@@ -21,10 +21,10 @@ from sena_warp.features import match_images
 from sena_warp.image_header import read_header
 from sena_warp.imageio import read_image, read_image_masked
 from sena_warp.video.loop import VideoOptions, run_video
-from helpers import decoded_frames, png_claiming, reencode_with_black_start, run_cli, with_orientation
+from helpers import (assert_one_line_error, decoded_frames, png_claiming, reencode_with_black_start, run_cli,
+                     with_orientation)
 from test_video_loop import SideBySide
 
-ERROR_PREFIX = "sena-warp: error: "
 FAST_VIDEO = ["--audio", "none", "--crf", "35"]
 
 
@@ -46,13 +46,6 @@ def baseline(pair, tmp_path_factory, warp_device):
     from sena_warp.cli import main
     assert main(["image", *map(str, pair), "-o", str(out), "--device", warp_device]) == 0
     return cv2.imread(str(out), cv2.IMREAD_UNCHANGED)
-
-
-def assert_one_line_error(err, *words):
-    assert len(err) == 1, err
-    assert err[0].startswith(ERROR_PREFIX), err
-    for word in words:
-        assert word in err[0], (word, err[0])
 
 
 def stitch_png(args, out, capfd, warp_device):

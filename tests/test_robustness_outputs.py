@@ -23,9 +23,8 @@ import pytest
 from sena_warp import imageio, outputs
 from sena_warp.errors import InputError, OutputError
 from sena_warp.video import reader as video_reader
-from helpers import run_cli
+from helpers import assert_one_line_error, run_cli
 
-ERROR_PREFIX = "sena-warp: error: "
 FAST_VIDEO = ["--audio", "none", "--crf", "35"]
 REPO = Path(__file__).resolve().parents[1]
 
@@ -90,13 +89,6 @@ def default_outputs(command: str, folder_out: Path) -> dict[str, Path]:
     return {option: folder_out / name for option, (name, _) in COMMANDS[command]["outputs"].items()}
 
 
-def assert_one_line_error(err, *words):
-    assert len(err) == 1, err
-    assert err[0].startswith(ERROR_PREFIX) and "Traceback" not in err[0], err
-    for word in words:
-        assert word in err[0], (word, err[0])
-
-
 def run_refused(command, outs, ins, folder_out, capfd, warp_device, code, *words, extra=()):
     """Run a command that must be refused; check the code, the one line, nothing left, inputs unchanged."""
     before_out, before_in = tree(folder_out), digest(p for p in ins if p.is_file())
@@ -122,7 +114,8 @@ def collision_cases():
             yield from ((command, ("same", a, b)) for b in options[i + 1:])
 
 
-@pytest.mark.parametrize("command, case", list(collision_cases()), ids=lambda v: "-".join(v) if isinstance(v, tuple) else v)
+@pytest.mark.parametrize("command, case", list(collision_cases()),
+                         ids=lambda v: "-".join(v) if isinstance(v, tuple) else v)
 def test_outputs_colliding_with_inputs_or_each_other_are_refused_before_work(
         command, case, inputs, dirs, capfd, warp_device, no_work):
     _, folder_out = dirs
@@ -232,7 +225,8 @@ BAD_OPTIONS = [
 ]
 
 
-@pytest.mark.parametrize("command, extra, words", BAD_OPTIONS, ids=lambda v: " ".join(v) if isinstance(v, list) else None)
+@pytest.mark.parametrize("command, extra, words", BAD_OPTIONS,
+                         ids=lambda v: " ".join(v) if isinstance(v, list) else None)
 def test_bad_option_values_exit_2_before_any_work(command, extra, words, inputs, dirs, capfd, warp_device, no_work):
     _, folder_out = dirs
     run_refused(command, default_outputs(command, folder_out), inputs[command], folder_out, capfd, warp_device,

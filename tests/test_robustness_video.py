@@ -29,9 +29,8 @@ import pytest
 from sena_warp.errors import InputError, OutputError, VideoError
 from sena_warp.video import reader as video_reader
 from sena_warp.video.writer import VideoWriter
-from helpers import damage_the_middle, index_first, run_cli, top_level_box, truncated
+from helpers import assert_one_line_error, damage_the_middle, index_first, run_cli, top_level_box, truncated
 
-ERROR_PREFIX = "sena-warp: error: "
 CLIP_FRAMES = {"rooftop_left": 60, "rooftop_right": 63}  # 2.0 s and 2.1 s at 30 fps (see test_video_reader)
 FAST = ["--audio", "none", "--crf", "35"]  # the cases are about failures and counts, not quality
 
@@ -40,13 +39,6 @@ FAST = ["--audio", "none", "--crf", "35"]  # the cases are about failures and co
 def clips(bundled_dir):
     d = bundled_dir / "video"
     return d / "rooftop_left.mp4", d / "rooftop_right.mp4"
-
-
-def assert_one_line_error(err_lines, *words):
-    assert len(err_lines) == 1, err_lines
-    assert err_lines[0].startswith(ERROR_PREFIX)
-    for word in words:
-        assert word in err_lines[0], (word, err_lines[0])
 
 
 def no_decoder_threads() -> bool:
