@@ -38,6 +38,10 @@ class VideoError(StitchError):
     exit_code = 5
 
 
+class SyncError(VideoError):
+    """``--offset auto`` found no clear time offset: a silent or static input, or an ambiguous peak."""
+
+
 class OutputError(StitchError):
     """An output cannot be written where asked: it is an input or another output, exists (without -y),
     its folder is missing or not writable, or the disk is full."""
