@@ -146,9 +146,12 @@ def cmd_image(args: argparse.Namespace) -> int:
 
 
 def cmd_video(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+
     from sena_warp.kernels.runtime import resolve_config
     from sena_warp.video.loop import VideoOptions, write_report
     from sena_warp.video.stitch import check_rig_settings, stitch_videos
+    from sena_warp.video.sync import estimate_offset
 
     if args.reestimate is not None and args.rig != "moving":
         raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
@@ -156,9 +159,11 @@ def cmd_video(args: argparse.Namespace) -> int:
     if args.reestimate is not None:
         cfg = cfg.replace(video_reestimate_s=args.reestimate)
     check_rig_settings(cfg)
+    auto = args.offset == "auto"
     # NVENC only where the kernels run on a GPU too; the writer falls back to libx264 if it cannot open.
     codec = args.codec or ("h264_nvenc" if cfg.device == "cuda" else cfg.video_codec)
-    options = VideoOptions.from_config(cfg, offset_s=args.offset, audio=args.audio, codec=codec,
+    # Every option is checked before any file is opened; with --offset auto, 0 stands in until the estimate.
+    options = VideoOptions.from_config(cfg, offset_s=0.0 if auto else args.offset, audio=args.audio, codec=codec,
                                        crf=cfg.video_crf if args.crf is None else args.crf,
                                        preset=args.preset or cfg.video_preset, progress=args.progress or None,
                                        strict=args.strict)
@@ -168,8 +173,14 @@ def cmd_video(args: argparse.Namespace) -> int:
         plan.add(args.report, "--report")
     if not checked(plan):  # before decoding: a bad --report must not cost a stitch or leave a video
         return 0
+    sync = estimate_offset(args.left, args.right, cfg) if auto else None
+    if sync is not None:
+        print(f"sena-warp: offset auto: {sync.summary()}", file=sys.stderr)
+        options = replace(options, offset_s=sync.offset_s)
     with plan:  # every output or none
         report = stitch_videos(args.left, args.right, args.output, cfg, options, reference=args.reference, plan=plan)
+        report["sync"] = (sync.as_dict() if sync is not None
+                          else {"method": "manual", "offset_ms": options.offset_s * 1000})
         if args.report:
             write_report(report, args.report, plan)
     if report["warnings"]:
@@ -182,6 +193,16 @@ def cmd_video(args: argparse.Namespace) -> int:
           f"repeated {report['repeated']}, damaged {sum(report['damaged'].values())}, {report['output_fps']} fps"
           + (", with the warning above" if report["warnings"] else ""))
     return 0
+
+
+def _offset(text: str) -> float | str:
+    """``--offset``: seconds, or "auto" to estimate them from the inputs' audio or motion."""
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a number of seconds nor 'auto'") from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -217,8 +238,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("left", help="left (or top) video; its frames and times drive the output")
     p.add_argument("right", help="right (or bottom) video, paired to the left one by time")
     p.add_argument("-o", "--output", required=True, help="output video (.mp4, .mov or .mkv), H.264")
-    p.add_argument("--offset", type=float, default=0.0, metavar="S",
-                   help="seconds the right video started after the left one (default: 0)")
+    p.add_argument("--offset", type=_offset, default=0.0, metavar="S|auto",
+                   help="seconds the right video started after the left one, or auto: estimated from the "
+                        "audio of both (else their motion), refused when unclear (default: 0)")
     p.add_argument("--rig", choices=("static", "moving"), default=Config.video_rig,
                    help="static: maps estimated once; moving: re-estimated now and then (default: %(default)s)")
     p.add_argument("--reestimate", type=float, metavar="S",

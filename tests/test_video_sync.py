@@ -1,4 +1,4 @@
-"""``--offset auto`` (video/sync.py): offsets of clips cut at known shifts, refusals.
+"""``--offset auto`` (video/sync.py): offsets of clips cut at known shifts, refusals, the CLI line.
 
 A cut pair's expected offset is its realised shift (whole frames, see ``sync_bench.cut_pair``)
 plus, for clips of two cameras, the recordings' own offset measured on the uncut pair. Targets
@@ -7,9 +7,12 @@ plus, for clips of two cameras, the recordings' own offset measured on the uncut
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
+from helpers import assert_one_line_error, run_cli
 from sena_warp.config import Config
 from sena_warp.errors import SyncError
 from sena_warp.sync_bench import SHIFTS_S, cut_pair
@@ -94,6 +97,31 @@ def test_clips_sharing_too_little_are_refused(clips, tmp_path):
         estimate_offset(cut.left, cut.right, SHORT)
 
 
+def test_cli_refuses_auto_on_a_static_scene_in_one_line(clips, dirs, capfd, warp_device):
+    out = dirs[1] / "pano.mp4"
+    rc, err, _ = run_cli(["video", clips / "office_cam1.mp4", clips / "office_cam2.mp4", "-o", out,
+                          "--offset", "auto"], capfd, warp_device)
+    assert rc == 5 and list(dirs[1].iterdir()) == []
+    assert_one_line_error(err, "no clear time offset", "give --offset S")
+
+
+def test_cli_auto_refuses_frames_above_the_limit_before_decoding(clips, dirs, capfd, warp_device, monkeypatch):
+    from sena_warp.video import sync
+
+    monkeypatch.setattr(sync, "open_input", lambda path: pytest.fail(f"decoded {path} above the limit"))
+    rc, err, _ = run_cli(["video", clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", "-o", dirs[1] / "p.mp4",
+                          "--offset", "auto", "--max-megapixels", "0.01"], capfd, warp_device)
+    assert rc == 2 and list(dirs[1].iterdir()) == []
+    assert_one_line_error(err, "rooftop_left.mp4", "--max-megapixels")
+
+
+def test_cli_offset_takes_seconds_or_auto_only(clips, dirs, capfd, warp_device):
+    rc, err, _ = run_cli(["video", clips / "office_cam1.mp4", clips / "office_cam2.mp4", "-o", dirs[1] / "p.mp4",
+                          "--offset", "soon"], capfd, warp_device)
+    assert rc == 2 and list(dirs[1].iterdir()) == []
+    assert_one_line_error(err, "neither a number of seconds nor 'auto'")
+
+
 @pytest.fixture(scope="module")
 def rooftop_own_s(rooftop) -> float:
     """The two phones' own offset, by audio on the full recordings."""
@@ -132,3 +160,16 @@ def test_recordings_without_a_clear_offset_are_refused(shared_dir, name):
     left, right = sorted((shared_dir / "videos" / name).glob("*.mp4"))
     with pytest.raises(SyncError, match=r"no clear time offset \(audio: .*; motion: .*\)"):
         estimate_offset(left, right, Config())
+
+
+@pytest.mark.shared
+def test_cli_auto_prints_the_estimate_and_reports_it(rooftop, tmp_path, dirs, capfd, warp_device):
+    cut = cut_pair(rooftop / "left.mp4", rooftop / "left.mp4", tmp_path, 0.5, keep_audio=True, seconds=4.0)
+    out, report = dirs[1] / "pano.mp4", dirs[1] / "report.json"
+    rc, err, _ = run_cli(["video", cut.left, cut.right, "-o", out, "--offset", "auto", "--report", report],
+                         capfd, warp_device)
+    assert rc == 0 and len(err) == 1 and err[0].startswith("sena-warp: offset auto: audio, +500.")
+    sync = json.loads(report.read_text())["sync"]
+    assert sync["method"] == "audio" and abs(sync["offset_ms"] - 500.0) < AUDIO_TOL_S * 1000
+    assert sync["confidence"] > Config().sync_min_confidence and sync["span_s"]["left"] > 3.0
+    assert json.loads(report.read_text())["inputs"]["right"]["offset_s"] == pytest.approx(0.5, abs=AUDIO_TOL_S)

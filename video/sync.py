@@ -39,6 +39,7 @@ import numpy as np
 
 from ..config import Config
 from ..errors import SyncError, VideoError
+from ..imageio import check_size
 from .reader import open_input, probe_video
 
 METHODS = ("audio", "motion")
@@ -110,9 +111,14 @@ class SyncEstimate:
 def estimate_offset(left: str | os.PathLike, right: str | os.PathLike, cfg: Config) -> SyncEstimate:
     """``--offset auto``: audio where both inputs have it, else (or when audio refuses) motion.
 
-    Raises :class:`SyncError` naming what each method found when none gives a clear peak.
+    Raises :class:`SyncError` naming what each method found when none gives a clear peak, and
+    InputError, before anything is decoded, for frames above ``cfg.max_input_megapixels`` (as the
+    stitch refuses them).
     """
-    both_audio = probe_video(left).has_audio and probe_video(right).has_audio
+    infos = probe_video(left), probe_video(right)
+    for info in infos:
+        check_size(str(info.path), info.width, info.height, cfg.max_input_megapixels, "a frame")
+    both_audio = infos[0].has_audio and infos[1].has_audio
     refusals = [] if both_audio else ["audio: not both inputs have a track"]
     for method in METHODS if both_audio else METHODS[1:]:
         try:
