@@ -44,6 +44,7 @@ from .reader import open_input, probe_video
 
 METHODS = ("audio", "motion")
 WHAT = {"audio": "hear the same sounds", "motion": "see the same motion"}  # what a low peak means
+MAD_TO_STD = 1.4826  # median absolute deviation x this = standard deviation, for normal noise
 
 
 @dataclass(frozen=True)
@@ -206,9 +207,9 @@ def _window_moments(values: np.ndarray, first: np.ndarray, stop: np.ndarray) -> 
     squares = np.concatenate(([0.0], np.cumsum(np.square(values))))
     count = np.maximum(stop - first, 1)
     total = sums[stop] - sums[first]
-    spread = squares[stop] - squares[first] - total**2 / count
+    deviations = squares[stop] - squares[first] - total**2 / count
     # A constant window has variance 0 up to rounding: below 1e-9 of the whole signal's, it is 0.
-    return total, np.where(spread > 1e-9 * count * values.var(), spread, 0.0)
+    return total, np.where(deviations > 1e-9 * count * values.var(), deviations, 0.0)
 
 
 def _parabolic_shift(values: np.ndarray, i: int) -> float:
@@ -297,7 +298,7 @@ def motion_signal(path: str | os.PathLike, rate_hz: float, cfg: Config) -> Signa
         raise SyncError(f"{path} has too few frames to measure motion")
     grid_s = np.arange(times_s[0], times_s[-1], 1 / rate_hz)
     values = np.interp(grid_s, times_s, _running_median(np.asarray(energy), cfg.sync_motion_median_frames))
-    spread = 1.4826 * float(np.median(np.abs(values - np.median(values))))  # robust std: a glitch is no motion
+    spread = MAD_TO_STD * float(np.median(np.abs(values - np.median(values))))  # robust: a glitch is no motion
     if spread < cfg.sync_motion_min_spread:
         raise SyncError(f"nothing moves in {path} over its first {cfg.sync_motion_span_s:g} s "
                         f"(frame-difference spread {spread:.3f} < {cfg.sync_motion_min_spread:g} grey levels)")
