@@ -15,7 +15,7 @@ import pytest
 from helpers import assert_one_line_error, run_cli
 from sena_warp.config import Config
 from sena_warp.errors import SyncError
-from sena_warp.sync_bench import SHIFTS_S, cut_pair
+from sena_warp.evaluation.sync_bench import SHIFTS_S, cut_pair
 from sena_warp.video.reader import probe_video
 from sena_warp.video.sync import Signal, check_peak, correlate, estimate_offset, measure_offset
 

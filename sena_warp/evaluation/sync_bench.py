@@ -18,12 +18,12 @@ from pathlib import Path
 
 import av
 
-from .config import Config
-from .errors import SyncError
-from .video.reader import probe_video
-from .video.sync import METHODS, SyncEstimate, measure_offset
+from sena_warp.config import Config
+from sena_warp.errors import SyncError
+from sena_warp.video.reader import probe_video
+from sena_warp.video.sync import METHODS, SyncEstimate, measure_offset
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 SHIFTS_S = (0.5, 1.37, -2.0)  # the shifts of issue 14's cut clips
 # (name, left, right) under shared/data/videos
 RECORDINGS = (
