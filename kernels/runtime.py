@@ -23,6 +23,7 @@ import pkgutil
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
+import numpy as np
 import warp as wp
 
 from sena_warp.config import Config
@@ -115,6 +116,16 @@ def _say_compiling() -> None:
     global _compiling_said
     _compiling_said = True
     stage("compiling kernels (first run only)")
+
+
+def readonly_array(values, dtype, device: str) -> wp.array:
+    """A Warp array of the float32 numpy ``values`` for a kernel that only reads it.
+
+    On the CPU it shares the numpy memory (a canvas map is 8 bytes a pixel: no copy of it); on CUDA
+    it is a copy on the device. The caller must not change ``values`` while the array is in use.
+    """
+    values = np.ascontiguousarray(values, dtype=np.float32)
+    return wp.array(values, dtype=dtype, device=device, copy=device != "cpu")
 
 
 def row_bands(height: int, bands: int) -> list[tuple[int, int]]:

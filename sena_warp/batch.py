@@ -4,8 +4,8 @@ JOBS is a folder of pair folders (each holding images ``a.*`` + ``b.*`` or video
 ``right.*``; the folder's name names the job), or a job list: TOML (``[defaults]`` and ``[[job]]``
 tables) or CSV (a header row, one job per row). A job gives its inputs (``a``/``b`` or
 ``left``/``right``, relative to the list's folder) and optionally ``name``, ``output`` (relative to
-DIR), ``reference``, ``crop`` (images), ``offset`` (videos, seconds) and any setting of ``sena-warp
-config``. Settings apply in this order, the later winning: defaults, ``--config``, command-line
+DIR), ``reference``, ``crop`` (images), ``offset`` (videos: seconds, or "auto" to estimate them) and
+any setting of ``sena-warp config``. Settings apply in this order, the later winning: defaults, ``--config``, command-line
 options, the list's ``[defaults]``, the job's own.
 
 Each job writes ``DIR/NAME.png`` or ``DIR/NAME.mp4`` and then ``DIR/reports/NAME.json`` (its report
@@ -34,16 +34,18 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Callable, Iterator
 
+from .config import OFFSET_AUTO
 from .config_file import check_value, field_types, read_toml, unknown_key_error
 from .errors import InputError, StitchError
-from .imageio import atomic_output, check_output_folder, make_folder
 from .jobs import INPUT_SUFFIXES, OUTPUT_SUFFIXES, PAIR_STEMS, Job, pair_inputs, run_job, summary_line
+from .outputs import atomic_output, make_folder
 from .progress import LOGGER, Count, echo
 
 # Job keys besides the settings: name -> (type, the kind it applies to or None for both).
 JOB_KEYS = {"name": (str, None), "output": (str, None), "reference": (str, None), "crop": (bool, "image"),
             "offset": (float, "video"), "a": (str, "image"), "b": (str, "image"), "left": (str, "video"),
             "right": (str, "video")}
+WORDS = {"offset": (OFFSET_AUTO,)}  # words a number key also takes
 REFERENCES = ("auto", "a", "b")
 TRUE_WORDS, FALSE_WORDS = ("true", "yes", "1"), ("false", "no", "0")  # CSV cells of a yes/no option
 TOML_TABLES = ("defaults", "job")
@@ -135,6 +137,8 @@ def _csv_rows(path: Path) -> list[tuple[str, dict]]:
 def _from_text(key: str, text: str, where: str):
     """A CSV cell as the value its column takes: a number, yes/no, or text; unknown columns pass through."""
     kind = JOB_KEYS[key][0] if key in JOB_KEYS else field_types().get(key, str)
+    if text in WORDS.get(key, ()):
+        return text
     if kind is bool:
         if text.lower() not in TRUE_WORDS + FALSE_WORDS:
             raise InputError(f"{where}: {key} = {text!r} is not one of {', '.join(TRUE_WORDS + FALSE_WORDS)}")
@@ -164,8 +168,9 @@ def _entry(row: dict, where: str, source: Path, out_dir: Path, settings: dict) -
         raise InputError(f"{where}: job name {name!r} cannot name a file; give a plain name")
     output = out_dir / options.get("output", name + OUTPUT_SUFFIXES[kind][0])
     job_settings = {**settings, **{key: check_value(key, value, where) for key, value in row.items() if key in types}}
+    # A job still to run replaces what an earlier, unfinished run left (complete jobs are skipped before).
     job = Job(kind, inputs, str(output), job_settings, reference=options.get("reference", "auto"),
-              crop=options.get("crop", False), offset_s=options.get("offset", 0.0))
+              crop=options.get("crop", False), offset_s=options.get("offset", 0.0), overwrite="overwrite")
     return Entry(name, job, str(out_dir / REPORTS / f"{name}.json"))
 
 
@@ -173,10 +178,14 @@ def _job_value(key: str, value, kind: str, where: str):
     wanted, applies_to = JOB_KEYS[key]
     if applies_to is not None and applies_to != kind:
         raise InputError(f"{where}: {key} is for {applies_to} jobs; this one is a {kind} job")
+    if value in WORDS.get(key, ()):
+        return value
     if wanted is float and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
     if not isinstance(value, wanted) or (wanted is not bool and isinstance(value, bool)):
-        raise InputError(f"{where}: {key} = {value!r} is not {'yes/no' if wanted is bool else 'a ' + wanted.__name__}")
+        words = "".join(f" or {word!r}" for word in WORDS.get(key, ()))
+        raise InputError(f"{where}: {key} = {value!r} is not {'yes/no' if wanted is bool else 'a ' + wanted.__name__}"
+                         f"{words}")
     if key == "reference" and value not in REFERENCES:
         raise InputError(f"{where}: reference = {value!r} is not one of {', '.join(REFERENCES)}")
     if key in PAIR_STEMS[kind] and Path(value).suffix.lower() not in INPUT_SUFFIXES[kind]:
@@ -230,7 +239,7 @@ def run_entry(entry: Entry) -> dict:
 def _write_report(path: str, data: dict) -> None:
     from .report import write_json
 
-    make_folder(Path(path).parent)
+    make_folder(Path(path).parent, "the reports folder")
     write_json(path, data)
 
 
@@ -343,7 +352,7 @@ def summary_table(summary: dict) -> str:
 
 def cmd_batch(args: argparse.Namespace) -> int:
     """``sena-warp batch``: run every job, print the table; BatchError (exit 7) when any failed."""
-    out_dir = make_folder(check_output_folder(args.out))
+    out_dir = make_folder(args.out, "--out")
     cores = os.cpu_count() or 1
     if args.ray:
         cpus = args.workers or cores

@@ -1,30 +1,53 @@
 """The ``sena-warp`` command line: one subcommand per job.
 
 Every expected failure is a :class:`~sena_warp.errors.StitchError`; it is printed as one line
-(``sena-warp: error: ...``) and the process exits with that error's code (see the README). What a
-run is doing goes to stderr through :mod:`sena_warp.progress` (``-q``, ``-v``, ``--progress``);
-stdout carries results only.
+(``sena-warp: error: ...``) and the process exits with that error's code (see the README); so is a
+malformed command line (exit 2). SIGINT, SIGTERM and SIGHUP end a run as Ctrl-C does, with 128 + the
+signal's number. Each command plans all its outputs first (``sena_warp.outputs``): they are checked
+before any input is read and written together at the end. What a run is doing goes to stderr through
+:mod:`sena_warp.progress` (``-q``, ``-v``, ``--progress``); stdout carries results only.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import logging
+import signal
 import sys
+import threading
 import time
 
 from . import __version__
-from .config import CHOICES, Config
+from .config import CHOICES, OFFSET_AUTO, Config
 from .errors import InputError, StitchError
+from .outputs import OutputPlan
 from .progress import LOGGER, ConsoleHandler, echo
 
 PROGRESS_MODES = ("auto", "bar", "plain", "json")
 # Command-line options that set a Config field: option dest -> field name.
-SETTING_OPTIONS = {"features": "features", "device": "device", "threads": "cpu_threads", "rig": "video_rig",
-                   "reestimate": "video_reestimate_s", "crf": "video_crf", "preset": "video_preset",
-                   "codec": "video_codec", "audio": "video_audio"}
+SETTING_OPTIONS = {"features": "features", "device": "device", "threads": "cpu_threads",
+                   "max_megapixels": "max_input_megapixels", "rig": "video_rig", "reestimate": "video_reestimate_s",
+                   "crf": "video_crf", "preset": "video_preset", "codec": "video_codec", "audio": "video_audio"}
+HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT, SIGTERM or SIGHUP, raised in the main thread as Ctrl-C is, so every output's temporary
+    is removed on the way out; the exit code is 128 + the signal's number."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line like every other error of the command (exit 2)."""
+
+    def error(self, message: str):
+        self.exit(InputError.exit_code, f"sena-warp: error: {message} (see {self.prog} --help)\n")
 
 
 def _positive_int(text: str) -> int:
@@ -56,26 +79,47 @@ def _settings_options() -> argparse.ArgumentParser:
                    help="threads for the Warp CPU kernels, onnxruntime and the video codecs (default: one per core)")
     p.add_argument("--features", choices=CHOICES["features"], help=f"feature detector (default: {Config.features})")
     p.add_argument("--device", choices=CHOICES["device"], help=f"where the Warp kernels run (default: {Config.device})")
+    p.add_argument("--max-megapixels", dest="max_megapixels", type=float, metavar="MP",
+                   help=f"refuse inputs larger than this, before decoding them (default: "
+                        f"{Config.max_input_megapixels:g}; see README)")
+    return p
+
+
+def _overwrite_options() -> argparse.ArgumentParser:
+    """-y / -n: what an existing output gets (one of ``outputs.OVERWRITE_MODES``; default: refused)."""
+    p = argparse.ArgumentParser(add_help=False)
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("-y", "--overwrite", dest="overwrite", action="store_const", const="overwrite",
+                       default="refuse", help="replace outputs that exist (default: refuse them)")
+    group.add_argument("-n", "--no-overwrite", dest="overwrite", action="store_const", const="skip",
+                       help="do nothing when an output exists (exit 0)")
     return p
 
 
 def _settings(args: argparse.Namespace) -> dict:
-    """Config changes asked for: the --config file's, then the options given on the command line."""
-    from .config_file import check_settings, load_settings
+    """Config changes asked for: the --config file's, then the options given on the command line (a bad
+    value is refused naming the option)."""
+    from .config_file import check_value, load_settings
 
     settings = load_settings(args.config) if args.config else {}
-    given = {field: getattr(args, dest) for dest, field in SETTING_OPTIONS.items() if getattr(args, dest, None) is not None}
-    return {**settings, **check_settings(given, "command line")}
+    given = {field: check_value(field, getattr(args, dest), f"--{dest.replace('_', '-')}")
+             for dest, field in SETTING_OPTIONS.items() if getattr(args, dest, None) is not None}
+    return {**settings, **given}
 
 
 def cmd_match(args: argparse.Namespace) -> int:
     from .debug import draw_matches
     from .features import match_images
-    from .imageio import read_image, write_image
-    from .jobs import job_config
+    from .imageio import IMAGE_SUFFIXES, read_image, write_image
+    from .jobs import checked, job_config
 
     cfg = job_config(args.settings)
-    img_a, img_b = read_image(args.image_a), read_image(args.image_b)
+    plan = OutputPlan((args.image_a, args.image_b), args.overwrite)
+    if args.output:
+        plan.add(args.output, "-o", suffixes=IMAGE_SUFFIXES)
+    if not checked(plan):
+        return 0
+    img_a, img_b = (read_image(path, cfg.max_input_megapixels) for path in (args.image_a, args.image_b))
     t0 = time.perf_counter()
     matches = match_images(img_a, img_b, cfg)
     elapsed = time.perf_counter() - t0
@@ -86,30 +130,39 @@ def cmd_match(args: argparse.Namespace) -> int:
         "matches": len(matches),
         "time_s": round(elapsed, 3),
     }
-    print(json.dumps(summary))
     if args.output:
-        write_image(args.output, draw_matches(img_a, img_b, matches), inputs=(args.image_a, args.image_b))
+        with plan:
+            write_image(args.output, draw_matches(img_a, img_b, matches), plan=plan)
+    print(json.dumps(summary))
+    return 0
+
+
+def _run_job(job) -> int:
+    """Run a :class:`~sena_warp.jobs.Job` and print its summary line after the output's name (none when
+    -n found an existing output)."""
+    from .jobs import run_job, summary_line
+
+    report = run_job(job)
+    if report is not None:
+        echo(f"{job.output}: {summary_line(job.kind, report)}")
     return 0
 
 
 def cmd_image(args: argparse.Namespace) -> int:
-    from .jobs import Job, run_job, summary_line
+    from .jobs import Job
 
-    job = Job("image", (args.image_a, args.image_b), args.output, args.settings, report=args.report,
-              reference=args.reference, crop=args.crop, debug=args.debug)
-    echo(f"{args.output}: {summary_line('image', run_job(job))}")
-    return 0
+    return _run_job(Job("image", (args.image_a, args.image_b), args.output, args.settings, report=args.report,
+                        reference=args.reference, crop=args.crop, debug=args.debug, overwrite=args.overwrite))
 
 
 def cmd_video(args: argparse.Namespace) -> int:
-    from .jobs import Job, run_job, summary_line
+    from .jobs import Job
 
     if args.reestimate is not None and args.settings.get("video_rig") != "moving":
         raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
-    job = Job("video", (args.left, args.right), args.output, args.settings, report=args.report,
-              reference=args.reference, offset_s=args.offset)
-    echo(f"{args.output}: {summary_line('video', run_job(job))}")
-    return 0
+    return _run_job(Job("video", (args.left, args.right), args.output, args.settings, report=args.report,
+                        reference=args.reference, offset_s=args.offset, strict=args.strict,
+                        overwrite=args.overwrite))
 
 
 def cmd_config(args: argparse.Namespace) -> int:
@@ -119,9 +172,19 @@ def cmd_config(args: argparse.Namespace) -> int:
     return 0
 
 
+def _offset(text: str) -> float | str:
+    """``--offset``: seconds, or "auto" to estimate them from the inputs' audio or motion."""
+    if text == OFFSET_AUTO:
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a number of seconds nor {OFFSET_AUTO!r}") from None
+
+
 def build_parser() -> argparse.ArgumentParser:
-    common, settings = _output_options(), _settings_options()
-    parser = argparse.ArgumentParser(
+    common, settings, overwrite = _output_options(), _settings_options(), _overwrite_options()
+    parser = _Parser(
         prog="sena-warp",
         description="Parallax-tolerant two-camera stitching (SENA) for image pairs and paired videos.",
     )
@@ -132,13 +195,13 @@ def build_parser() -> argparse.ArgumentParser:
         return sub.add_parser(name, help=help_text, description=help_text[0].upper() + help_text[1:] + ".",
                               parents=[common, *parents])
 
-    p = command("match", "find and match features between two images", settings)
+    p = command("match", "find and match features between two images", settings, overwrite)
     p.add_argument("image_a")
     p.add_argument("image_b")
     p.add_argument("-o", "--output", help="write a picture of the matches (.jpg/.png)")
     p.set_defaults(run=cmd_match)
 
-    p = command("image", "stitch two images into a panorama", settings)
+    p = command("image", "stitch two images into a panorama", settings, overwrite)
     p.add_argument("image_a")
     p.add_argument("image_b")
     p.add_argument("-o", "--output", required=True, help="panorama file: .png (transparent where uncovered) or .jpg")
@@ -149,12 +212,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="input kept unwarped (default: auto = the right or bottom view)")
     p.set_defaults(run=cmd_image)
 
-    p = command("video", "stitch two synchronised videos", settings)
+    p = command("video", "stitch two synchronised videos", settings, overwrite)
     p.add_argument("left", help="left (or top) video; its frames and times drive the output")
     p.add_argument("right", help="right (or bottom) video, paired to the left one by time")
     p.add_argument("-o", "--output", required=True, help="output video (.mp4, .mov or .mkv), H.264")
-    p.add_argument("--offset", type=float, default=0.0, metavar="S",
-                   help="seconds the right video started after the left one (default: 0)")
+    p.add_argument("--offset", type=_offset, default=0.0, metavar="S|auto",
+                   help="seconds the right video started after the left one, or auto: estimated from the "
+                        "audio of both (else their motion), refused when unclear (default: 0)")
     p.add_argument("--rig", choices=CHOICES["video_rig"],
                    help=f"static: maps estimated once; moving: re-estimated now and then (default: {Config.video_rig})")
     p.add_argument("--reestimate", type=float, metavar="S",
@@ -167,6 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--report", help="write a JSON report (docs/report.md)")
     p.add_argument("--reference", choices=("auto", "a", "b"), default="auto",
                    help="input kept unwarped: a = left, b = right (default: auto = the right or bottom view)")
+    p.add_argument("--strict", action="store_true",
+                   help="fail (exit 5) on damaged frames or a truncated input instead of replacing them with a warning")
     p.set_defaults(run=cmd_video)
 
     p = command("batch", "stitch many pairs on local worker processes or a Ray cluster", settings)
@@ -185,7 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
                 settings)
     p.set_defaults(run=cmd_config)
 
-    p = command("bench", "frame-rate benchmark: transcode baseline vs stitch, per stage, kernel")
+    p = command("bench", "frame-rate benchmark: transcode baseline vs stitch, per stage, kernel", overwrite)
     p.add_argument("--sizes", nargs="+", metavar="SIZE",
                    help="clip sizes: 720p, 1080p, 4k or WIDTHxHEIGHT (default: 720p 1080p 4k)")
     p.add_argument("--seconds", type=float, default=10.0, help="clip length in seconds (default: %(default)s)")
@@ -199,7 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where the Warp kernels run (default: %(default)s)")
     p.set_defaults(run=_lazy("evaluation.bench", "cmd_bench"))
 
-    p = command("eval", "quality evaluation: SENA vs global affine, homography, OpenCV's stitcher", settings)
+    p = command("eval", "quality evaluation: SENA vs global affine, homography, OpenCV's stitcher", settings,
+                overwrite)
     p.add_argument("data_dir", help="folder of pair folders, each holding a.* and b.* (or one pair folder)")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for results.csv, summary.md and the sheets")
     p.set_defaults(run=_lazy("evaluation.evaluate", "cmd_eval"))
@@ -224,20 +291,51 @@ def _console(args: argparse.Namespace) -> ConsoleHandler:
     return console
 
 
+@contextlib.contextmanager
+def _signals_as_interrupts():
+    """While the command runs, SIGINT, SIGTERM and SIGHUP raise :class:`Interrupted` (once: a second
+    signal must not break the clean-up of the first). Only the main thread can set handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+
+    def interrupt(signum, frame):
+        if not received:
+            received.append(signum)
+            raise Interrupted(signum)
+
+    previous = {signum: signal.signal(signum, interrupt) for signum in HANDLED_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # --help, --version, or a malformed command line (said on one line)
+        return int(exc.code or 0)
     level = LOGGER.level
     console = _console(args)
     try:
-        if hasattr(args, "config"):
-            args.settings = _settings(args)
-        return args.run(args)
+        with _signals_as_interrupts():
+            if hasattr(args, "config"):
+                args.settings = _settings(args)
+            return args.run(args)
     except StitchError as exc:
         LOGGER.error(str(exc))
         return exc.exit_code
-    except KeyboardInterrupt:
-        LOGGER.error("interrupted", extra={"label": ""})
-        return 130
+    except MemoryError:  # a raised --max-megapixels, or a machine busy with other work
+        LOGGER.error("out of memory; lower --max-megapixels, downscale the inputs or free some memory")
+        return StitchError.exit_code
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        by = "" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"
+        LOGGER.error(f"interrupted{by}", extra={"label": ""})
+        return 128 + signum
     finally:
         LOGGER.removeHandler(console)
         LOGGER.setLevel(level)

@@ -61,12 +61,11 @@ class Compositor:
         self.canvas_shape = tuple(np.asarray(alpha_canvas).shape[:2])
         if map_src_canvas.shape[:2] != self.canvas_shape or map_tgt_canvas.shape[:2] != self.canvas_shape:
             raise ValueError("map_src_canvas, map_tgt_canvas and alpha_canvas must share one (Hc, Wc)")
-        self.device = device = cfg.device
+        self.device = cfg.device
         self.threads = cfg.cpu_threads
-        self.map_src = wp.array(np.ascontiguousarray(map_src_canvas, dtype=np.float32), dtype=wp.vec2, device=device)
-        self.map_tgt = wp.array(np.ascontiguousarray(map_tgt_canvas, dtype=np.float32), dtype=wp.vec2, device=device)
-        self.alpha = wp.array(np.ascontiguousarray(alpha_canvas, dtype=np.float32), dtype=float, device=device)
+        self.map_src = self.map_tgt = self.alpha = None
         self._buffers: dict[tuple, _Buffers] = {}
+        self.set_maps(map_src_canvas, map_tgt_canvas, alpha_canvas)
 
     @property
     def planned_shapes(self) -> tuple[tuple[tuple, tuple], ...]:
@@ -76,13 +75,26 @@ class Compositor:
 
     def set_maps(self, map_src_canvas: np.ndarray | None = None, map_tgt_canvas: np.ndarray | None = None,
                  alpha_canvas: np.ndarray | None = None) -> None:
-        """Upload new maps (same shapes) in place; the plans are rebuilt on the next ``apply``."""
-        for array, values in ((self.map_src, map_src_canvas), (self.map_tgt, map_tgt_canvas),
-                              (self.alpha, alpha_canvas)):
-            if values is not None:
-                array.assign(np.ascontiguousarray(values, dtype=np.float32))
+        """Take new maps (same shapes); the plans are rebuilt on the next ``apply``.
+
+        On the CPU the maps are used where they are, not copied (a canvas map is 8 bytes a pixel): do
+        not change them afterwards, hand over new arrays instead, as the video path does. On CUDA
+        they are uploaded into the arrays allocated the first time.
+        """
+        if map_src_canvas is not None:
+            self.map_src = self._take(self.map_src, map_src_canvas, wp.vec2)
+        if map_tgt_canvas is not None:
+            self.map_tgt = self._take(self.map_tgt, map_tgt_canvas, wp.vec2)
+        if alpha_canvas is not None:
+            self.alpha = self._take(self.alpha, alpha_canvas, float)
         for buf in self._buffers.values():
             buf.plan_ready = False
+
+    def _take(self, current: wp.array | None, values: np.ndarray, dtype) -> wp.array:
+        if current is None or self.device == "cpu":
+            return runtime.readonly_array(values, dtype, self.device)
+        current.assign(np.ascontiguousarray(values, dtype=np.float32))
+        return current
 
     def _buffers_for(self, shape_src: tuple, shape_tgt: tuple) -> _Buffers:
         key = (shape_src, shape_tgt)

@@ -40,12 +40,15 @@ MAY_BE_ZERO = frozenset({
     "unstable_min_points", "unstable_min_det", "unstable_max_disp_px", "w_cond", "w_det", "tau_det", "w_delta",
     "sigma_l_nodes", "ramp_min_px", "ramp_diag_ratio", "gamma_min", "sigma_g_px", "zone_jump_px", "zone_lambda",
     "flat_min_std", "brightness_max_diff", "seam_smooth_sigma_px", "seam_fade_px", "video_crf",
-    "video_min_inlier_ratio", "video_max_median_change_px", "video_blend_frames", "cpu_threads",
+    "video_min_inlier_ratio", "video_max_median_change_px", "video_blend_frames", "cpu_threads", "alpha_margin_px",
+    "video_blank_max_std", "sync_min_confidence", "sync_audio_min_rms", "sync_audio_min_peak", "sync_audio_exclusion_s",
+    "sync_motion_min_spread", "sync_motion_min_peak",
 })
-# ... and those named here have an upper bound too (probabilities, ratios, x264's quality scale).
+# ... and those named here have an upper bound too (probabilities, ratios, correlations, x264's quality scale).
 AT_MOST = {
     "xfeat_detection_threshold": 1.0, "min_cossim": 1.0, "sift_ratio": 1.0, "ransac_confidence": 1.0,
-    "gamma_min": 1.0, "video_min_inlier_ratio": 1.0, "video_crf": 51,
+    "gamma_min": 1.0, "video_min_inlier_ratio": 1.0, "video_crf": 51, "sync_min_overlap": 1.0,
+    "sync_min_confidence": 1.0, "sync_audio_min_peak": 1.0, "sync_motion_min_peak": 1.0,
 }
 KIND_WORDS = {int: "a whole number", float: "a number", str: "text"}
 SECTION_MARK = "# ---"  # a comment line opening a group of fields in config.py

@@ -2,8 +2,8 @@
 
 A :class:`Job` names its inputs, outputs and the settings it changes; :func:`run_job` builds the
 :class:`Config` on the machine that runs it (where the Warp device is resolved, so a Ray task on a GPU
-node gets CUDA), checks every output path before any work, stitches, writes the outputs and returns
-the report (``docs/report.md``).
+node gets CUDA), plans every output (``sena_warp.outputs``: checked before any input is read, written
+together at the end), stitches and returns the report (``docs/report.md``).
 """
 
 from __future__ import annotations
@@ -14,18 +14,16 @@ from pathlib import Path
 
 from sena_warp.kernels.runtime import resolve_config
 
-from .config import Config
+from .config import OFFSET_AUTO, Config
 from .config_file import check_config
-from .errors import OutputError
-from .progress import stage
+from .imageio import IMAGE_SUFFIXES
+from .outputs import OutputPlan
+from .progress import LOGGER, stage
 
 KINDS = ("image", "video")
 PAIR_STEMS = {"image": ("a", "b"), "video": ("left", "right")}  # file stems of a pair folder
-INPUT_SUFFIXES = {
-    "image": (".jpg", ".jpeg", ".png", ".tif", ".tiff", ".bmp", ".webp"),
-    "video": (".mp4", ".mov", ".mkv", ".m4v", ".avi", ".webm", ".ts"),
-}
-OUTPUT_SUFFIXES = {"image": (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".webp"), "video": (".mp4", ".mov", ".mkv")}
+INPUT_SUFFIXES = {"image": IMAGE_SUFFIXES, "video": (".mp4", ".mov", ".mkv", ".m4v", ".avi", ".webm", ".ts")}
+OUTPUT_SUFFIXES = {"image": IMAGE_SUFFIXES, "video": (".mp4", ".mov", ".mkv")}  # the first: a batch job's default
 
 
 @dataclass(frozen=True)
@@ -34,7 +32,10 @@ class Job:
 
     ``reference``: input kept unwarped ("a" / "b", "auto" = the right or bottom view); ``crop`` (images):
     keep the largest fully covered rectangle; ``offset_s`` (videos): seconds the right video started after
-    the left one; ``debug`` (images): folder for one picture per stage.
+    the left one, or "auto" to estimate them; ``strict`` (videos): damaged or truncated inputs fail the
+    job instead of a warning; ``debug`` (images): folder for one picture per stage; ``overwrite``: what
+    an existing output gets, one of ``outputs.OVERWRITE_MODES`` (the CLI's default refuses it, ``-y``
+    replaces it, ``-n`` skips the job).
     """
 
     kind: str
@@ -44,8 +45,10 @@ class Job:
     report: str | None = None
     reference: str = "auto"
     crop: bool = False
-    offset_s: float = 0.0
+    offset_s: float | str = 0.0
+    strict: bool = False
     debug: str | None = None
+    overwrite: str = "refuse"
 
 
 def job_config(settings: dict) -> Config:
@@ -73,63 +76,90 @@ def pair_inputs(folder: str | os.PathLike) -> tuple[str, tuple[Path, Path]] | No
     return None
 
 
-def check_output_suffix(path: str | os.PathLike, kind: str) -> None:
-    """OutputError unless ``path`` ends in a suffix a ``kind`` job can write."""
-    allowed = OUTPUT_SUFFIXES[kind]
-    if Path(path).suffix.lower() not in allowed:
-        raise OutputError(f"{path}: unsupported output type; use one of {', '.join(allowed)}")
+def checked(plan: OutputPlan) -> bool:
+    """Check ``plan`` (raises on a broken rule); False, after saying so on stdout, when -n found an
+    existing output (the command then does nothing)."""
+    existing = plan.check()
+    for path in existing:
+        print(f"{path}: exists, skipped (-n)")
+    return not existing
 
 
-def run_job(job: Job) -> dict:
-    """Stitch ``job`` and write its outputs; its report (also written to ``job.report`` when set)."""
+def output_plan(job: Job) -> OutputPlan:
+    """The plan of ``job``'s outputs: the stitch, its report and debug folder (not yet checked)."""
+    plan = OutputPlan(job.inputs, job.overwrite)
+    plan.add(job.output, "-o", suffixes=OUTPUT_SUFFIXES[job.kind])
+    if job.report:
+        plan.add(job.report, "--report")
+    if job.debug:
+        plan.add(job.debug, "--debug", folder=True)
+    return plan
+
+
+def run_job(job: Job) -> dict | None:
+    """Stitch ``job`` and write its outputs; its report (also written to ``job.report`` when set), or
+    None when ``job.overwrite`` is "skip" and an output exists (nothing done)."""
     cfg = job_config(job.settings)
     return _image(job, cfg) if job.kind == "image" else _video(job, cfg)
 
 
-def _image(job: Job, cfg: Config) -> dict:
+def _image(job: Job, cfg: Config) -> dict | None:
     from sena_warp.evaluation.figures import report_figures
 
     from .crop import crop_to_covered
     from .debug import dump_stages
-    from .imageio import check_output_folder, check_output_path, read_image, write_image
+    from .imageio import read_image_masked, write_image
     from .report import image_report, write_json
     from .stitch import stitch_images
 
-    check_output_suffix(job.output, "image")
-    for path in filter(None, (job.output, job.report)):
-        check_output_path(path, job.inputs)  # before the stitch: a bad path must not leave a panorama behind
-    if job.debug:
-        check_output_folder(job.debug)
+    plan = output_plan(job)
+    if not checked(plan):  # before the stitch: a bad --report must not cost a stitch or leave a panorama
+        return None
     stage("reading images")
-    img_a, img_b = (read_image(path) for path in job.inputs)
-    pano = stitch_images(img_a, img_b, cfg, reference=job.reference)
+    (img_a, transparent_a), (img_b, transparent_b) = (read_image_masked(path, cfg.max_input_megapixels)
+                                                      for path in job.inputs)
+    pano = stitch_images(img_a, img_b, cfg, reference=job.reference, transparent=(transparent_a, transparent_b))
     image, crop = crop_to_covered(pano.image) if job.crop else (pano.image, None)
-    stage("writing outputs")
-    write_image(job.output, image, inputs=job.inputs)
-    if job.debug:
-        dump_stages(job.debug, img_a, img_b, pano, cfg)
     # The front end measures the stitch for its report; the pipeline itself never imports the evaluation.
     report = image_report(pano, img_a, img_b, report_figures(img_a, img_b, pano, cfg), cfg, crop)
     report["output"] = {"path": str(job.output), "width": int(image.shape[1]), "height": int(image.shape[0])}
-    if job.report:
-        write_json(job.report, report)
+    stage("writing outputs")
+    with plan:  # every output or none
+        write_image(job.output, image, plan=plan)
+        if job.debug:
+            with plan.writing(job.debug) as folder:
+                dump_stages(folder, img_a, img_b, pano, cfg)
+        if job.report:
+            write_json(job.report, report, plan)
     return report
 
 
-def _video(job: Job, cfg: Config) -> dict:
+def _video(job: Job, cfg: Config) -> dict | None:
+    from dataclasses import replace
+
     from sena_warp.video.loop import VideoOptions
     from sena_warp.video.stitch import stitch_videos
+    from sena_warp.video.sync import estimate_offset
 
-    from .imageio import check_output_path
     from .report import write_json
 
-    check_output_suffix(job.output, "video")
-    for path in filter(None, (job.output, job.report)):
-        check_output_path(path, job.inputs)  # before decoding: a bad report path must not leave a video
-    report = stitch_videos(*job.inputs, job.output, cfg, VideoOptions.from_config(cfg, offset_s=job.offset_s),
-                           reference=job.reference)
-    if job.report:
-        write_json(job.report, report)
+    auto = job.offset_s == OFFSET_AUTO
+    # Every option is checked before any file is opened; with an automatic offset, 0 stands in until the estimate.
+    options = VideoOptions.from_config(cfg, offset_s=0.0 if auto else job.offset_s, strict=job.strict)
+    plan = output_plan(job)
+    if not checked(plan):  # before decoding: a bad --report must not cost a stitch or leave a video
+        return None
+    sync = estimate_offset(*job.inputs, cfg) if auto else None
+    if sync is not None:
+        # Said even with -q, as a fallback is: the user must be able to check the offset the stitch used.
+        LOGGER.warning(f"offset auto: {sync.summary()}", extra={"label": ""})
+        options = replace(options, offset_s=sync.offset_s)
+    with plan:  # every output or none
+        report = stitch_videos(*job.inputs, job.output, cfg, options, reference=job.reference, plan=plan)
+        report["sync"] = (sync.as_dict() if sync is not None
+                          else {"method": "manual", "offset_ms": options.offset_s * 1000})
+        if job.report:
+            write_json(job.report, report, plan)
     return report
 
 
@@ -144,8 +174,10 @@ def summary_line(kind: str, report: dict) -> str:
     out, st, timing = report["output"], report["stitch"], report["timing_s"]
     after_estimate_s = timing["total"] - timing["compositor_setup"]
     steady = f", {report['frames_out'] / after_estimate_s:.1f} fps after the first estimate" if after_estimate_s > 0 else ""
+    warnings = f", {len(report['warnings'])} warnings" if report["warnings"] else ""
     return (f"{out['width']}x{out['height']} px, {report['frames_out']} frames at {out['fps']:g} fps "
             f"({out['encoder']['codec']}), source={st['rig']['source']}, {st['first_estimate']['inliers']} inliers, "
             f"re-estimations {st['reestimations']['accepted']} accepted / {st['reestimations']['rejected']} rejected, "
             f"seam jitter {st['jitter']['seam_jitter_px_mean']} px, dropped {report['dropped']}, "
-            f"repeated {report['repeated']}, {report['output_fps']} fps overall{steady}")
+            f"repeated {report['repeated']}, damaged {sum(report['damaged'].values())}, "
+            f"{report['output_fps']} fps overall{steady}{warnings}")

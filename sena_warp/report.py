@@ -16,7 +16,7 @@ from . import __version__
 from .affine import similarity_deviation
 from .config import Config
 from .config_file import non_default
-from .imageio import atomic_output
+from .outputs import OutputPlan, atomic_output
 from .stitch import Panorama
 
 ROUND = 4
@@ -61,8 +61,9 @@ def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, metrics: 
     }
 
 
-def write_json(path: str | os.PathLike, data: dict) -> None:
-    with atomic_output(path) as tmp:
+def write_json(path: str | os.PathLike, data: dict, plan: OutputPlan | None = None) -> None:
+    """``data`` as indented JSON, atomically (with ``plan``: committed with its other outputs)."""
+    with atomic_output(path, plan=plan) as tmp:
         tmp.write_text(json.dumps(data, indent=2) + "\n")
 
 

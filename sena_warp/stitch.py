@@ -24,6 +24,7 @@ from .cells import grid_cells
 from .chain import keypoint_chain
 from .composite import Compositor
 from .config import Config
+from .errors import GeometryError, MatchError
 from .features import Matches, match_images
 from .ffd import ffd_field_canvas
 from .gate import gate_canvas, guard_field
@@ -154,17 +155,19 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, warp: Warp, cfg: Con
 
 
 def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
-                  matches: Matches | None = None) -> StitchMaps:
+                  matches: Matches | None = None,
+                  transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> StitchMaps:
     """All of SENA on one image pair: the maps that stitch it (and every later frame of the same rig).
 
     ``cfg.device`` must be resolved (``runtime.resolve_config``: the job calling this, an image or a
     video stitch, chooses the device once). ``matches`` of (img_a, img_b) found earlier (e.g. while
-    screening video frames) skip step 0.
+    screening video frames) skip step 0. ``transparent``: per image, (H, W) bool pixels that are not
+    content (no keypoints there) or None.
     """
     clock = StageClock()
     if matches is None:
         with clock("features"):
-            matches = match_images(img_a, img_b, cfg)
+            matches = match_images(img_a, img_b, cfg, transparent)
     rig = detect_rig(matches.pts_a, matches.pts_b, reference)
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
@@ -182,24 +185,63 @@ def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     )
 
 
-def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto") -> Panorama:
+def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
+                  transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> Panorama:
     """Stitch two BGR uint8 images; returns a BGRA panorama (alpha 0 where nothing was covered).
 
     The Warp device of ``cfg`` ("auto", "cpu" or "cuda") is resolved here, once for the whole stitch.
+    ``transparent``: per image, (H, W) bool pixels that are not content (an input's alpha 0) or None:
+    no keypoints there, and the canvas takes the other image there, or nothing (alpha 0).
     """
     cfg = runtime.resolve_config(cfg)
     clock = StageClock()
     with clock("load_kernels"):  # a first run's compile gets its own time, not a stage's
         runtime.prewarm(cfg.device)
     stage("estimating maps")
-    maps = estimate_maps(img_a, img_b, cfg, reference)
+    with naming_scale_ratio(img_a, img_b, cfg):
+        maps = estimate_maps(img_a, img_b, cfg, reference, transparent=transparent)
     clock.seconds.update(maps.seconds)
     img_src, img_tgt = maps.rig.pick(img_a, img_b)
+    transparent_src, transparent_tgt = maps.rig.pick(*transparent)
     stage("compositing")
     with clock("composite"):
-        compositor = Compositor(maps.map_src_input, maps.map_tgt_input, maps.alpha_input, cfg)
+        compositor = Compositor(without_transparent(maps.map_src_input, transparent_src),
+                                without_transparent(maps.map_tgt_input, transparent_tgt), maps.alpha_input, cfg)
         out, coverage = compositor.apply(img_src, img_tgt)
     return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
+
+
+@contextmanager
+def naming_scale_ratio(img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> Iterator[None]:
+    """Inside the block, a failed stitch of two images more than ``cfg.scale_hint_ratio`` apart in
+    size (square root of the area ratio) says so first: the likely cause, and what to do."""
+    (h_a, w_a), (h_b, w_b) = img_a.shape[:2], img_b.shape[:2]
+    ratio = float(np.sqrt(max(w_a * h_a, w_b * h_b) / min(w_a * h_a, w_b * h_b)))
+    try:
+        yield
+    except (MatchError, GeometryError) as exc:
+        if ratio <= cfg.scale_hint_ratio:
+            raise
+        raise type(exc)(f"the images differ {ratio:.1f}x in size (a {w_a}x{h_a} px, b {w_b}x{h_b} px), more than "
+                        f"features match across (about {cfg.scale_hint_ratio:g}x): resize the larger one to about "
+                        f"the other's size first ({exc})") from exc
+
+
+def without_transparent(map_input: np.ndarray, transparent: np.ndarray | None) -> np.ndarray:
+    """An input-frame (H, W, 2) float32 sampling map (``StitchMaps.map_*_input``) that samples nothing
+    (NaN) where it would touch a pixel of ``transparent`` ((h, w) bool over the image it samples; None:
+    the map as it is).
+
+    Any bilinear tap on a transparent pixel counts, so no fill colour bleeds into the edge; the
+    compositor then shows the other image there, or nothing.
+    """
+    if transparent is None:
+        return map_input
+    opaque = np.where(transparent, 0, 255).astype(np.uint8)
+    sampled = cv2.remap(opaque, map_input, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    out = map_input.copy()
+    out[sampled < 255] = np.nan
+    return out
 
 
 def _diagonal_px(img_src: np.ndarray, img_tgt: np.ndarray) -> float:

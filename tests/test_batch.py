@@ -113,10 +113,12 @@ def test_a_toml_list_gives_per_job_options_and_settings(bundled_dir, tmp_path, c
 
 def test_a_csv_list_reads_each_cell_as_its_column_takes_it(bundled_dir, tmp_path):
     jobs = tmp_path / "jobs.csv"
+    videos = f"{bundled_dir / 'video/office_cam1.mp4'},{bundled_dir / 'video/office_cam2.mp4'}"
     jobs.write_text("name,a,b,left,right,crop,grid_x,offset,reference\n"
                     f"one,{bundled_dir / PAIRS[0] / 'a.jpg'},{bundled_dir / PAIRS[0] / 'b.jpg'},,,yes,8,,b\n"
-                    f"two,,,{bundled_dir / 'video/office_cam1.mp4'},{bundled_dir / 'video/office_cam2.mp4'},,,0.5,\n")
-    one, two = read_jobs(jobs, tmp_path / "out", {"cpu_threads": 1})
+                    f"two,,,{videos},,,0.5,\nthree,,,{videos},,,auto,\n")
+    one, two, three = read_jobs(jobs, tmp_path / "out", {"cpu_threads": 1})
+    assert three.job.offset_s == "auto"
     assert (one.job.kind, one.job.crop, one.job.reference, one.job.settings) == ("image", True, "b",
                                                                                  {"cpu_threads": 1, "grid_x": 8})
     assert (two.job.kind, two.job.offset_s, two.job.output) == ("video", 0.5, str(tmp_path / "out" / "two.mp4"))
@@ -132,6 +134,7 @@ def test_a_csv_list_reads_each_cell_as_its_column_takes_it(bundled_dir, tmp_path
     ('[[job]]\nname="n"\na = "x.jpg"\nb = "y.jpg"\n[[job]]\nname="n"\na = "x.jpg"\nb = "z.jpg"\n',
      "two jobs have the name n"),
     ('[jobs]\n', "unknown setting 'jobs'; did you mean 'job'?"),
+    ('[[job]]\nleft = "x.mp4"\nright = "y.mp4"\noffset = "soon"\n', "offset = 'soon' is not a float or 'auto'"),
 ])
 def test_a_bad_job_list_is_refused_before_any_work(text, message, tmp_path):
     jobs = tmp_path / "jobs.toml"
@@ -161,3 +164,31 @@ def test_ray_tasks_give_the_local_run_s_results(jobs_dir, fast, tmp_path, capfd,
                {k: v for k, v in local.items() if k not in ("job", "output")}
         np.testing.assert_array_equal(cv2.imread(str(tmp_path / "ray" / f"{name}.png"), cv2.IMREAD_UNCHANGED),
                                       cv2.imread(str(tmp_path / "local" / f"{name}.png"), cv2.IMREAD_UNCHANGED))
+
+
+def test_a_video_job_can_estimate_its_offset_and_a_bad_output_type_fails_that_job_alone(bundled_dir, tmp_path,
+                                                                                        capfd, warp_device):
+    clips, pair = bundled_dir / "video", bundled_dir / PAIRS[0]
+    jobs = tmp_path / "jobs.toml"
+    # The bundled clips last 2 s: the default 3 s of shared signal would refuse any offset.
+    jobs.write_text(f'[[job]]\nname = "synced"\nleft = "{clips / "rooftop_left.mp4"}"\n'
+                    f'right = "{clips / "rooftop_right.mp4"}"\noffset = "auto"\nsync_min_overlap_s = 0.75\n'
+                    f'video_estimate_pairs = 1\nvideo_audio = "none"\n\n'
+                    f'[[job]]\nname = "gif"\na = "{pair / "a.jpg"}"\nb = "{pair / "b.jpg"}"\noutput = "p.gif"\n')
+    out = tmp_path / "out"
+    rc, _, err = batch([jobs, "--out", out, "-q"], capfd, warp_device)
+    assert rc == 7, err
+    synced = json.loads((out / REPORTS / "synced.json").read_text())
+    assert synced["job"]["status"] == "ok" and synced["sync"]["method"] == "audio"
+    assert -11 < synced["sync"]["offset_ms"] < -8  # the two phones' own offset, as test_video_sync measures it
+    assert synced["inputs"]["right"]["offset_s"] == pytest.approx(synced["sync"]["offset_ms"] / 1000, abs=1e-4)
+    gif = json.loads((out / REPORTS / "gif.json").read_text())["job"]
+    assert (gif["status"], gif["exit_code"]) == ("failed", InputError.exit_code)
+    assert "unsupported output type" in gif["error"] and not (out / "p.gif").exists()
+
+
+def test_the_max_megapixels_option_reaches_every_job(bundled_dir, tmp_path, capfd, warp_device):
+    out = tmp_path / "out"
+    rc, _, _ = batch([bundled_dir / PAIRS[0], "--out", out, "--max-megapixels", "0.01", "-q"], capfd, warp_device)
+    job = json.loads((out / REPORTS / f"{PAIRS[0]}.json").read_text())["job"]
+    assert rc == 7 and job["exit_code"] == InputError.exit_code and "--max-megapixels" in job["error"]

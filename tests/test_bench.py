@@ -7,6 +7,7 @@ path, and against the OpenCV reference the benchmark times it with, on the same 
 from __future__ import annotations
 
 import math
+import subprocess
 
 import numpy as np
 import pytest
@@ -130,6 +131,28 @@ def test_fixed_point_matches_float_kernel(scene, warp_device):  # noqa: F811
     assert np.abs(out.astype(int) - expected).max() <= 1
     # The target map is an integer shift, so where alpha is 0 the output is an exact copy of the target.
     assert (np.abs(out.astype(int) - expected) == 0).mean() > 0.9
+
+
+def test_bench_refuses_a_bad_size_before_making_its_work_folder(tmp_path, capfd):
+    from sena_warp.cli import main
+
+    capfd.readouterr()
+    assert main(["bench", "--sizes", "320x180", "17x9", "--work", str(tmp_path / "w")]) == 2
+    err = capfd.readouterr().err.splitlines()
+    assert err == ["sena-warp: error: size '17x9': width and height must be even and at least 16"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bench_keeps_the_stitch_child_s_exit_code_and_message(tmp_path, monkeypatch):
+    from sena_warp.evaluation import bench
+    from sena_warp.errors import MatchError
+
+    said = "sena-warp: error: only 3 of 40 matches agree on one affine model: check that the images overlap\n"
+    monkeypatch.setattr(bench.subprocess, "run", lambda *a, **k: subprocess.CompletedProcess(a, 3, "", said))
+    with pytest.raises(MatchError) as caught:
+        bench.stitch_in_child(tmp_path / "l.mp4", tmp_path / "r.mp4", tmp_path / "o.mp4", "cpu")
+    assert str(caught.value) == "stitching l.mp4: only 3 of 40 matches agree on one affine model: check that the " \
+                                "images overlap"
 
 
 def test_bench_without_the_shared_pair_is_one_line_error(tmp_path, capsys):

@@ -10,6 +10,7 @@ frames so the warp and the seam glide rather than jump. Jitter figures measure w
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ import numpy as np
 from ..composite import Compositor
 from ..config import CHOICES, Config
 from ..errors import InputError, StitchError
-from ..imageio import check_output_path
+from ..outputs import OutputPlan
 from ..report import run_info
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
@@ -189,21 +190,27 @@ class SenaFrameCompositor:
         }
 
 
+def check_rig_settings(cfg: Config) -> None:
+    """InputError for a rig mode or re-estimation period that cannot be used (before any work)."""
+    if cfg.video_rig not in RIGS:
+        raise InputError(f"rig {cfg.video_rig!r} unknown; use one of {', '.join(RIGS)}")
+    if not (0 < cfg.video_reestimate_s < math.inf):
+        raise InputError(f"re-estimation period {cfg.video_reestimate_s} s must be a positive number of seconds "
+                         f"(--reestimate)")
+
+
 def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike, cfg: Config,
-                  options: VideoOptions, reference: str = "auto") -> dict:
+                  options: VideoOptions, reference: str = "auto", plan: OutputPlan | None = None) -> dict:
     """Stitch two videos into ``output`` with SENA maps; return the run's report.
 
     ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
     ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
+    ``plan``: commit the video with that plan's other outputs (see ``sena_warp.outputs``).
     The report is :func:`loop.run_video`'s plus ``run`` (tool, device, settings) and ``stitch`` (see
     :meth:`SenaFrameCompositor.report`), its times in one ``timing_s`` block (``docs/report.md``).
     The Warp device of ``cfg`` is resolved here, once for the whole video.
     """
-    check_output_path(output, (left, right))  # before any decoding: an input, a folder, no writable folder
-    if cfg.video_rig not in RIGS:
-        raise InputError(f"rig {cfg.video_rig!r} unknown; use one of {', '.join(RIGS)}")
-    if cfg.video_reestimate_s <= 0:
-        raise InputError(f"re-estimation period {cfg.video_reestimate_s} s must be positive")
+    check_rig_settings(cfg)
     cfg = resolve_config(cfg)
     t0 = time.perf_counter()
     prewarm(cfg.device)  # before the run's clock: a first run's kernel compile is not frame time
@@ -214,7 +221,7 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
         built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference))
         return built[0]
 
-    report = run_video(left, right, output, factory, options)
+    report = run_video(left, right, output, factory, options, plan)
     stitch = built[0].report()
     report["timing_s"] = {"load_kernels": round(load_kernels_s, 4), **report["timing_s"], **stitch.pop("timing_s")}
     return {"run": run_info(cfg), **report, "stitch": stitch}
