@@ -23,10 +23,12 @@ import pkgutil
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
+import numpy as np
 import warp as wp
 
 from sena_warp.config import Config
 from sena_warp.errors import InputError
+from sena_warp.progress import stage
 
 # The init banner would go to stdout of every CLI run; Warp reads the level when it initialises
 # (``config.quiet`` is deprecated in favour of this in Warp 1.19).
@@ -55,6 +57,7 @@ _init_without_driver_noise()
 _pools: dict[int, ThreadPoolExecutor] = {}
 _pools_lock = threading.Lock()
 _loaded: set[tuple[str, str]] = set()
+_compiling_said = False
 
 
 def resolve_device(name: str) -> str:
@@ -95,8 +98,34 @@ def _ensure_loaded(kernel, device: str) -> None:
     """Load (compile if needed) the kernel's module once, before bands launch concurrently."""
     key = (kernel.module.name, device)
     if key not in _loaded:
+        if not _compiling_said and not _in_kernel_cache(kernel.module, device):
+            _say_compiling()
         wp.load_module(kernel.module, device=device)
         _loaded.add(key)
+
+
+def _in_kernel_cache(module, device: str) -> bool:
+    """Whether Warp's kernel cache holds a build of ``module`` for ``device``: its folder is named by the
+    hash of the variant that loads (CPU launches build block_dim 1, CUDA the module's block_dim)."""
+    block_dim = 1 if wp.get_device(device).is_cpu else module.options["block_dim"]
+    return os.path.isdir(os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(block_dim)))
+
+
+def _say_compiling() -> None:
+    """The one-time stage line of a first run, which spends seconds compiling (later runs load the cache)."""
+    global _compiling_said
+    _compiling_said = True
+    stage("compiling kernels (first run only)")
+
+
+def readonly_array(values, dtype, device: str) -> wp.array:
+    """A Warp array of the float32 numpy ``values`` for a kernel that only reads it.
+
+    On the CPU it shares the numpy memory (a canvas map is 8 bytes a pixel: no copy of it); on CUDA
+    it is a copy on the device. The caller must not change ``values`` while the array is in use.
+    """
+    values = np.ascontiguousarray(values, dtype=np.float32)
+    return wp.array(values, dtype=dtype, device=device, copy=device != "cpu")
 
 
 def row_bands(height: int, bands: int) -> list[tuple[int, int]]:

@@ -89,8 +89,8 @@ class Compositor:
             raise ValueError(f"the seam needs one position per line ({lines}), got {seam.positions.shape}")
         self.device, self.threads, self.layout = device, threads, seam
         self.lines = lines
-        self.map_src = wp.array(np.ascontiguousarray(map_src_canvas, np.float32), dtype=wp.vec2, device=device)
-        self.map_tgt = wp.array(np.ascontiguousarray(map_tgt_canvas, np.float32), dtype=wp.vec2, device=device)
+        self.map_src = self._take(None, map_src_canvas, wp.vec2)
+        self.map_tgt = self._take(None, map_tgt_canvas, wp.vec2)
         self.seam_static = wp.array(np.ascontiguousarray(seam.positions, np.float32), dtype=float, device=device)
         self.seam = wp.clone(self.seam_static)
         self._lf = {}
@@ -105,13 +105,24 @@ class Compositor:
         return tuple(self._buffers)
 
     def set_maps(self, map_src_canvas: np.ndarray, positions: np.ndarray) -> None:
-        """A new source map (same shape) and static seam; the plans are rebuilt on the next ``apply``."""
-        self.map_src.assign(np.ascontiguousarray(map_src_canvas, np.float32))
+        """A new source map (same shape) and static seam; the plans are rebuilt on the next ``apply``.
+
+        On the CPU the maps are used where they are, not copied (a canvas map is 8 bytes a pixel): do
+        not change them afterwards, hand over new arrays instead, as the video path does. On CUDA
+        they are uploaded into the arrays allocated the first time.
+        """
+        self.map_src = self._take(self.map_src, map_src_canvas, wp.vec2)
         self.layout = replace(self.layout, positions=np.asarray(positions, np.float32))
         self.seam_static.assign(self.layout.positions)
         self.seam.assign(self.layout.positions)
         for buf in self._buffers.values():
             buf.plan_ready = False
+
+    def _take(self, current: wp.array | None, values: np.ndarray, dtype) -> wp.array:
+        if current is None or self.device == "cpu":
+            return runtime.readonly_array(values, dtype, self.device)
+        current.assign(np.ascontiguousarray(values, dtype=np.float32))
+        return current
 
     def set_seam(self, positions: np.ndarray) -> None:
         """This frame's seam (L,) float32, kept within the band around the static seam."""

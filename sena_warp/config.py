@@ -14,6 +14,11 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Config:
+    # --- Inputs (no paper symbol) -------------------------------------------------------------
+    max_input_megapixels: float = 100.0  # refuse a larger input, from its header before decoding (memory; README)
+    alpha_margin_px: int = 8  # keypoints this close to a fully transparent pixel are dropped (no scene there)
+    scale_hint_ratio: float = 4.0  # inputs whose sizes differ more than this: a failed stitch names the ratio
+
     # --- Step 0: features -------------------------------------------------------------------
     features: str = "xfeat"  # detector: "xfeat" (ONNX backbone) or "sift"
     xfeat_max_side: int = 1024  # working resolution: long side in px (rounded down to /32)
@@ -74,7 +79,7 @@ class Config:
     # --- Step 5: seam guard (gate G) ----------------------------------------------------------
     gate_model: str = "none"  # "none": D as fitted (ours); "paper": G ramps D in from the source-only border
     ramp_min_px: float = 40.0  # b = max(ramp_min_px, ramp_diag_ratio * image diagonal)
-    ramp_diag_ratio: float = 0.10
+    ramp_diag_ratio: float = 0.10  # b as a fraction of the larger image diagonal
     sigma_d_ratio: float = 24.0 / 512.0  # sigma_d: density blur, as a fraction of the image's long side
     gamma_p: float = 1.2  # gamma_p: ramp steepness exponent
     gamma_min: float = 0.9  # gamma_min: gate floor where matches are sparse (SENA.md: 0.30; sweep)
@@ -162,11 +167,45 @@ class Config:
     video_gain_stride_px: int = 8  # exposure: the overlap sampled every this many canvas pixels
     video_gain_settle_s: float = 0.3  # exposure: time constant with which gains follow the measurement
     video_gain_step_grey: float = 0.5  # exposure: gains alone change the picture by at most this per frame
+    video_blank_max_std: float = 2.0  # luma standard deviation below which a frame is blank (e.g. a black start)
+
+    # --- Video sync, --offset auto (no paper symbol; video/sync.py) ---------------------------
+    sync_max_lag_s: float = 10.0  # largest offset searched, either sign (seconds)
+    sync_min_overlap_s: float = 3.0  # offsets where the signals share less than this (seconds) are not searched
+    sync_min_overlap: float = 0.5  # ... nor those where they share less than this x the shorter one
+    sync_min_confidence: float = 0.4  # refuse a peak going less of the way from its runner-up to a perfect match
+    sync_audio_rate_hz: int = 8000  # audio is resampled to mono at this rate before correlating
+    sync_audio_span_s: float = 30.0  # audio correlated: the first this many seconds of each input
+    sync_audio_min_rms: float = 1e-4  # quieter audio (full scale 1) is silence: refused
+    sync_audio_min_peak: float = 0.3  # refuse a lower waveform correlation: the microphones hear different sounds
+    sync_audio_exclusion_s: float = 0.05  # the runner-up is sought at least this far from the peak (past its ringing)
+    sync_motion_span_s: float = 30.0  # video correlated: the first this many seconds of each input
+    sync_motion_side_px: int = 128  # frames are area-downscaled to this long side before differencing
+    sync_motion_median_frames: int = 3  # median filter of the frame-difference energy: one-frame spikes are no motion
+    sync_motion_min_spread: float = 0.1  # robust std of that energy (grey levels) below this: a static scene, refused
+    sync_motion_min_peak: float = 0.8  # refuse a lower energy correlation: the two views do not see the same motion
 
     # --- Execution ----------------------------------------------------------------------------
     device: str = "auto"  # Warp device: "auto", "cpu" or "cuda"
-    cpu_threads: int = 0  # row-band launch threads on CPU; 0 = one per core
+    cpu_threads: int = 0  # threads of the Warp CPU row bands, onnxruntime and the video codecs; 0 = one per core
 
     def replace(self, **changes) -> "Config":
         """A copy with some fields changed (unknown names raise TypeError)."""
         return dataclasses.replace(self, **changes)
+
+
+# The values a text setting may take; the CLI's choices and the settings-file checks read them here.
+CHOICES: dict[str, tuple[str, ...]] = {
+    "features": ("xfeat", "sift"),
+    "video_codec": ("libx264", "h264_nvenc"),
+    "video_preset": ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower",
+                     "veryslow", "placebo"),
+    "video_audio": ("left", "right", "none"),
+    "video_rig": ("static", "moving"),
+    "ffd_model": ("fit", "blend"),
+    "gate_model": ("none", "paper"),
+    "seam_model": ("path", "paper"),
+    "gain_model": ("channels", "opencv", "none"),
+    "device": ("auto", "cpu", "cuda"),
+}
+OFFSET_AUTO = "auto"  # --offset, or a batch job's offset, that is estimated from the inputs (video/sync.py)

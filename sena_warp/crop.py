@@ -35,6 +35,13 @@ def largest_inner_rectangle(coverage: np.ndarray) -> tuple[int, int, int, int]:
     return (x0, y0, x1 - x0, y1 - y0)
 
 
+def crop_to_covered(image_bgra: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]]:
+    """A BGRA panorama (``Panorama.image``) cut to :func:`largest_inner_rectangle` of its alpha; and that
+    (x, y, w, h) in panorama pixels."""
+    x, y, w, h = largest_inner_rectangle(image_bgra[:, :, 3])
+    return image_bgra[y:y + h, x:x + w], (x, y, w, h)
+
+
 def _largest_in_histogram(heights: np.ndarray, row: int) -> tuple[int, int, int, int, int]:
     """Largest rectangle under a histogram whose bars end at ``row``: (area, x, y, w, h)."""
     best = (0, 0, 0, 0, 0)

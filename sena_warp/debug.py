@@ -5,12 +5,14 @@ Pictures are BGR uint8 ``(H, W, 3)`` images meant for people; nothing in the pip
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 
 from .config import Config
 from .features import Matches
-from .imageio import make_folder, write_image
+from .imageio import encode_image
 from .rig import image_to_working
 
 # Drawing style only (not pipeline tunables): line and marker sizes in output pixels.
@@ -126,13 +128,14 @@ def draw_seam(pano_working: np.ndarray, seam) -> np.ndarray:
 
 
 def dump_stages(folder, img_a: np.ndarray, img_b: np.ndarray, pano, cfg: Config) -> list:
-    """Write one picture per stage into ``folder`` (created); returns the paths written.
+    """Write one picture per stage into the existing ``folder``; returns the paths written.
 
-    Pictures after the features are in the working frame (source left; transposed for a vertical rig).
-    ``cfg``: the stitch's settings (the warped source is remapped on its device).
+    The folder is an output's temporary (``outputs.OutputPlan``), so the pictures are written into
+    it directly. Pictures after the features are in the working frame (source left; transposed for
+    a vertical rig). ``cfg``: the stitch's settings (the warped source is remapped on its device).
     """
     maps = pano.maps
-    folder = make_folder(folder)
+    folder = Path(folder)
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
     pano_working = image_to_working(pano.image, maps.rig)
     pictures = {
@@ -146,6 +149,6 @@ def dump_stages(folder, img_a: np.ndarray, img_b: np.ndarray, pano, cfg: Config)
     }
     paths = []
     for name, pic in pictures.items():
-        write_image(folder / name, pic)
+        (folder / name).write_bytes(memoryview(encode_image(folder / name, pic)))
         paths.append(folder / name)
     return paths

@@ -14,7 +14,8 @@ class StitchError(Exception):
 
 
 class InputError(StitchError):
-    """A missing, unreadable, corrupt or unsuitable input file, or a bad option value."""
+    """A missing, unreadable, corrupt, too large or unsuitable input file, or a bad option value
+    (out of range, unknown name, an unsupported output type)."""
 
     exit_code = 2
 
@@ -37,7 +38,18 @@ class VideoError(StitchError):
     exit_code = 5
 
 
+class SyncError(VideoError):
+    """``--offset auto`` found no clear time offset: a silent or static input, or an ambiguous peak."""
+
+
 class OutputError(StitchError):
-    """The output cannot be written (path equals an input, folder not writable)."""
+    """An output cannot be written where asked: it is an input or another output, exists (without -y),
+    its folder is missing or not writable, or the disk is full."""
 
     exit_code = 6
+
+
+def error_for_exit_code(code: int) -> type[StitchError]:
+    """The error class that exits with ``code`` (StitchError itself for an unknown one), so a child
+    process's failure can be raised again with its own code."""
+    return next((cls for cls in StitchError.__subclasses__() if cls.exit_code == code), StitchError)

@@ -12,11 +12,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .config import Config
+from .config import CHOICES, Config
 from .errors import InputError
 from .xfeat import detect_xfeat
 
-DETECTORS = ("xfeat", "sift")
+DETECTORS = CHOICES["features"]
 
 
 @dataclass(frozen=True)
@@ -113,13 +113,31 @@ def match_descriptors(desc_a: np.ndarray, desc_b: np.ndarray,
     return match_ratio(desc_a, desc_b, cfg.sift_ratio)
 
 
-def match_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> Matches:
+def drop_transparent(found: tuple[np.ndarray, np.ndarray, np.ndarray], transparent: np.ndarray | None,
+                     margin_px: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The keypoints of ``detect`` (pts, desc, scores) that lie at least ``margin_px`` from every pixel
+    of ``transparent`` ((H, W) bool, True = not content; None keeps them all)."""
+    if transparent is None:
+        return found
+    side = 2 * margin_px + 1
+    near = cv2.dilate(transparent.astype(np.uint8), np.ones((side, side), np.uint8)) > 0
+    pts = found[0]
+    cols = np.clip(np.round(pts[:, 0]).astype(np.int64), 0, near.shape[1] - 1)
+    rows = np.clip(np.round(pts[:, 1]).astype(np.int64), 0, near.shape[0] - 1)
+    keep = ~near[rows, cols]
+    return tuple(a[keep] for a in found)
+
+
+def match_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config,
+                 transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> Matches:
     """Detect keypoints in two BGR uint8 images and match them (SENA.md step 0).
 
-    The images may differ in size. An image without keypoints gives an empty ``Matches``.
+    The images may differ in size. ``transparent``: per image, (H, W) bool masks of pixels that are
+    not content (alpha 0) or None; no keypoint is kept there (see :func:`drop_transparent`). An
+    image without keypoints gives an empty ``Matches``.
     """
-    pts_a, desc_a, _ = detect(img_a, cfg)
-    pts_b, desc_b, _ = detect(img_b, cfg)
+    pts_a, desc_a, _ = drop_transparent(detect(img_a, cfg), transparent[0], cfg.alpha_margin_px)
+    pts_b, desc_b, _ = drop_transparent(detect(img_b, cfg), transparent[1], cfg.alpha_margin_px)
     idx_a, idx_b, scores = match_descriptors(desc_a, desc_b, cfg)
     return Matches(pts_a=pts_a[idx_a], pts_b=pts_b[idx_b], scores=scores,
                    n_keypoints_a=len(pts_a), n_keypoints_b=len(pts_b))

@@ -60,12 +60,13 @@ def inlier_density(shape: tuple[int, int], inliers_canvas: np.ndarray, sigma_px:
             weight = np.abs(1 - dx - frac[:, 0]) * np.abs(1 - dy - frac[:, 1])
             np.add.at(splat, (base[:, 1] + dy, base[:, 0] + dx), weight)
     coarse = cv2.GaussianBlur(splat, (0, 0), sigma_px / step, borderType=cv2.BORDER_CONSTANT)  # no points beyond
-    # Coarse cell k sits at pixel k * step: sample it at y / step, x / step.
-    grid_y = (np.arange(shape[0], dtype=np.float32) / step)[:, None].repeat(shape[1], axis=1)
-    grid_x = (np.arange(shape[1], dtype=np.float32) / step)[None, :].repeat(shape[0], axis=0)
-    density = cv2.remap(coarse, grid_x, grid_y, cv2.INTER_LINEAR)
+    # Coarse cell k sits at pixel k * step: sample it at (x / step, y / step), without canvas-sized maps.
+    to_coarse = np.array([[1.0 / step, 0.0, 0.0], [0.0, 1.0 / step, 0.0]])
+    density = cv2.warpAffine(coarse, to_coarse, (shape[1], shape[0]), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
     peak = float(density.max())
-    return density / peak if peak > 0 else density
+    if peak > 0:
+        density /= peak
+    return density
 
 
 def gate_canvas(

@@ -1,44 +1,43 @@
-"""Reading images into one canonical form and writing outputs atomically.
+"""Reading images into one canonical form and writing them atomically.
 
 Images inside the pipeline are ``uint8`` arrays of shape ``(H, W, 3)`` in OpenCV's BGR order,
-row-major (``img[y, x]``). Inputs are never modified; outputs are written to a temporary file in the
-destination folder and renamed over the final name only once complete.
+row-major (``img[y, x]``), upright (EXIF orientation applied); a separate mask says which pixels
+were fully transparent. Inputs are never modified; outputs go through ``sena_warp.outputs``.
 """
 
 from __future__ import annotations
 
-import contextlib
 import os
 import sys
 import tempfile
 from pathlib import Path
-from typing import Iterator
 
 import cv2
 import numpy as np
 
 from .errors import InputError, OutputError
+from .image_header import apply_orientation, read_header
+from .outputs import OutputPlan, atomic_output
+
 
 MIN_SIDE_PX = 16
-
-
-def _process_umask() -> int:
-    """The process's umask (read once at import, before any thread: os.umask can only swap it)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _process_umask()
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
+OPENCV_MAX_PIXELS = 1 << 30  # OpenCV's decoder refuses larger images (CV_IO_MAX_IMAGE_PIXELS)
+# Float images are scaled from the smallest of these ranges that holds their largest value (else
+# from that value): 0-1 is the float convention, but 0-255 and 0-65535 floats are common too.
+FLOAT_RANGES = (1.0, 255.0, 65535.0)
 
 
 def to_bgr8(img: np.ndarray, name: str = "image") -> np.ndarray:
-    """Convert grey, BGRA or 16-bit images to 8-bit BGR ``(H, W, 3)``."""
+    """Convert grey, BGRA, 16-bit or float images to 8-bit BGR ``(H, W, 3)``.
+
+    16-bit values are scaled by their type (65535 -> 255); float values by their range (see
+    ``FLOAT_RANGES``), NaN and negative values reading as 0.
+    """
     if img.dtype == np.uint16:
-        img = (img.astype(np.float32) / 257.0 + 0.5).astype(np.uint8)
+        img = cv2.convertScaleAbs(img, alpha=1 / 257)  # rounds; no float copy of a large image
     elif img.dtype in (np.float32, np.float64):
-        # NaN (e.g. no-data pixels of a float TIFF) would cast to an undefined byte with a warning: black.
-        img = np.clip(np.nan_to_num(img, nan=0.0) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+        img = _float_to_uint8(img)
     elif img.dtype != np.uint8:
         raise InputError(f"{name}: unsupported pixel type {img.dtype}; convert it to 8- or 16-bit PNG or JPEG")
     if img.ndim == 2:
@@ -52,6 +51,24 @@ def to_bgr8(img: np.ndarray, name: str = "image") -> np.ndarray:
     raise InputError(f"{name}: unsupported image shape {img.shape}")
 
 
+def _float_to_uint8(img: np.ndarray) -> np.ndarray:
+    colour = img[:, :, :3] if img.ndim == 3 and img.shape[2] == 4 else img  # alpha does not set the range
+    finite = colour[np.isfinite(colour)]
+    peak = float(finite.max()) if finite.size else 1.0
+    full = next((r for r in FLOAT_RANGES if peak <= r), peak)
+    # NaN (e.g. no-data pixels of a float TIFF) would cast to an undefined byte with a warning: black.
+    scaled = np.nan_to_num(img, nan=0.0, posinf=full, neginf=0.0) * np.float32(255.0 / full)
+    return np.clip(scaled + 0.5, 0, 255).astype(np.uint8)
+
+
+def transparent_mask(img: np.ndarray) -> np.ndarray | None:
+    """(H, W) bool True where a decoded image with alpha is fully transparent; None when no pixel is."""
+    if img.ndim != 3 or img.shape[2] != 4:
+        return None
+    transparent = img[:, :, 3] == 0
+    return transparent if transparent.any() else None
+
+
 def existing_file(path: str | os.PathLike) -> Path:
     """``path`` as a Path, or InputError when it is missing or not a regular file."""
     path = Path(path)
@@ -62,23 +79,56 @@ def existing_file(path: str | os.PathLike) -> Path:
     return path
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
-    """Read an image file as 8-bit BGR, or raise InputError saying what is wrong with it."""
+def check_size(name: str, width: int, height: int, max_megapixels: float | None, what: str = "image") -> None:
+    """InputError when a ``width`` x ``height`` input is above ``max_megapixels`` (None: no limit of
+    ours) or above what OpenCV decodes, before anything that size is allocated."""
+    megapixels = width * height / 1e6
+    if width * height > OPENCV_MAX_PIXELS:
+        raise InputError(f"{name}: {what} is {width}x{height} px ({megapixels:.0f} MP), above the "
+                         f"{OPENCV_MAX_PIXELS / 1e6:.0f} MP OpenCV decodes; downscale it first")
+    if max_megapixels is not None and megapixels > max_megapixels:
+        raise InputError(f"{name}: {what} is {width}x{height} px ({megapixels:.0f} MP), above the limit of "
+                         f"{max_megapixels:g} MP per input; downscale it first, or raise --max-megapixels if the "
+                         f"machine has the memory (see the README)")
+
+
+def read_image_masked(path: str | os.PathLike, max_megapixels: float | None = None
+                      ) -> tuple[np.ndarray, np.ndarray | None]:
+    """Read an image file upright as 8-bit BGR, with its fully transparent pixels; or raise
+    InputError saying what is wrong with it.
+
+    Returns (BGR uint8 (H, W, 3), (H, W) bool transparent mask or None when no pixel is). The size
+    is checked against ``max_megapixels`` from the header, before decoding; the EXIF orientation
+    is applied (see ``image_header``).
+    """
     path = existing_file(path)
     try:
         data = np.fromfile(str(path), dtype=np.uint8)
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror})") from exc
+    header = read_header(memoryview(data))
+    if header.pixels is not None:
+        check_size(str(path), header.width, header.height, max_megapixels)
     img, decoder_says = _decode_quietly(data) if data.size else (None, "")
     if img is None:
         reason = f"; the decoder says: {decoder_says}" if decoder_says else ""
         raise InputError(f"{path}: not a readable image (corrupt, truncated or unsupported format{reason})")
+    del data
+    if header.pixels is None:  # a format whose header we do not read: check what was decoded
+        check_size(str(path), img.shape[1], img.shape[0], max_megapixels)
+    img = apply_orientation(img, header.orientation)
+    transparent = transparent_mask(img)
     img = to_bgr8(img, str(path))
     if min(img.shape[:2]) < MIN_SIDE_PX:
         raise InputError(
             f"{path}: image is {img.shape[1]}x{img.shape[0]} px; at least {MIN_SIDE_PX} px per side is needed"
         )
-    return img
+    return img, transparent
+
+
+def read_image(path: str | os.PathLike, max_megapixels: float | None = None) -> np.ndarray:
+    """Read an image file upright as 8-bit BGR (H, W, 3) (see :func:`read_image_masked`)."""
+    return read_image_masked(path, max_megapixels)[0]
 
 
 def _decode_quietly(data: np.ndarray) -> tuple[np.ndarray | None, str]:
@@ -94,102 +144,45 @@ def _decode_quietly(data: np.ndarray) -> tuple[np.ndarray | None, str]:
         os.dup2(sink.fileno(), 2)
         try:
             img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        except cv2.error as exc:  # e.g. a size the decoder refuses to allocate
+            img, error = None, exc.err
+        else:
+            error = ""
         finally:
             os.dup2(saved_fd, 2)
             os.close(saved_fd)
         sink.seek(0)
-        decoder_says = " ".join(sink.read().decode(errors="replace").split())
+        decoder_says = " ".join(f"{sink.read().decode(errors='replace')} {error}".split())
     return img, decoder_says
 
 
-def check_output_path(path: str | os.PathLike, inputs: tuple[str | os.PathLike, ...] = ()) -> Path:
-    """``path`` as a Path, or OutputError when no file can be written there.
+def encode_image(path: str | os.PathLike, img: np.ndarray, params: tuple[int, ...] = ()) -> np.ndarray:
+    """``img`` (BGR or BGRA uint8) encoded as the extension of ``path`` says: the file's bytes (uint8).
 
-    Refused: one of the ``inputs`` (same file, also through links), an existing folder, a parent that
-    is missing, not a folder or not writable. Cheap, so callers can check before any work.
-    """
-    path = Path(path)
-    for src in inputs:
-        if Path(src).exists() and path.exists() and os.path.samefile(src, path):
-            raise OutputError(f"{path}: output would overwrite an input; choose another output name")
-    if path.is_dir():
-        raise OutputError(f"{path}: is a folder; give a file name")
-    folder = path.parent
-    if not folder.exists():
-        raise OutputError(f"{path}: folder {folder} does not exist")
-    if not folder.is_dir():
-        raise OutputError(f"{path}: {folder} is not a folder")
-    if not os.access(folder, os.W_OK):
-        raise OutputError(f"{path}: folder {folder} is not writable")
-    return path
-
-
-def check_output_folder(path: str | os.PathLike) -> Path:
-    """``path`` as a Path, or OutputError when it cannot be (or become) a writable folder.
-
-    Creates nothing: the nearest existing ancestor must be a writable folder, so a folder made later
-    (``--debug``) cannot fail after the real work is done.
-    """
-    path = Path(path)
-    existing = next(p for p in (path, *path.parents) if p.exists())
-    if not existing.is_dir():
-        raise OutputError(f"{path}: {existing} is not a folder; choose another folder")
-    if not os.access(existing, os.W_OK):
-        raise OutputError(f"{path}: folder {existing} is not writable")
-    return path
-
-
-@contextlib.contextmanager
-def atomic_output(path: str | os.PathLike, inputs: tuple[str | os.PathLike, ...] = ()) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it to ``path`` only if the block succeeds.
-
-    Refuses an output that is one of the ``inputs`` or sits in a folder that cannot be written.
-    On any exception (including KeyboardInterrupt) the temporary file is removed.
-    """
-    path = check_output_path(path, inputs)
-    folder = path.parent
-    try:
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}", dir=folder)
-    except OSError as exc:
-        raise OutputError(f"{path}: cannot create a file in {folder} ({exc.strerror}); choose another folder") from exc
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        yield tmp
-        try:
-            os.chmod(tmp, 0o666 & ~_UMASK)  # mkstemp makes 0600; the output gets a new file's usual mode
-            os.replace(tmp, path)
-        except OSError as exc:
-            raise OutputError(f"{path}: cannot write it ({exc.strerror}); choose another output name") from exc
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-
-
-def make_folder(path: str | os.PathLike) -> Path:
-    """Create folder ``path`` (and its parents) if needed; OutputError saying why when it cannot be."""
-    path = Path(path)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{path}: cannot create this folder ({exc.strerror or exc}); choose another folder") from exc
-    return path
-
-
-def write_image(path: str | os.PathLike, img: np.ndarray, inputs: tuple[str | os.PathLike, ...] = (),
-                params: tuple[int, ...] = ()) -> None:
-    """Encode ``img`` (BGR or BGRA uint8) by the file extension and write it atomically.
-
-    ``params``: OpenCV encoder flags and values, e.g. ``(cv2.IMWRITE_JPEG_QUALITY, 80)``.
+    ``params``: OpenCV encoder flags and values, e.g. ``(cv2.IMWRITE_JPEG_QUALITY, 80)``. Formats
+    without alpha get the colour channels only.
     """
     path = Path(path)
     ext = path.suffix.lower()
-    if ext not in (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp"):
-        raise OutputError(f"{path}: unknown image extension {ext!r}; use .png or .jpg")
+    if ext not in IMAGE_SUFFIXES:
+        raise InputError(f"{path}: unsupported output type; use one of {', '.join(IMAGE_SUFFIXES)}")
     if img.ndim == 3 and img.shape[2] == 4 and ext in (".jpg", ".jpeg", ".bmp"):
         img = img[:, :, :3]
-    ok, buf = cv2.imencode(ext, img, list(params))
+    try:
+        ok, buf = cv2.imencode(ext, img, list(params))
+    except cv2.error as exc:  # e.g. a JPEG side above 65535 px
+        ok, buf = False, exc.err
     if not ok:
-        raise OutputError(f"{path}: image encoding failed")
-    with atomic_output(path, inputs) as tmp:
-        buf.tofile(str(tmp))
+        raise OutputError(f"{path}: the {ext} encoder refuses this {img.shape[1]}x{img.shape[0]} px image; use .png")
+    return buf
+
+
+def write_image(path: str | os.PathLike, img: np.ndarray, inputs: tuple[str | os.PathLike, ...] = (),
+                params: tuple[int, ...] = (), plan: OutputPlan | None = None) -> None:
+    """Encode ``img`` by the file extension (see :func:`encode_image`) and write it atomically.
+
+    ``plan``: commit the file with that plan's other outputs (see ``outputs.atomic_output``).
+    """
+    buf = encode_image(path, img, params)
+    with atomic_output(path, inputs, plan) as tmp:
+        tmp.write_bytes(memoryview(buf))  # an OSError with its errno (EFBIG, ENOSPC), unlike ndarray.tofile

@@ -1,5 +1,6 @@
-"""What a stitch did, as a JSON-ready dict (``--report``): counts, models, zone, anchors, the
-figures of SENA.md "Measuring" and the time per stage.
+"""What a stitch did, as a JSON-ready dict (``--report``): the run (tool, device, settings), counts,
+models, zone, anchors, the figures of SENA.md "Measuring" and the time per stage. Every key is
+explained in ``docs/report.md``.
 
 The pipeline does not measure itself: the figures are computed by the caller (the CLI, with
 ``sena_warp.evaluation.figures.report_figures``) and only formatted here."""
@@ -11,20 +12,33 @@ import os
 
 import numpy as np
 
+from . import __version__
 from .affine import similarity_deviation
-from .imageio import atomic_output
+from .config import Config
+from .config_file import non_default
+from .outputs import OutputPlan, atomic_output
 from .stitch import Panorama
 
 ROUND = 4
 
 
-def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, metrics: dict[str, float],
+def run_info(cfg: Config) -> dict:
+    """Which tool ran, where, and with which settings: the report's ``run`` block (``cfg.device`` resolved)."""
+    settings = non_default(cfg)
+    settings.pop("device", None)  # reported on its own, resolved
+    return {"tool": "sena-warp", "version": __version__, "device": cfg.device, "detector": cfg.features,
+            "threads": cfg.cpu_threads, "settings": settings}
+
+
+def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, metrics: dict[str, float], cfg: Config,
                  crop_xywh: tuple[int, int, int, int] | None = None) -> dict:
-    """The ``--report`` of ``sena-warp image``; ``metrics``: name -> figure (NaN: not measurable)."""
+    """The ``--report`` of ``sena-warp image``; ``metrics``: name -> figure (NaN: not measurable);
+    ``cfg``: the stitch's, device resolved."""
     maps = pano.maps
     warp, seam = maps.warp, maps.seam
     zone = seam.zone
     return {
+        "run": run_info(cfg),
         "inputs": {"a": _size(img_a), "b": _size(img_b)},
         "rig": {"source": maps.rig.source, "target": maps.rig.target, "vertical": maps.rig.vertical,
                 "median_dx_px": _num(maps.rig.median_dx_px), "median_dy_px": _num(maps.rig.median_dy_px)},
@@ -43,7 +57,7 @@ def image_report(pano: Panorama, img_a: np.ndarray, img_b: np.ndarray, metrics: 
                     "src_canvas": _nums(seam.anchors_src_canvas), "tgt_canvas": _nums(seam.anchors_tgt_canvas),
                     "frame": "working (transposed for a vertical rig)"},
         "metrics": {name: _num(value) for name, value in metrics.items()},
-        "seconds": {k: _num(v) for k, v in pano.seconds.items()},
+        "timing_s": {**{k: _num(v) for k, v in pano.seconds.items()}, "total": _num(sum(pano.seconds.values()))},
     }
 
 
@@ -63,8 +77,9 @@ def warp_figures(warp) -> dict:
     return figures
 
 
-def write_json(path: str | os.PathLike, data: dict) -> None:
-    with atomic_output(path) as tmp:
+def write_json(path: str | os.PathLike, data: dict, plan: OutputPlan | None = None) -> None:
+    """``data`` as indented JSON, atomically (with ``plan``: committed with its other outputs)."""
+    with atomic_output(path, plan=plan) as tmp:
         tmp.write_text(json.dumps(data, indent=2) + "\n")
 
 

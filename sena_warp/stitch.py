@@ -22,12 +22,13 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from .cells import grid_cells
 from .composite import Compositor, SeamLayout
-from .config import Config
-from .errors import InputError
+from .config import CHOICES, Config
+from .errors import GeometryError, InputError, MatchError
 from .features import Matches, match_images, neighbour_supported
 from .ffd import LatticeFit, field_from_lattice, fitted_lattice, smoothed_blend_lattice
 from .gains import Gains, compensated_views, view_gains
@@ -36,27 +37,31 @@ from .global_affine import GlobalAffine, fit_global_affine, near_model
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
 from .partition import SeamMaps, SeamOffsets, seam_maps, seam_offsets
+from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .seam_path import SeamPath, seam_line
 from .warp_map import CanvasViews, canvas_views, forward_points, source_map_canvas
 from .zone import Zone, adequate_zone
 from sena_warp.kernels import runtime
 
-FFD_MODELS = ("fit", "blend")
-GATE_MODELS = ("none", "paper")
-
 
 class StageClock:
-    """Wall-clock seconds per stage, in the order the stages first ran: ``with clock("gate"): ...``."""
+    """Wall-clock seconds per stage, in the order the stages first ran: ``with clock("gate"): ...``.
+
+    Each stage is announced as a step (``progress.stage``) and its time logged at DEBUG (shown with -v).
+    """
 
     def __init__(self) -> None:
         self.seconds: dict[str, float] = {}
 
     @contextmanager
     def __call__(self, name: str) -> Iterator[None]:
+        stage(name, step=True)
         t0 = time.perf_counter()
         yield
-        self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+        elapsed = time.perf_counter() - t0
+        self.seconds[name] = self.seconds.get(name, 0.0) + elapsed
+        LOGGER.debug("%s: %.3f s", name, elapsed)
 
 
 @dataclass(frozen=True)
@@ -133,8 +138,8 @@ class Panorama:
 def estimate_warp(img_src: np.ndarray, img_tgt: np.ndarray, pts_src: np.ndarray, pts_tgt: np.ndarray,
                   cfg: Config, clock: StageClock) -> Warp:
     """SENA steps 1-6 ("Locally adaptive image warping") in the working frame; ``cfg.device`` resolved."""
-    if cfg.ffd_model not in FFD_MODELS or cfg.gate_model not in GATE_MODELS:
-        raise InputError(f"ffd_model must be one of {FFD_MODELS} and gate_model one of {GATE_MODELS}")
+    if cfg.ffd_model not in CHOICES["ffd_model"] or cfg.gate_model not in CHOICES["gate_model"]:
+        raise InputError(f"ffd_model must be one of {CHOICES['ffd_model']} and gate_model one of {CHOICES['gate_model']}")
     with clock("global_affine"):
         glob = fit_global_affine(pts_src, pts_tgt, cfg)
     affine = glob.affine_src_to_tgt
@@ -200,17 +205,19 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndar
 
 
 def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
-                  matches: Matches | None = None, prior_seam_tgt: np.ndarray | None = None) -> StitchMaps:
+                  matches: Matches | None = None, prior_seam_tgt: np.ndarray | None = None,
+                  transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> StitchMaps:
     """All of SENA on one image pair: the maps that stitch it (and every later frame of the same rig).
 
     ``cfg.device`` must be resolved (``runtime.resolve_config``: the job calling this, an image or a
     video stitch, chooses the device once). ``matches`` of (img_a, img_b) found earlier (e.g. while
     screening video frames) skip step 0; ``prior_seam_tgt`` as ``estimate_seam``'s (working frame).
+    ``transparent``: per image, (H, W) bool pixels that are not content (no keypoints there) or None.
     """
     clock = StageClock()
     if matches is None:
         with clock("features"):
-            matches = match_images(img_a, img_b, cfg)
+            matches = match_images(img_a, img_b, cfg, transparent)
     rig = detect_rig(matches.pts_a, matches.pts_b, reference)
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
@@ -238,27 +245,39 @@ def seam_layout(seam: Seam, rig: Rig, cfg: Config, band_px: float | None = None)
                       smooth_sigma_px=float(cfg.seam_smooth_sigma_px), lf_px=seam.offsets.fade_px)
 
 
-def panorama_compositor(maps: StitchMaps, cfg: Config) -> Compositor:
-    """A compositor for BGR images of the two inputs: the maps, the seam, both views' gains and offsets."""
-    compositor = Compositor(maps.map_src_input, maps.map_tgt_input, maps.seam_input, cfg)
+def panorama_compositor(maps: StitchMaps, cfg: Config,
+                        transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> Compositor:
+    """A compositor for BGR images of the two inputs: the maps, the seam, both views' gains and offsets.
+    ``transparent``: per input (a, b), (H, W) bool pixels it must not sample (``without_transparent``)."""
+    transparent_src, transparent_tgt = maps.rig.pick(*transparent)
+    compositor = Compositor(without_transparent(maps.map_src_input, transparent_src),
+                            without_transparent(maps.map_tgt_input, transparent_tgt), maps.seam_input, cfg)
     gains, offsets = maps.seam.gains, maps.seam.offsets
     compositor.set_gains(len(gains.gain_src), gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt)
     compositor.set_offsets(offsets.src, offsets.tgt)
     return compositor
 
 
-def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto") -> Panorama:
+def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
+                  transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> Panorama:
     """Stitch two BGR uint8 images; returns a BGRA panorama (alpha 0 where nothing was covered).
 
     The Warp device of ``cfg`` ("auto", "cpu" or "cuda") is resolved here, once for the whole stitch.
+    ``transparent``: per image, (H, W) bool pixels that are not content (an input's alpha 0) or None:
+    no keypoints there, and the canvas takes the other image there, or nothing (alpha 0).
     """
     cfg = runtime.resolve_config(cfg)
-    maps = estimate_maps(img_a, img_b, cfg, reference)
     clock = StageClock()
+    with clock("load_kernels"):  # a first run's compile gets its own time, not a stage's
+        runtime.prewarm(cfg.device)
+    stage("estimating maps")
+    with naming_scale_ratio(img_a, img_b, cfg):
+        maps = estimate_maps(img_a, img_b, cfg, reference, transparent=transparent)
     clock.seconds.update(maps.seconds)
     img_src, img_tgt = maps.rig.pick(img_a, img_b)
+    stage("compositing")
     with clock("composite"):
-        compositor = panorama_compositor(maps, cfg)
+        compositor = panorama_compositor(maps, cfg, transparent)
         out = compositor.apply(img_src, img_tgt)
         coverage = compositor.coverage(img_src.shape, img_tgt.shape)
     return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
@@ -274,6 +293,39 @@ def _prior_on_canvas(prior_seam_tgt: np.ndarray | None, canvas) -> np.ndarray | 
     inside = (rows >= 0) & (rows < canvas.height)
     prior[rows[inside]] = np.asarray(prior_seam_tgt, np.float64)[inside] + ox
     return prior
+
+
+@contextmanager
+def naming_scale_ratio(img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> Iterator[None]:
+    """Inside the block, a failed stitch of two images more than ``cfg.scale_hint_ratio`` apart in
+    size (square root of the area ratio) says so first: the likely cause, and what to do."""
+    (h_a, w_a), (h_b, w_b) = img_a.shape[:2], img_b.shape[:2]
+    ratio = float(np.sqrt(max(w_a * h_a, w_b * h_b) / min(w_a * h_a, w_b * h_b)))
+    try:
+        yield
+    except (MatchError, GeometryError) as exc:
+        if ratio <= cfg.scale_hint_ratio:
+            raise
+        raise type(exc)(f"the images differ {ratio:.1f}x in size (a {w_a}x{h_a} px, b {w_b}x{h_b} px), more than "
+                        f"features match across (about {cfg.scale_hint_ratio:g}x): resize the larger one to about "
+                        f"the other's size first ({exc})") from exc
+
+
+def without_transparent(map_input: np.ndarray, transparent: np.ndarray | None) -> np.ndarray:
+    """An input-frame (H, W, 2) float32 sampling map (``StitchMaps.map_*_input``) that samples nothing
+    (NaN) where it would touch a pixel of ``transparent`` ((h, w) bool over the image it samples; None:
+    the map as it is).
+
+    Any bilinear tap on a transparent pixel counts, so no fill colour bleeds into the edge; the
+    compositor then shows the other image there, or nothing.
+    """
+    if transparent is None:
+        return map_input
+    opaque = np.where(transparent, 0, 255).astype(np.uint8)
+    sampled = cv2.remap(opaque, map_input, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    out = map_input.copy()
+    out[sampled < 255] = np.nan
+    return out
 
 
 def _diagonal_px(img_src: np.ndarray, img_tgt: np.ndarray) -> float:

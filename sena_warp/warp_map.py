@@ -139,7 +139,7 @@ def remap_image(img: np.ndarray, map_canvas: np.ndarray, cfg: Config) -> tuple[n
     height, width = map_canvas.shape[:2]
     device = cfg.device
     img_wp = wp.array(img3, dtype=wp.uint8, device=device)
-    map_wp = wp.array(np.ascontiguousarray(map_canvas, dtype=np.float32), dtype=wp.vec2, device=device)
+    map_wp = runtime.readonly_array(map_canvas, wp.vec2, device)
     out = wp.zeros((height, width, img3.shape[2]), dtype=wp.uint8, device=device)
     valid = wp.zeros((height, width), dtype=wp.uint8, device=device)
     runtime.launch_rows(remap_kernel, height, width, [img_wp, map_wp, out, valid], device, cfg.cpu_threads)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import importlib.resources
+import os
 
 import cv2
 import numpy as np
@@ -34,9 +35,14 @@ NORM_EPS = 1e-12  # as torch.nn.functional.normalize
 CUBIC_A = -0.75
 
 
-@functools.lru_cache(maxsize=1)
-def xfeat_session() -> ort.InferenceSession:
-    """The ONNX backbone from the installed package, loaded once (CUDA provider when available)."""
+@functools.lru_cache(maxsize=2)
+def xfeat_session(threads: int) -> ort.InferenceSession:
+    """The ONNX backbone from the installed package, loaded once per thread count (CUDA provider when available).
+
+    ``threads``: onnxruntime's intra-op threads (``Config.cpu_threads``; 0 = one per physical core).
+    With fewer threads than cores the process shares the machine (batch workers, the video decoder
+    and encoder), so the pool does not spin while waiting for work: spinning would take cores from them.
+    """
     model = importlib.resources.files("sena_warp") / "models" / MODEL_FILE
     if not model.is_file():
         raise InputError(f"XFeat model {MODEL_FILE} is missing from the sena_warp package; reinstall it "
@@ -46,6 +52,9 @@ def xfeat_session() -> ort.InferenceSession:
         providers.insert(0, "CUDAExecutionProvider")
     options = ort.SessionOptions()
     options.log_severity_level = 3  # errors only: the CUDA provider's fallbacks are not news
+    options.intra_op_num_threads = threads
+    if 0 < threads < (os.cpu_count() or 1):
+        options.add_session_config_entry("session.intra_op.allow_spinning", "0")
     return ort.InferenceSession(model.read_bytes(), sess_options=options, providers=providers)
 
 
@@ -161,7 +170,7 @@ def detect_xfeat(img_bgr: np.ndarray, cfg: Config) -> tuple[np.ndarray, np.ndarr
     N <= cfg.xfeat_top_k (0 on an image without keypoints).
     """
     work_w, work_h = working_size(img_bgr.shape[:2], cfg.xfeat_max_side)
-    feats, logits, reliability = xfeat_session().run(list(OUTPUT_NAMES),
+    feats, logits, reliability = xfeat_session(cfg.cpu_threads).run(list(OUTPUT_NAMES),
                                                      {"image": prepare_input(img_bgr, (work_w, work_h))})
     heatmap = keypoint_heatmap(logits[0])
     pts_work = nms_peaks(heatmap, cfg.xfeat_nms_size, cfg.xfeat_detection_threshold).astype(np.float64)

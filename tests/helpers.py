@@ -1,7 +1,11 @@
-"""Helpers shared by several test modules (imported as ``helpers``: pytest puts tests/ on sys.path)."""
+"""Helpers shared by several test modules (imported as ``helpers``: pytest puts tests/ on sys.path) and
+by ``benchmarks/soak.py``: running the CLI, reading media back, making damaged, huge-claiming,
+rotated or black-starting inputs from the bundled data."""
 
 from __future__ import annotations
 
+import struct
+import zlib
 from fractions import Fraction
 from pathlib import Path
 
@@ -10,7 +14,10 @@ import numpy as np
 
 from sena_warp.cli import main
 from sena_warp.imageio import read_image
-from sena_warp.video.reader import FrameReader, YuvFrame
+from sena_warp.video.reader import FrameReader, YuvFrame, probe_video
+from sena_warp.video.writer import VideoWriter
+
+ERROR_PREFIX = "sena-warp: error: "
 
 
 def read_pair(folder: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -41,8 +48,94 @@ def stream_spans(path) -> dict:
 
 
 def run_cli(argv, capfd, warp_device):
-    """(exit code, stderr lines, stdout) of ``sena-warp argv`` on the session's Warp device."""
+    """(exit code, stderr lines, stdout) of ``sena-warp argv -q`` on the session's Warp device.
+
+    ``-q``: stderr holds the warnings and errors only, not the progress lines.
+    """
     capfd.readouterr()
-    rc = main([*map(str, argv), "--device", warp_device])
+    rc = main([*map(str, argv), "-q", "--device", warp_device])
     captured = capfd.readouterr()
     return rc, captured.err.splitlines(), captured.out
+
+
+def assert_one_line_error(err_lines, *words):
+    """``err_lines`` (stderr as lines) is exactly one error line, no traceback, holding every word."""
+    assert len(err_lines) == 1, err_lines
+    assert err_lines[0].startswith(ERROR_PREFIX) and "Traceback" not in err_lines[0], err_lines
+    for word in words:
+        assert word in err_lines[0], (word, err_lines[0])
+
+
+def index_first(src, dst):
+    """Remux ``src``'s video with the MP4 index (moov) before the data, as streaming files are."""
+    with av.open(str(src)) as cin, av.open(str(dst), "w", options={"movflags": "+faststart"}) as cout:
+        sin = cin.streams.video[0]
+        sout = cout.add_stream_from_template(sin)
+        for packet in cin.demux(sin):
+            if packet.dts is not None:
+                packet.stream = sout
+                cout.mux(packet)
+    return dst
+
+
+def top_level_box(data: bytes, name: bytes) -> tuple[int, int]:
+    """(start, size) of the first top-level MP4 box called ``name``."""
+    pos = 0
+    while pos + 8 <= len(data):
+        size = int.from_bytes(data[pos:pos + 4], "big")
+        if data[pos + 4:pos + 8] == name:
+            return pos, size
+        pos += size
+    raise AssertionError(f"no {name!r} box")
+
+
+def truncated(src, dst, fraction=0.6):
+    """The first ``fraction`` of file ``src`` as ``dst``: a copy cut short."""
+    data = src.read_bytes()
+    dst.write_bytes(data[: int(len(data) * fraction)])
+    return dst
+
+
+def damage_the_middle(src, dst, span=4000):
+    """``src`` with ``span`` random bytes in the middle of its media data."""
+    data = bytearray(src.read_bytes())
+    start, size = top_level_box(bytes(data), b"mdat")
+    middle = start + size // 2
+    data[middle:middle + span] = np.random.default_rng(1).integers(0, 256, span, dtype=np.uint8).tobytes()
+    dst.write_bytes(bytes(data))
+    return dst
+
+
+def png_claiming(width: int, height: int) -> bytes:
+    """A 16-bit grey PNG header claiming width x height, with a token of (zero) image data."""
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+    ihdr = struct.pack(">IIBBBBB", width, height, 16, 0, 0, 0, 0)
+    data = chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(bytes(1000))) + chunk(b"IEND", b"")
+    return b"\x89PNG\r\n\x1a\n" + data
+
+
+def tiff_orientation(value: int) -> bytes:
+    return b"II*\x00" + struct.pack("<IH", 8, 1) + struct.pack("<HHIHH", 274, 3, 1, value, 0) + struct.pack("<I", 0)
+
+
+def with_orientation(encoded: bytes, ext: str, value: int) -> bytes:
+    """``encoded`` (a .jpg or .png file) with an EXIF orientation: a hand-built APP1 segment or eXIf chunk."""
+    if ext == ".jpg":
+        body = b"Exif\x00\x00" + tiff_orientation(value)
+        return encoded[:2] + b"\xff\xe1" + struct.pack(">H", len(body) + 2) + body + encoded[2:]
+    body = tiff_orientation(value)
+    chunk = struct.pack(">I", len(body)) + b"eXIf" + body + struct.pack(">I", zlib.crc32(b"eXIf" + body) & 0xFFFFFFFF)
+    return encoded[:33] + chunk + encoded[33:]  # after IHDR
+
+
+def reencode_with_black_start(src, dst, black_frames: int) -> None:
+    """``src``'s video (no audio) with its first ``black_frames`` frames black, at its frame rate."""
+    frames = decoded_frames(src)
+    h, w = frames[0].y.shape
+    with VideoWriter(dst, w, h, probe_video(src).fps) as writer:
+        for i, f in enumerate(frames):
+            if i < black_frames:
+                writer.write(np.full_like(f.y, 16), np.full_like(f.u, 128), np.full_like(f.v, 128), pts=i)
+            else:
+                writer.write(f.y, f.u, f.v, pts=i)

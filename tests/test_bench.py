@@ -7,6 +7,7 @@ real images, maps, seam, gains and offsets.
 from __future__ import annotations
 
 import math
+import subprocess
 
 import numpy as np
 import pytest
@@ -106,6 +107,28 @@ def test_opencv_reference_agrees_with_warp_compositor(scene, channels, warp_devi
     assert (coverage == 0).any() and (coverage > 0).any()
     assert np.abs(out.astype(int) - expected).max() <= 1
     np.testing.assert_array_equal(out[coverage == 0], np.broadcast_to(fill, out[coverage == 0].shape))
+
+
+def test_bench_refuses_a_bad_size_before_making_its_work_folder(tmp_path, capfd):
+    from sena_warp.cli import main
+
+    capfd.readouterr()
+    assert main(["bench", "--sizes", "320x180", "17x9", "--work", str(tmp_path / "w")]) == 2
+    err = capfd.readouterr().err.splitlines()
+    assert err == ["sena-warp: error: size '17x9': width and height must be even and at least 16"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bench_keeps_the_stitch_child_s_exit_code_and_message(tmp_path, monkeypatch):
+    from sena_warp.evaluation import bench
+    from sena_warp.errors import MatchError
+
+    said = "sena-warp: error: only 3 of 40 matches agree on one affine model: check that the images overlap\n"
+    monkeypatch.setattr(bench.subprocess, "run", lambda *a, **k: subprocess.CompletedProcess(a, 3, "", said))
+    with pytest.raises(MatchError) as caught:
+        bench.stitch_in_child(tmp_path / "l.mp4", tmp_path / "r.mp4", tmp_path / "o.mp4", "cpu")
+    assert str(caught.value) == "stitching l.mp4: only 3 of 40 matches agree on one affine model: check that the " \
+                                "images overlap"
 
 
 def test_bench_without_the_shared_pair_is_one_line_error(tmp_path, capsys):

@@ -31,14 +31,16 @@ def evaluated(bundled_dir, tmp_path_factory):
     shutil.copy(bundled_dir / "udisd_test_000001" / "a.jpg", data / "featureless" / "a.jpg")
     cv2.imwrite(str(data / "featureless" / "b.png"), cv2.imread(str(data / "featureless" / "a.jpg")) * 0 + 128)
     (data / "not_a_pair").mkdir()
+    (data / "only_a").mkdir()  # its b.* was forgotten: a failed pair, not a silently missing one
+    shutil.copy(bundled_dir / "udisd_test_000001" / "a.jpg", data / "only_a" / "a.jpg")
     out = tmp_path_factory.mktemp("out") / "eval"
-    rows = run_eval(data, out, CFG, progress=False)
+    rows = run_eval(data, out, CFG)
     return data, out, {(r.pair, r.method): r for r in rows}
 
 
 def test_every_pair_and_method_has_a_row(evaluated):
     data, out, table = evaluated
-    pairs = ["broken", "featureless", "graf_gt", "udisd_test_000001"]  # not_a_pair has no a.* / b.*
+    pairs = ["broken", "featureless", "graf_gt", "only_a", "udisd_test_000001"]  # not_a_pair has no a.* / b.*
     assert sorted({pair for pair, _ in table}) == pairs
     assert all((pair, method) in table for pair in pairs for method in METHODS)
     with open(out / "results.csv", newline="") as handle:
@@ -66,6 +68,7 @@ def test_sena_is_measured_against_its_own_affine_on_real_pairs(evaluated):
 def test_failures_are_recorded_with_their_reason_and_the_run_goes_on(evaluated):
     _, _, table = evaluated
     assert all(not table["broken", m].ok and "b.jpg" in table["broken", m].error for m in METHODS)
+    assert all(not table["only_a", m].ok and "no b.* image" in table["only_a", m].error for m in METHODS)
     sena = table["featureless", "sena"]
     assert not sena.ok and "matches" in sena.error and not table["featureless", "affine"].ok
     assert not table["featureless", "opencv_scans"].ok and "ERR_NEED_MORE_IMGS" in table["featureless", "opencv_scans"].error
@@ -84,10 +87,10 @@ def test_sheets_overview_summary_and_csv_show_the_results(evaluated):
     failed = pictures(cv2.imread(str(out / "sheets" / "broken.png")))  # a failed pair still gets its sheet
     assert failed[0].mean() > 20 and all(picture.max() == 0 for picture in failed[1:])  # b unreadable, no panorama
     overview = cv2.imread(str(out / "overview.jpg"))
-    assert overview.shape == (4 * (OVERVIEW_THUMB_WH[1] + LABEL_H_PX), COLUMNS * OVERVIEW_THUMB_WH[0], 3)
+    assert overview.shape == (5 * (OVERVIEW_THUMB_WH[1] + LABEL_H_PX), COLUMNS * OVERVIEW_THUMB_WH[0], 3)
     summary = (out / "summary.md").read_text()
     sena = table["udisd_test_000001", "sena"]
-    assert "| sena | 2/4 |" in summary and "- broken, sena: " in summary
+    assert "| sena | 2/5 |" in summary and "- broken, sena: " in summary and "- only_a, sena: " in summary
     assert f"| udisd_test_000001 | {sena.psnr_db:.2f} / {sena.ssim:.3f} |" in summary
     assert (f"| udisd_test_000001 | {sena.anchors} | {sena.anchor_residual_px:.3f} | {sena.seam_mad:.2f} | "
             f"{sena.feather_mad:.2f} |") in summary

@@ -96,3 +96,17 @@ def test_transition_mad_counts_only_the_band():
     tgt[:, 0] = 100.0  # outside the band
     assert transition_mad(src, tgt, valid, np.full(4, 5.0), 2.0) == pytest.approx(6.0)
     assert np.isnan(transition_mad(src, tgt, np.zeros((4, 10), bool), np.full(4, 5.0), 2.0))
+
+
+def test_transition_mad_of_uint8_images_is_the_float64_figure():
+    # uint8 images are differenced in int16 (memory: the feather's band is the whole overlap); the
+    # figure must be the float64 one to the bit, over a narrow band and over the whole width.
+    rng = np.random.default_rng(7)
+    src, tgt = (rng.integers(0, 256, (120, 160, 3), dtype=np.uint8) for _ in range(2))
+    valid = rng.random((120, 160)) > 0.2
+    seam_x = rng.uniform(0, 160, 120)
+    for width in (24.0, 160.0):
+        cols = np.arange(160)[None, :]
+        band = valid & (np.abs(cols - seam_x[:, None]) <= width / 2)
+        expected = float(np.abs(src[band].astype(np.float64) - tgt[band].astype(np.float64)).mean())
+        assert transition_mad(src, tgt, valid, seam_x, width) == expected

@@ -8,8 +8,10 @@ Each CLI case runs ``sena_warp.cli.main`` in-process with ``capfd`` (file-descri
 anything FFmpeg prints counts too). Decisions taken here (see the README's exit codes):
 
 - inputs of different sizes are stitched (SENA estimates on the frame pair, sizes need not match);
-- an input cut short (mid-file damage, a truncated file whose index is at the front, a much shorter
-  clip) is stitched where both inputs have frames; what was lost is counted in the report;
+- damaged frames are replaced by the last good one (``reader.py``'s policy) and a truncated input
+  (index at the front) is stitched where both inputs have frames; either way ONE warning line on
+  stderr says what and when, and ``--strict`` makes it an error (exit 5, nothing written);
+- a much shorter clip is stitched where both inputs have frames, without a warning;
 - a truncated MP4 whose index (``moov``) was at the end cannot be opened at all: exit 2;
 - an image given as a video, like an audio-only file, is refused as having no video: exit 5.
 """
@@ -27,9 +29,8 @@ import pytest
 from sena_warp.errors import InputError, OutputError, VideoError
 from sena_warp.video import reader as video_reader
 from sena_warp.video.writer import VideoWriter
-from helpers import run_cli
+from helpers import assert_one_line_error, damage_the_middle, index_first, run_cli, top_level_box, truncated
 
-ERROR_PREFIX = "sena-warp: error: "
 CLIP_FRAMES = {"rooftop_left": 60, "rooftop_right": 63}  # 2.0 s and 2.1 s at 30 fps (see test_video_reader)
 FAST = ["--audio", "none", "--crf", "35"]  # the cases are about failures and counts, not quality
 
@@ -38,13 +39,6 @@ FAST = ["--audio", "none", "--crf", "35"]  # the cases are about failures and co
 def clips(bundled_dir):
     d = bundled_dir / "video"
     return d / "rooftop_left.mp4", d / "rooftop_right.mp4"
-
-
-def assert_one_line_error(err_lines, *words):
-    assert len(err_lines) == 1, err_lines
-    assert err_lines[0].startswith(ERROR_PREFIX)
-    for word in words:
-        assert word in err_lines[0], (word, err_lines[0])
 
 
 def no_decoder_threads() -> bool:
@@ -83,47 +77,26 @@ def audio_only(dst, seconds=0.5, rate=48000):
     return dst
 
 
-def index_first(src, dst):
-    """Remux ``src``'s video with the MP4 index (moov) before the data, as streaming files are."""
-    with av.open(str(src)) as cin, av.open(str(dst), "w", options={"movflags": "+faststart"}) as cout:
-        sin = cin.streams.video[0]
-        sout = cout.add_stream_from_template(sin)
-        for packet in cin.demux(sin):
-            if packet.dts is not None:
-                packet.stream = sout
-                cout.mux(packet)
-    return dst
-
-
-def top_level_box(data: bytes, name: bytes) -> tuple[int, int]:
-    """(start, size) of the first top-level MP4 box called ``name``."""
-    pos = 0
-    while pos + 8 <= len(data):
-        size = int.from_bytes(data[pos:pos + 4], "big")
-        if data[pos + 4:pos + 8] == name:
-            return pos, size
-        pos += size
-    raise AssertionError(f"no {name!r} box")
-
-
-def truncated(src, dst, fraction=0.6):
-    data = src.read_bytes()
-    dst.write_bytes(data[: int(len(data) * fraction)])
-    return dst
-
-
 def decoded_count(path) -> int:
     with av.open(str(path)) as c:
         return sum(1 for _ in c.decode(video=0))
 
 
-def stitch_ok(argv, folder_out, capfd, warp_device):
-    """Run a stitch that must succeed; return (report, output path)."""
+def stitch_ok(argv, folder_out, capfd, warp_device, *warning_words):
+    """Run a stitch that must succeed; return (report, output path). Each note and warning of the
+    report was also said on stderr, as one warning line, and nothing else was. With
+    ``warning_words``: exactly one warning, holding them all."""
     out, report_path = folder_out / "pano.mp4", folder_out / "report.json"
     rc, err, _ = run_cli(["video", *argv, "-o", out, "--report", report_path, *FAST], capfd, warp_device)
     assert rc == 0, err
-    assert err == []
-    return json.loads(report_path.read_text()), out
+    report = json.loads(report_path.read_text())
+    assert sorted(err) == sorted(f"sena-warp: warning: {text}" for text in report["notes"] + report["warnings"])
+    if warning_words:
+        assert len(report["warnings"]) == 1, report["warnings"]
+        assert all(word in report["warnings"][0] for word in warning_words), (warning_words, report["warnings"])
+    else:
+        assert report["warnings"] == []
+    return report, out
 
 
 # --- inputs that are not videos: exit 5, nothing written -------------------------------------------
@@ -160,22 +133,38 @@ def test_inputs_of_different_sizes_are_stitched(clips, dirs, capfd, warp_device)
 
 # --- inputs damaged or cut short: stitched where both have frames, losses counted ---------------
 
-def test_corruption_in_the_middle_is_skipped_counted_and_the_rest_stitched(clips, dirs, capfd, warp_device):
+def test_corruption_in_the_middle_is_replaced_counted_and_warned(clips, dirs, capfd, warp_device):
     folder_in, folder_out = dirs
-    data = bytearray(clips[1].read_bytes())
-    start, size = top_level_box(bytes(data), b"mdat")
-    middle, span = start + size // 2, 4000
-    data[middle:middle + span] = np.random.default_rng(1).integers(0, 256, span, dtype=np.uint8).tobytes()
-    bad = folder_in / "damaged.mp4"
-    bad.write_bytes(bytes(data))
-    report, out = stitch_ok([clips[0], bad], folder_out, capfd, warp_device)
+    bad = damage_the_middle(clips[1], folder_in / "damaged.mp4")
+    report, out = stitch_ok([clips[0], bad], folder_out, capfd, warp_device, "right input has", "damaged frames",
+                            "replaced by the last good frame", "--strict")
     damaged, decoded = report["damaged"]["right"], report["frames_in"]["right"]
     assert damaged > 0 and report["damaged"]["left"] == 0
     assert decoded + damaged == CLIP_FRAMES["rooftop_right"]
-    # Every left frame is output; a lost right frame is covered by repeating its neighbour.
+    first, last = report["inputs"]["right"]["damaged_span_s"]
+    assert report["warnings"] == [f"right input has {damaged} damaged frames between {first:.2f} s and {last:.2f} s: "
+                                  f"each replaced by the last good frame (--strict fails instead)"]
+    # Every left frame is output, each right one paired at its own time.
     assert report["frames_out"] == CLIP_FRAMES["rooftop_left"]
-    assert report["repeated"] == damaged
     assert decoded_count(out) == report["frames_out"]
+
+
+@pytest.mark.parametrize("case", ["damaged", "truncated"])
+def test_strict_turns_damage_and_truncation_into_exit_5_and_writes_nothing(case, clips, dirs, capfd, warp_device):
+    folder_in, folder_out = dirs
+    if case == "damaged":
+        bad = damage_the_middle(clips[1], folder_in / "damaged.mp4")
+        words = ("damaged frame at", "(--strict)")
+    else:
+        bad = truncated(index_first(clips[1], folder_in / "whole.mp4"), folder_in / "cut.mp4")
+        words = ("right input ended after", "truncated?", "(--strict)")
+    before = bad.read_bytes()
+    rc, err, _ = run_cli(["video", clips[0], bad, "-o", folder_out / "pano.mp4", "--report", folder_out / "r.json",
+                          "--strict", *FAST], capfd, warp_device)
+    assert rc == VideoError.exit_code
+    assert_one_line_error(err, *words)
+    assert list(folder_out.iterdir()) == []
+    assert bad.read_bytes() == before
 
 
 def test_truncated_file_with_index_at_the_end_cannot_be_opened(clips, dirs, capfd, warp_device):
@@ -191,12 +180,12 @@ def test_truncated_file_with_index_at_the_end_cannot_be_opened(clips, dirs, capf
 def test_truncated_file_with_index_first_stitches_what_is_there(clips, dirs, capfd, warp_device):
     folder_in, folder_out = dirs
     cut = truncated(index_first(clips[1], folder_in / "whole.mp4"), folder_in / "cut.mp4")
-    report, out = stitch_ok([clips[0], cut], folder_out, capfd, warp_device)
+    report, out = stitch_ok([clips[0], cut], folder_out, capfd, warp_device, "right input ended after", "truncated?")
     decoded = report["frames_in"]["right"]
     assert 0.4 * CLIP_FRAMES["rooftop_right"] < decoded < 0.7 * CLIP_FRAMES["rooftop_right"]
     assert report["frames_out"] == decoded
     assert report["pairing"]["leftover_ticks"] == CLIP_FRAMES["rooftop_left"] - decoded
-    assert any("right input ended after" in note and "truncated" in note for note in report["notes"])
+    assert any("right input ended after" in warning and "truncated" in warning for warning in report["warnings"])
     assert decoded_count(out) == report["frames_out"]
 
 
@@ -298,7 +287,6 @@ OUTPUT_CASES = {
     # name: (argv after the inputs given the output folder, words in the message)
     "missing_folder": (lambda out: ["-o", out / "nope" / "pano.mp4"], ("does not exist",)),
     "existing_folder": (lambda out: ["-o", (out / "pano.mp4").mkdir() or out / "pano.mp4"], ("is a folder",)),
-    "unknown_extension": (lambda out: ["-o", out / "pano.txt"], ("unsupported output type", ".mp4")),
     "report_in_missing_folder": (lambda out: ["-o", out / "pano.mp4", "--report", out / "nope" / "r.json"],
                                  ("r.json", "does not exist")),
     "report_is_a_folder": (lambda out: ["-o", out / "pano.mp4", "--report", (out / "r.json").mkdir() or out / "r.json"],

@@ -84,6 +84,6 @@ def test_threads_reach_every_launch_of_a_video_stitch(bundled_dir, tmp_path, mon
     cfg = Config(device="cpu", cpu_threads=THREADS, video_estimate_pairs=1)
     clips = bundled_dir / "video"
     stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "o.mp4", cfg,
-                  VideoOptions.from_config(cfg, audio="none", progress=False))
+                  VideoOptions.from_config(cfg, audio="none"))
     assert len(seen) > 60  # the estimate's launches and two per frame (Y, then U and V)
     assert {(device, threads) for _, device, threads in seen} == {("cpu", THREADS)}

@@ -7,6 +7,7 @@ long as the video, frames paired by time (also across frame rates), nothing left
 from __future__ import annotations
 
 import json
+import logging
 import threading
 import wave
 from fractions import Fraction
@@ -17,7 +18,8 @@ import numpy as np
 import pytest
 
 from sena_warp.errors import InputError, VideoError
-from sena_warp.video.loop import VideoOptions, run_video, write_report
+from sena_warp.report import write_json
+from sena_warp.video.loop import VideoOptions, run_video
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import YuvFrame, probe_video
 from sena_warp.video.writer import VideoWriter, choose_codec
@@ -62,7 +64,7 @@ class FailsAt(SideBySide):
         return super().composite_yuv(*planes)
 
 
-QUIET = VideoOptions(progress=False)
+QUIET = VideoOptions()
 
 
 @pytest.fixture(scope="module")
@@ -117,7 +119,7 @@ def test_office_yuv422_is_converted_and_missing_audio_is_noted(clips, tmp_path):
 def test_offset_shifts_the_second_input(clips, tmp_path):
     # Right camera "started" 0.25 s late = 6 frames at 24 fps: the first 6 left frames have no partner.
     report = run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "o.mp4", SideBySide,
-                       VideoOptions(progress=False, offset_s=0.25))
+                       VideoOptions(offset_s=0.25))
     assert report["frames_out"] == 42
     assert report["pairing"]["unpaired_ticks_start"] == 6 and report["pairing"]["leftover_other"] == 6
 
@@ -145,7 +147,7 @@ def test_30fps_against_24fps_copy_is_paired_by_time(clips, right_24fps, tmp_path
 
 def test_24fps_ticks_against_30fps_drop_frames_and_copy_the_right_audio(clips, right_24fps, tmp_path):
     out = tmp_path / "mix.mp4"
-    options = VideoOptions(progress=False, audio="right")
+    options = VideoOptions(audio="right")
     report = run_video(right_24fps, clips / "rooftop_left.mp4", out, SideBySide, options)
     # ticks j/24 pair up to the 30 fps clip's end (59/30 s + half a frame): j <= 47, then 2 left over.
     assert report["frames_out"] == 48 and report["pairing"]["leftover_ticks"] == 2
@@ -201,19 +203,20 @@ def test_odd_output_size_is_cropped_even_and_nvenc_falls_back_with_a_note(clips,
     assert codec == "libx264" and "no_such_encoder" in note
 
 
-def test_progress_line_only_when_asked(clips, tmp_path, capsys):
-    run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "a.mp4", SideBySide, QUIET)
-    assert capsys.readouterr().err == ""
-    run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "b.mp4", SideBySide,
-              VideoOptions(progress=True))
-    err = capsys.readouterr().err
-    assert "48/48 frames" in err and "fps" in err and err.endswith("\n")
+def test_library_is_silent_and_counts_frames_on_the_logger(clips, tmp_path, capsys, caplog):
+    with caplog.at_level(logging.INFO, logger="sena_warp"):
+        run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "a.mp4", SideBySide, QUIET)
+    assert capsys.readouterr().err == ""  # no handler configured: nothing on stderr
+    stages = [r.stage for r in caplog.records if hasattr(r, "stage")]
+    assert stages == ["opening videos", "estimating maps", "stitching frames"]
+    last = [r for r in caplog.records if hasattr(r, "count")][-1]
+    assert (last.done, last.count.total, last.final) == (48, 48, True)
 
 
 def test_report_json_round_trips(clips, tmp_path):
     report = run_video(clips / "office_cam1.mp4", clips / "office_cam2.mp4", tmp_path / "o.mp4", SideBySide,
-                       VideoOptions(progress=False, audio="none"))
-    write_report(report, tmp_path / "report.json")
+                       VideoOptions(audio="none"))
+    write_json(tmp_path / "report.json", report)
     assert json.loads((tmp_path / "report.json").read_text()) == report
     assert report["output_fps"] > 0 and report["notes"] == []
 
@@ -247,20 +250,71 @@ def test_audio_the_output_cannot_hold_is_reencoded_to_aac(clips, tmp_path):
     assert abs(float(end_audio - t_audio[0]) - float(spans["video"][2])) < 0.1
 
 
-def test_damaged_frames_are_skipped_counted_and_paired_around(clips, tmp_path):
+def test_damaged_frames_are_replaced_by_the_last_good_one_up_to_the_next_key_frame(clips, tmp_path):
+    """reader.py's policy: a lost packet taints every later frame up to a key frame (the clip has one,
+    at frame 0), and each damaged frame is shown as the last good one at its own time."""
     # Overwrite the payload of 3 video packets with noise (the 4-byte NAL length is kept).
     left = clips / "rooftop_left.mp4"
     data = bytearray(left.read_bytes())
     with av.open(str(left)) as c:
-        packets = [(p.pos, p.size) for p in c.demux(video=0) if p.pts is not None]
+        packets = [(p.pos, p.size, p.pts) for p in c.demux(video=0) if p.pts is not None]
     rng = np.random.default_rng(0)
-    for pos, size in (packets[10], packets[20], packets[30]):
+    for pos, size, _ in (packets[10], packets[20], packets[30]):
         data[pos + 4 : pos + size] = rng.integers(0, 256, size - 4, dtype=np.uint8).tobytes()
     damaged = tmp_path / "damaged.mp4"
     damaged.write_bytes(bytes(data))
+    first_lost = sorted(p[2] for p in packets).index(min(packets[10][2], packets[20][2], packets[30][2]))
     report = run_video(damaged, clips / "rooftop_right.mp4", tmp_path / "out.mp4", SideBySide, QUIET)
-    assert report["damaged"] == {"left": 3, "right": 0}
-    assert report["frames_in"]["left"] == 57 and report["frames_out"] == 57
-    # The right frames shown with the lost left frames are passed over: dropped, not misaligned.
-    assert report["dropped"] == 3 and report["repeated"] == 0
-    assert stream_spans(tmp_path / "out.mp4")["video"][0] == 57
+    assert report["damaged"] == {"left": 60 - first_lost, "right": 0}
+    assert report["frames_in"]["left"] == first_lost
+    # Every tick is kept (the timing holds) and paired as usual.
+    assert report["frames_out"] == 60 and report["dropped"] == report["repeated"] == 0
+    assert report["warnings"] == [f"left input has {60 - first_lost} damaged frames between "
+                                  f"{first_lost / 30:.2f} s and {59 / 30:.2f} s: each replaced by the last good "
+                                  f"frame (--strict fails instead)"]
+    out = decoded_frames(tmp_path / "out.mp4")
+    in_l = decoded_frames(left)
+    width = in_l[0].y.shape[1]
+    frozen = out[first_lost - 1].y[:, :width]
+    assert all(mean_abs_diff(f.y[:, :width], frozen) < 1.0 for f in out[first_lost:])
+    assert mean_abs_diff(in_l[-1].y, in_l[first_lost - 1].y) > 5.0  # the camera moved meanwhile
+
+
+def test_strict_stops_at_the_first_damaged_frame_and_leaves_nothing(clips, tmp_path):
+    left = clips / "rooftop_left.mp4"
+    data = bytearray(left.read_bytes())
+    with av.open(str(left)) as c:
+        pos, size = next((p.pos, p.size) for i, p in enumerate(c.demux(video=0)) if i == 20)
+    data[pos + 4 : pos + size] = np.random.default_rng(0).integers(0, 256, size - 4, dtype=np.uint8).tobytes()
+    damaged = tmp_path / "in" / "damaged.mp4"
+    damaged.parent.mkdir()
+    damaged.write_bytes(bytes(data))
+    out = tmp_path / "out"
+    out.mkdir()
+    with pytest.raises(VideoError, match=r"damaged frame at \d+\.\d\d s after \d+ good frames \(--strict\)"):
+        run_video(damaged, clips / "rooftop_right.mp4", out / "out.mp4", SideBySide,
+                  VideoOptions(strict=True))
+    assert list(out.iterdir()) == []
+
+
+def test_variable_frame_rate_keeps_the_input_frame_times(clips, tmp_path):
+    """Frames 20 ms and 50 ms apart in turn: the output's frames sit at the left input's times exactly."""
+    gaps_ms = [20, 50] * 15
+    times_ms = np.concatenate([[0], np.cumsum(gaps_ms)])
+    paths = []
+    for name in ("rooftop_left", "rooftop_right"):
+        frames = decoded_frames(clips / f"{name}.mp4")[: len(times_ms)]
+        path = tmp_path / f"{name}_vfr.mp4"
+        with VideoWriter(path, 270, 480, Fraction(30), time_base=Fraction(1, 1000)) as writer:
+            for t, f in zip(times_ms, frames):
+                writer.write(f.y, f.u, f.v, pts=int(t))
+        paths.append(path)
+    report = run_video(*paths, tmp_path / "out.mp4", SideBySide, VideoOptions(audio="none"))
+    with av.open(str(tmp_path / "out.mp4")) as c:
+        stream = c.streams.video[0]
+        out_ms = sorted(float(f.pts * stream.time_base) * 1000 for f in c.decode(stream))
+    in_ms = [float(f.time_s) * 1000 for f in decoded_frames(paths[0])]
+    assert len(out_ms) == len(in_ms) == len(times_ms)
+    assert np.abs(np.array(out_ms) - (np.array(in_ms) - in_ms[0])).max() < 0.5
+    assert report["dropped"] == report["repeated"] == 0
+    assert any("variable frame rate" in note and "20 to 50 ms" in note for note in report["notes"])

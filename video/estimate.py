@@ -46,8 +46,8 @@ def first_pairs(left: str | os.PathLike, right: str | os.PathLike, offset_s: flo
     """
     span = cfg.video_estimate_pairs * cfg.video_estimate_spacing
     right_period_s = 1 / probe_video(right).fps
-    with FrameReader(left, Fraction(0), cfg.video_queue_frames) as reader_l, \
-            FrameReader(right, Fraction(str(offset_s)), cfg.video_queue_frames) as reader_r:
+    with FrameReader(left, Fraction(0), cfg.video_queue_frames, cfg.cpu_threads) as reader_l, \
+            FrameReader(right, Fraction(str(offset_s)), cfg.video_queue_frames, cfg.cpu_threads) as reader_r:
         pairs = pair_by_time(reader_l, reader_r, right_period_s, attrgetter("time_s"))
         return [(i, fl, fr) for i, (fl, fr) in zip(range(span), pairs) if i % cfg.video_estimate_spacing == 0]
 
@@ -78,7 +78,8 @@ def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offse
     attempts: list[Attempt] = []
     screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches]] = []
     last_error: StitchError | None = None
-    for index, frame_l, frame_r in first_pairs(left, right, offset_s, cfg):
+    tried = first_pairs(left, right, offset_s, cfg)
+    for index, frame_l, frame_r in tried:
         try:
             matches, inliers = screen_pair(frame_l, frame_r, cfg, reference)
         except StitchError as exc:
@@ -94,7 +95,24 @@ def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offse
         except StitchError as exc:
             last_error = exc
             attempts = [Attempt(a.pair, a.time_s, a.inliers, str(exc)) if a.pair == index else a for a in attempts]
-    raise last_error or VideoError(f"{left} and {right}: no frame pair to estimate the stitch from")
+    if last_error is None:
+        raise VideoError(f"{left} and {right}: no frame pair to estimate the stitch from")
+    raise type(last_error)(no_estimate_message(tried, last_error, cfg)) from last_error
+
+
+def no_estimate_message(tried: list[tuple[int, YuvFrame, YuvFrame]], error: StitchError, cfg: Config) -> str:
+    """Why none of the ``tried`` (pair index, left, right) frame pairs gave a stitch, in one line: which
+    times were tried, inputs whose frames there are blank or whose resolutions differ, the last error."""
+    times = ", ".join(f"{float(fl.time_s):.2f}" for _, fl, _ in tried)
+    parts = [f"no stitch found on the first frame pairs (left frames at {times} s)"]
+    for side, frames in (("left", [fl for _, fl, _ in tried]), ("right", [fr for _, _, fr in tried])):
+        if all(float(f.y.std()) < cfg.video_blank_max_std for f in frames):
+            parts.append(f"the {side} frames there are blank (black or flat): trim the blank start of that video")
+    size_l, size_r = (f"{f.y.shape[1]}x{f.y.shape[0]}" for f in tried[0][1:])
+    if size_l != size_r:
+        parts.append(f"the inputs' resolutions differ (left {size_l}, right {size_r}): check that they are the "
+                     f"two views of one rig")
+    return "; ".join(parts) + f"; the last try said: {error}"
 
 
 def rejection_reason(candidate: PlaneMaps, current: PlaneMaps, first_inliers: int,

@@ -8,10 +8,9 @@ never go through RGB on the hot path.
 
 from __future__ import annotations
 
-import json
+import math
 import os
 import queue
-import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -23,14 +22,16 @@ from typing import Callable, Protocol
 import numpy as np
 
 from ..config import Config
+from ..config_file import check_value
 from ..errors import InputError, VideoError
-from ..imageio import atomic_output
-from ..progress import Progress
+from ..imageio import check_size
+from ..outputs import OutputPlan, staged
+from ..progress import LOGGER, Count, stage
 from .pairing import PairingStats, pair_by_time
 from .reader import FrameReader, VideoInfo, YuvFrame, probe_video
 from .writer import VideoWriter
 
-AUDIO_SOURCES = ("left", "right", "none")
+VFR_SPREAD = Fraction(3, 2)  # longest / shortest frame interval above this: a variable frame rate (noted)
 _POLL_S = 0.1  # how often a blocked producer re-checks that the encoder thread is still alive
 
 
@@ -63,7 +64,10 @@ class VideoOptions:
 
     ``offset_s`` shifts the right (second) input's clock: its frame at time t is paired as if it
     were at t + offset_s (+0.5: the right camera started 0.5 s after the left one). ``audio``: whose
-    audio to copy. ``progress``: None = a progress line only when stderr is a terminal.
+    audio to copy. ``threads``: decoder and encoder threads (0: FFmpeg chooses). ``strict``: a
+    damaged frame, a truncated input or audio left out fails the run (VideoError) instead of a
+    warning. ``max_megapixels``: larger frames are refused. Values are checked here (InputError),
+    before any file is opened.
     """
 
     offset_s: float = 0.0
@@ -72,22 +76,35 @@ class VideoOptions:
     crf: int = Config.video_crf
     preset: str = Config.video_preset
     queue_frames: int = Config.video_queue_frames
-    progress: bool | None = None
+    threads: int = Config.cpu_threads
+    strict: bool = False
+    max_megapixels: float = Config.max_input_megapixels
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.offset_s):
+            raise InputError(f"offset {self.offset_s} s is not a time; give a finite number of seconds (--offset)")
+        # The encoder settings take the values of their Config fields, checked by the same rule.
+        for name, value in (("video_audio", self.audio), ("video_crf", self.crf), ("video_preset", self.preset)):
+            check_value(name, value, "video options")
 
     @classmethod
     def from_config(cls, cfg: Config, **changes) -> "VideoOptions":
-        """Options taking their encoder and queue settings from ``cfg``."""
+        """Options taking their encoder, queue and thread settings from ``cfg``."""
         base = dict(audio=cfg.video_audio, codec=cfg.video_codec, crf=cfg.video_crf,
-                    preset=cfg.video_preset, queue_frames=cfg.video_queue_frames)
+                    preset=cfg.video_preset, queue_frames=cfg.video_queue_frames, threads=cfg.cpu_threads,
+                    max_megapixels=cfg.max_input_megapixels)
         return cls(**{**base, **changes})
 
 
 def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
+    span = reader.damaged_span_s
     return {
         "path": str(info.path), "width": info.width, "height": info.height, "fps": float(info.fps),
-        "pix_fmt": info.pix_fmt, "converted_from": reader.converted_from, "offset_s": float(reader.offset_s),
-        "frames_decoded": reader.decoded, "damaged": reader.damaged, "decode_wait_s": round(reader.wait_s, 4),
-        "decode_s": round(reader.decode_s, 4),
+        "rotation_deg": info.rotation_deg, "pix_fmt": info.pix_fmt, "converted_from": reader.converted_from,
+        "offset_s": float(reader.offset_s), "frames_decoded": reader.decoded, "damaged": reader.damaged,
+        "damaged_span_s": None if span is None else [round(float(t), 4) for t in span],
+        "decode_wait_s": round(reader.wait_s, 4), "decode_s": round(reader.decode_s, 4),
+        "decoder_threads": reader.decoder_threads,
     }
 
 
@@ -97,31 +114,42 @@ def run_video(
     output: str | os.PathLike,
     compositor_factory: CompositorFactory,
     options: VideoOptions,
+    plan: OutputPlan | None = None,
 ) -> dict:
     """Stitch two videos frame pair by frame pair into ``output``; return the run's report.
 
-    Output frames follow the left input's frames (its rate and times); each is paired with the
-    right frame nearest in time (see ``pairing.py``). The output appears under its name only once
-    complete. Report keys: ``frames_in``, ``frames_out``, ``dropped``, ``repeated``, ``damaged``
-    (per input), ``pairing`` (all counts), ``timing_s`` (decode_wait, compositor_setup, composite,
-    encode, total; maps_update when the compositor has ``update``), ``output_fps``, ``inputs``, ``output``, ``notes``.
+    Output frames follow the left input's frames (its times, exactly: also a variable frame rate);
+    each is paired with the right frame nearest in time (see ``pairing.py``). The output appears
+    under its name only once complete (with ``plan``: when the plan commits). Report keys:
+    ``frames_in``, ``frames_out``, ``dropped``, ``repeated``, ``damaged`` (per input), ``pairing``
+    (all counts), ``timing_s`` (decode_wait, compositor_setup, composite, encode, total; maps_update
+    when the compositor has ``update``), ``output_fps``, ``inputs``, ``output``, ``notes``, and
+    ``warnings``: what a user must hear about (damaged frames, a truncated input, audio left out),
+    one sentence each; with ``options.strict`` those raise VideoError instead.
     """
+    with staged(plan, output, (left, right)) as plan:  # the output is checked before any input is opened
+        return _run(left, right, output, compositor_factory, options, plan)
+
+
+def _run(left, right, output, compositor_factory: CompositorFactory, options: VideoOptions,
+         plan: OutputPlan) -> dict:
     t_run = time.perf_counter()
-    if options.audio not in AUDIO_SOURCES:
-        raise InputError(f"audio source {options.audio!r} unknown; use one of {', '.join(AUDIO_SOURCES)}")
+    stage("opening videos")
     infos = {"left": probe_video(left), "right": probe_video(right)}
+    for info in infos.values():
+        check_size(str(info.path), info.width, info.height, options.max_megapixels, "a frame")
     offsets = {"left": Fraction(0), "right": Fraction(str(options.offset_s))}
     notes: list[str] = []
     audio_side = None if options.audio == "none" else options.audio
     if audio_side is not None and not infos[audio_side].has_audio:
-        notes.append(f"{audio_side} input has no audio: output has none")
+        _note(notes, f"{audio_side} input has no audio: output has none")
         audio_side = None
     rate = infos["left"].fps
     stats = PairingStats()
     timing = {"compositor_setup": 0.0, "composite": 0.0, "encode": 0.0}
 
-    with FrameReader(left, offsets["left"], options.queue_frames) as reader_l, \
-            FrameReader(right, offsets["right"], options.queue_frames) as reader_r:
+    with FrameReader(left, offsets["left"], options.queue_frames, options.threads, options.strict) as reader_l, \
+            FrameReader(right, offsets["right"], options.queue_frames, options.threads, options.strict) as reader_r:
         pairs = pair_by_time(reader_l, reader_r, 1 / infos["right"].fps, attrgetter("time_s"), stats)
         first = next(pairs, None)
         if first is None:
@@ -129,40 +157,81 @@ def run_video(
                 f"{left} and {right}: no frames overlap in time with offset {options.offset_s} s; check --offset"
             )
         t0 = time.perf_counter()
+        stage("estimating maps")
         compositor = compositor_factory(*first)
         timing["compositor_setup"] = time.perf_counter() - t0
         width, height = compositor.output_size
-        with atomic_output(output, inputs=(left, right)) as tmp, \
-                VideoWriter(tmp, width, height, rate, options.codec, options.crf, options.preset) as writer:
-            if writer.note:
-                notes.append(writer.note)
+        # The output clock is the left input's own time base, so every frame keeps its input time.
+        with plan.writing(output) as tmp, VideoWriter(tmp, width, height, rate, options.codec, options.crf,
+                                                      options.preset, options.threads,
+                                                      infos["left"].time_base) as writer:
+            problems = []  # (what is the matter, what was done about it): warnings, or errors with --strict
             if audio_side is not None:
                 # Audio time in its file -> output clock: the same shift as that input's video frames.
                 side = infos[audio_side]
-                writer.add_audio(side.path, side.start_time_s - offsets[audio_side] + first[0].time_s)
-            show = sys.stderr.isatty() if options.progress is None else options.progress
+                if writer.add_audio(side.path, side.start_time_s - offsets[audio_side] + first[0].time_s) is None:
+                    audio_side = None
+                    problems.append((writer.audio_refusal, "the output has no audio"))
+            for note in writer.notes:
+                _note(notes, note)
+            stage("stitching frames")
             expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
-            progress = Progress(expected, show, sys.stderr, "sena-warp video", "frames", "fps")
-            _encode_pairs(chain([first], pairs), compositor, writer, progress, timing, options.queue_frames)
+            _encode_pairs(chain([first], pairs), compositor, writer, Count("frames", expected, "fps"), timing,
+                          options.queue_frames)
+            readers = {"left": reader_l, "right": reader_r}
+            problems += _input_problems(infos, readers)
+            if problems and options.strict:
+                raise VideoError("; ".join(what for what, _ in problems) + "; nothing written (--strict)")
+    warnings = [f"{what}: {done}" for what, done in problems]
+    for warning in warnings:
+        LOGGER.warning(warning)
     timing["total"] = time.perf_counter() - t_run
     timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
-    notes += _input_notes(infos, {"left": reader_l, "right": reader_r}, stats)
-    return _report(infos, (reader_l, reader_r), writer, stats, timing, notes, output, audio_side)
+    for note in _input_notes(infos, readers, stats):
+        _note(notes, note)
+    return _report(infos, (reader_l, reader_r), writer, stats, timing, notes, warnings, output, audio_side)
+
+
+def _note(notes: list[str], text: str) -> None:
+    """Keep ``text`` in the report's notes and say it now, as one warning line."""
+    notes.append(text)
+    LOGGER.warning(text)
 
 
 def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], stats: PairingStats) -> list[str]:
-    """What the report's reader should know about the inputs: rates that differ, an input that ended early."""
+    """What the report's reader should know about the inputs: rates that differ or vary, rotations."""
     notes = []
     rate_l, rate_r = infos["left"].fps, infos["right"].fps
     if rate_l != rate_r:
         notes.append(f"frame rates differ (left {float(rate_l):g} fps, right {float(rate_r):g} fps): frames paired "
                      f"by time at the left rate; {stats.dropped} right frames dropped, {stats.repeated} repeated")
     for side, reader in readers.items():
+        if reader.interval_range_s is not None and reader.interval_range_s[0] > 0:
+            low, high = reader.interval_range_s
+            if high > VFR_SPREAD * low:
+                kept = "the output keeps its frame times" if side == "left" else "paired to the left frames by time"
+                notes.append(f"{side} input has a variable frame rate (frames {1000 * float(low):.0f} to "
+                             f"{1000 * float(high):.0f} ms apart): {kept}")
+        if infos[side].rotation_deg:
+            notes.append(f"{side} input is displayed turned {infos[side].rotation_deg} degrees (display matrix): "
+                         f"stitched upright")
+    return notes
+
+
+def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]) -> list[tuple[str, str]]:
+    """Damaged frames and truncated inputs: (what is the matter, what was done), see ``reader.py``."""
+    problems = []
+    for side, reader in readers.items():
+        if reader.damaged:
+            span = reader.damaged_span_s
+            where = f" between {float(span[0]):.2f} s and {float(span[1]):.2f} s" if span is not None else ""
+            problems.append((f"{side} input has {reader.damaged} damaged frames{where}",
+                             "each replaced by the last good frame (--strict fails instead)"))
         declared = infos[side].frame_count
         if declared and reader.decoded + reader.damaged < declared:
-            notes.append(f"{side} input ended after {reader.decoded + reader.damaged} of the {declared} frames "
-                         f"its header declares: truncated? Stitched up to where it ends")
-    return notes
+            problems.append((f"{side} input ended after {reader.decoded + reader.damaged} of the {declared} frames "
+                             f"its header declares (truncated?)", "stitched up to where it ends"))
+    return problems
 
 
 class EncodeThread:
@@ -180,6 +249,10 @@ class EncodeThread:
         self._queue: queue.Queue = queue.Queue(maxsize=max(queue_frames, 1))
         self._error: BaseException | None = None
         self._stop = threading.Event()
+        # Set when the thread is done. Waited on instead of Thread.join: a signal that interrupts a
+        # join marks the thread stopped while it still runs (CPython 3.11), and the file would be
+        # closed under the encoder.
+        self._done = threading.Event()
         self._thread = threading.Thread(target=self._run, name="encode", daemon=True)
         self._thread.start()
 
@@ -195,9 +268,11 @@ class EncodeThread:
                 self.seconds += time.perf_counter() - t0
         except BaseException as exc:  # handed to the producer, which re-raises it
             self._error = exc
+        finally:
+            self._done.set()
 
     def _put(self, item) -> None:
-        while self._thread.is_alive():
+        while not self._done.is_set():
             try:
                 self._queue.put(item, timeout=_POLL_S)
                 return
@@ -217,7 +292,7 @@ class EncodeThread:
     def finish(self) -> None:
         """Wait until every queued frame is encoded, then flush the encoder."""
         self._put(None)
-        self._thread.join()
+        self._done.wait()
         self._raise_error()
         t0 = time.perf_counter()
         self.writer.finish()
@@ -226,15 +301,15 @@ class EncodeThread:
     def abandon(self) -> None:
         """Stop after the frame being encoded, dropping the queue (a failed or interrupted run)."""
         self._stop.set()
-        while self._thread.is_alive():
+        while not self._done.is_set():
             try:
                 self._queue.get_nowait()
             except queue.Empty:
                 self._queue.put(None)
-            self._thread.join(_POLL_S)
+            self._done.wait(_POLL_S)
 
 
-def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Progress, timing: dict,
+def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Count, timing: dict,
                   queue_frames: int) -> None:
     """Composite every ``(left, right)`` pair and encode it on :class:`EncodeThread`.
 
@@ -256,8 +331,8 @@ def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progr
             planes = compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
             timing["composite"] += time.perf_counter() - t0
             t_first = frame_l.time_s if t_first is None else t_first
-            # The left frame's own time on the 1/fps grid; forced to increase should rounding collide.
-            last_pts = max(last_pts + 1, round((frame_l.time_s - t_first) * writer.rate))
+            # The left frame's own time in the writer's time base; forced to increase should rounding collide.
+            last_pts = max(last_pts + 1, round((frame_l.time_s - t_first) / writer.time_base))
             encoder.write(planes, last_pts)
             progress.update(writer.frames)
         encoder.finish()
@@ -270,7 +345,7 @@ def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progr
 
 
 def _report(infos, readers, writer: VideoWriter, stats: PairingStats, timing: dict, notes: list[str],
-            output, audio_side: str | None) -> dict:
+            warnings: list[str], output, audio_side: str | None) -> dict:
     """The run's report as plain JSON-ready values (see :func:`run_video`)."""
     reader_l, reader_r = readers
     audio = writer.audio
@@ -286,15 +361,11 @@ def _report(infos, readers, writer: VideoWriter, stats: PairingStats, timing: di
         "inputs": {"left": _input_summary(infos["left"], reader_l), "right": _input_summary(infos["right"], reader_r)},
         "output": {
             "path": str(output), "width": writer.width, "height": writer.height, "fps": float(writer.rate),
-            "codec": writer.codec, "audio": audio_side or "none",
+            "encoder": writer.encoder_settings(), "audio": audio_side or "none",
             "audio_mode": None if audio is None else ("copy" if audio.remux else "aac"),
             "audio_span_s": None if audio is None else [audio.first_s, audio.end_s],
         },
         "notes": notes,
+        "warnings": warnings,
     }
 
-
-def write_report(report: dict, path: str | os.PathLike) -> None:
-    """Write a run's report as indented JSON (atomically, like every output)."""
-    with atomic_output(path) as tmp:
-        tmp.write_text(json.dumps(report, indent=2) + "\n")

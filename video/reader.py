@@ -7,10 +7,20 @@ shifted by a user offset, so two inputs share one clock. Times are exact ``Fract
 
 Decoding runs in a thread per input (PyAV releases the GIL inside FFmpeg) and hands frames over a
 bounded queue, which caps memory and lets decoding overlap compositing and encoding.
+
+Frames leave upright: a display matrix (the rotation phones record instead of turning the pixels)
+is applied to the planes. Damaged input, the policy: after a packet the decoder rejects or a frame
+it flags as corrupt, every frame up to the next key frame is *damaged* (predicted from the damage:
+macroblock garbage), and so is every frame the decoder lost meanwhile (the gap it leaves, on the
+nominal frame rate). Each damaged frame is replaced by the last good frame at the damaged frame's
+own time, so the timing holds; damage before the first good frame is dropped. The reader counts
+them and their time span; the loop turns that into a warning, or with ``strict`` the first one
+stops the run.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import queue
 import threading
@@ -46,6 +56,7 @@ class VideoInfo:
     start_time_s: Fraction  # the video stream's first presentation time
     duration_s: float  # of the video stream (container duration when the stream has none)
     frame_count: int  # as the container declares it (0 when unknown)
+    rotation_deg: int  # counter-clockwise turn the display matrix asks for (0, 90, 180, 270); width/height are after it
     pix_fmt: str
     codec: str
     has_audio: bool
@@ -111,20 +122,38 @@ def probe_video(path: str | os.PathLike) -> VideoInfo:
         else:
             duration_s = 0.0
         audio = container.streams.audio
+        turns = _quarter_turns(_first_frame_rotation(container))
+        width, height = (ctx.height, ctx.width) if turns % 2 else (ctx.width, ctx.height)
         return VideoInfo(
             path=path,
-            width=ctx.width,
-            height=ctx.height,
+            width=width,
+            height=height,
             fps=Fraction(rate),
             time_base=time_base,
             start_time_s=Fraction(stream.start_time or 0) * time_base,
             duration_s=duration_s,
             frame_count=stream.frames,
+            rotation_deg=90 * turns,
             pix_fmt=ctx.format.name if ctx.format is not None else "unknown",
             codec=ctx.name,
             has_audio=bool(audio),
             audio_codec=audio[0].codec_context.name if audio else None,
         )
+
+
+def _first_frame_rotation(container: av.container.InputContainer) -> float:
+    """The display rotation of the first frame that decodes (0 when none does); rewinds the container."""
+    try:
+        rotation = next((frame.rotation for frame in container.decode(video=0)), 0)
+    except av.error.FFmpegError:
+        rotation = 0
+    container.seek(0)
+    return rotation
+
+
+def _quarter_turns(rotation_deg: float) -> int:
+    """Counter-clockwise quarter turns (0-3) nearest to a display rotation in degrees."""
+    return round(rotation_deg / 90) % 4
 
 
 def plane_array(plane: av.video.plane.VideoPlane) -> np.ndarray:
@@ -137,17 +166,28 @@ class FrameReader:
     """Decode one input on a background thread; iterate to get :class:`YuvFrame` in time order.
 
     Use as a context manager (``with FrameReader(...) as reader: for frame in reader: ...``);
-    leaving the block stops and joins the thread even mid-file. Decode errors of single packets
-    are skipped and counted in ``damaged``; any other failure is re-raised in the iterating thread.
+    leaving the block stops and joins the thread even mid-file. Damaged frames are replaced as the
+    module says and counted in ``damaged`` (``damaged_span_s``: the first and last damaged time on
+    the shared clock); with ``strict`` the first one raises VideoError instead. Any other failure is
+    re-raised in the iterating thread. ``decoded`` counts the good frames; ``interval_range_s`` is
+    the (shortest, longest) time between two of them (a variable frame rate when they differ).
     ``wait_s`` accumulates the time the consumer spent blocked waiting for frames; ``decode_s`` the
     decoder thread's time decoding and copying planes out (not its waits on a full queue).
+    ``threads``: FFmpeg decoder threads (``Config.cpu_threads``; 0 lets FFmpeg choose); once decoding
+    has started, ``decoder_threads`` is the count the decoder was opened with.
     """
 
-    def __init__(self, path: str | os.PathLike, offset_s: Fraction = Fraction(0), queue_frames: int = 8):
+    def __init__(self, path: str | os.PathLike, offset_s: Fraction = Fraction(0), queue_frames: int = 8,
+                 threads: int = 0, strict: bool = False):
         self.path = Path(path)
         self.offset_s = Fraction(offset_s)
+        self.threads = threads
+        self.decoder_threads: int | None = None
+        self.strict = strict
         self.decoded = 0
         self.damaged = 0
+        self.damaged_span_s: tuple[Fraction, Fraction] | None = None
+        self.interval_range_s: tuple[Fraction, Fraction] | None = None
         self.converted_from: str | None = None  # source pixel format when it was not yuv420p
         self.wait_s = 0.0
         self.decode_s = 0.0
@@ -155,6 +195,8 @@ class FrameReader:
         self._queue: queue.Queue = queue.Queue(maxsize=queue_frames)
         self._stop = threading.Event()
         self._ended = False  # the end marker (or an error) was taken: iterating again yields nothing
+        self._last_good: YuvFrame | None = None  # the last frame queued, repeated in place of damaged ones
+        self._done = threading.Event()  # the decoder thread has finished
         self._thread = threading.Thread(target=self._run, name=f"decode:{self.path.name}", daemon=True)
 
     def __enter__(self) -> "FrameReader":
@@ -168,7 +210,7 @@ class FrameReader:
         """Stop the decoder thread and release the file (idempotent)."""
         self._stop.set()
         if self._thread.is_alive():
-            self._thread.join()
+            self._done.wait()  # not Thread.join: see loop.EncodeThread (a signal there would close under it)
         self._container.close()
 
     def __iter__(self) -> Iterator[YuvFrame]:
@@ -196,47 +238,105 @@ class FrameReader:
 
     def _run(self) -> None:
         try:
-            stream = self._container.streams.video[0]
-            # Let FFmpeg decode with frame and slice threads; set before the codec opens.
-            stream.thread_type = "AUTO"
-            time_base = Fraction(stream.time_base)
-            start_pts = stream.start_time or 0
-            period_pts = 1 / (Fraction(stream.average_rate or stream.guessed_rate) * time_base)
-            last_pts = None
-            for packet in self._container.demux(stream):
-                t0 = time.perf_counter()
-                try:
-                    frames = packet.decode()
-                except av.error.InvalidDataError:
-                    self.damaged += 1
-                    continue
-                finally:
-                    self.decode_s += time.perf_counter() - t0
-                for frame in frames:
-                    if frame.is_corrupt:  # FFmpeg concealed errors in it: skip rather than stitch garbage
-                        self.damaged += 1
-                        continue
-                    pts = frame.pts
-                    if pts is None:  # rare (broken muxing): place it one frame after the previous one
-                        pts = start_pts if last_pts is None else last_pts + period_pts
-                    last_pts = pts
-                    t0 = time.perf_counter()
-                    yuv = self._to_yuv(frame, (pts - start_pts) * time_base + self.offset_s)
-                    self.decode_s += time.perf_counter() - t0
-                    if not self._put(yuv):
-                        return
+            self._decode_all()
         except av.error.FFmpegError as exc:
             self._put(VideoError(f"{self.path}: decoding failed after {self.decoded} frames ({exc.strerror})"))
         except BaseException as exc:  # handed to the consumer, which re-raises it
             self._put(exc)
         finally:
             self._put(_END)
+            self._done.set()
+
+    def _decode_all(self) -> None:
+        stream = self._container.streams.video[0]
+        # Let FFmpeg decode with frame and slice threads; set before the codec opens.
+        stream.thread_type = "AUTO"
+        stream.thread_count = self.threads
+        time_base = Fraction(stream.time_base)
+        start_pts = stream.start_time or 0
+        rate = Fraction(stream.average_rate or stream.guessed_rate)
+        period_pts = 1 / (rate * time_base)
+        last_pts = None
+        # After damage, up to the next key frame: frames are predicted from it, and frames the decoder
+        # lost leave gaps in time. (With frame threads its error comes a few packets late: the packet
+        # that raises is not the damaged one, so the gaps, not the packets, say what is missing.)
+        tainted = False
+        for packet in self._container.demux(stream):
+            t0 = time.perf_counter()
+            try:
+                frames = packet.decode()
+            except av.error.InvalidDataError:
+                if self.strict:
+                    raise self._damage_error(self._last_good.time_s if self._last_good else Fraction(0))
+                tainted = True
+                continue
+            finally:
+                self.decode_s += time.perf_counter() - t0
+            for frame in frames:
+                self.decoder_threads = stream.codec_context.thread_count
+                was_tainted = tainted
+                tainted = (tainted and not frame.key_frame) or frame.is_corrupt
+                pts = frame.pts
+                if pts is None:  # rare (broken muxing): place it one frame after the previous one
+                    pts = start_pts if last_pts is None else last_pts + period_pts
+                last_pts = pts
+                time_s = (pts - start_pts) * time_base + self.offset_s
+                if (was_tainted or tainted) and not self._fill_gap(time_s, 1 / rate):
+                    return
+                if tainted:
+                    if not self._emit_damaged(time_s):
+                        return
+                    continue
+                t0 = time.perf_counter()
+                yuv = self._to_yuv(frame, time_s)
+                self.decode_s += time.perf_counter() - t0
+                if not self._put(yuv):
+                    return
+
+    def _damage_error(self, time_s: Fraction) -> VideoError:
+        return VideoError(f"{self.path}: damaged frame at {float(time_s):.2f} s after {self.decoded} good frames "
+                          f"(--strict)")
+
+    def _count_damage(self, time_s: Fraction) -> None:
+        if self.strict:
+            raise self._damage_error(time_s)
+        self.damaged += 1
+        first, _ = self.damaged_span_s or (time_s, time_s)
+        self.damaged_span_s = (first, time_s)
+
+    def _fill_gap(self, time_s: Fraction, period_s: Fraction) -> bool:
+        """Damaged frames for the frames lost before ``time_s`` (more than half a period missing
+        after the last one queued); False when asked to stop."""
+        if self._last_good is None:
+            return True
+        missing = self._last_good.time_s + period_s
+        while missing < time_s - period_s / 2:
+            if not self._emit_damaged(missing):
+                return False
+            missing += period_s
+        return True
+
+    def _emit_damaged(self, time_s: Fraction) -> bool:
+        """Count one damaged frame and queue the last good frame in its place (nothing before the first
+        good frame); False when asked to stop."""
+        self._count_damage(time_s)
+        if self._last_good is None:
+            return True
+        self._last_good = dataclasses.replace(self._last_good, time_s=time_s)
+        return self._put(self._last_good)
 
     def _to_yuv(self, frame: av.VideoFrame, time_s: Fraction) -> YuvFrame:
         if frame.format.name != PIX_FMT:
             # Only non-4:2:0 sources (e.g. yuv422p webcams) pay for a conversion.
             self.converted_from = frame.format.name
             frame = frame.reformat(format=PIX_FMT)
-        y, u, v = (plane_array(p) for p in frame.planes[:3])
+        turns = _quarter_turns(frame.rotation)
+        y, u, v = (np.ascontiguousarray(np.rot90(plane_array(p), turns)) if turns else plane_array(p)
+                   for p in frame.planes[:3])
+        if self._last_good is not None:
+            step = time_s - self._last_good.time_s
+            low, high = self.interval_range_s or (step, step)
+            self.interval_range_s = (min(low, step), max(high, step))
         self.decoded += 1
-        return YuvFrame(time_s=time_s, index=self.decoded - 1, y=y, u=u, v=v)
+        self._last_good = YuvFrame(time_s=time_s, index=self.decoded - 1, y=y, u=u, v=v)
+        return self._last_good

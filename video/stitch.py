@@ -10,6 +10,7 @@ frames so the warp and the seam glide rather than jump. Jitter figures measure w
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -18,12 +19,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..composite import Compositor
-from ..config import Config
+from ..config import CHOICES, Config
 from ..crop import largest_inner_rectangle
 from ..errors import InputError, StitchError, VideoError
-from ..imageio import check_output_path
+from ..outputs import OutputPlan
+from ..report import run_info
 from ..stitch import StitchMaps
-from sena_warp.kernels.runtime import resolve_config
+from sena_warp.kernels.runtime import prewarm, resolve_config
 from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, band_offsets
@@ -33,7 +35,7 @@ from .maps import (BLACK_UV, BLACK_Y, PlaneMaps, chroma_lines, lerp_maps, map_ch
 from .reader import YuvFrame, probe_video
 from .writer import even_size
 
-RIGS = ("static", "moving")
+RIGS = CHOICES["video_rig"]
 JITTER_PERCENTILE = 99.0  # "largest map change" = this percentile of |delta M_s| per frame (robust to edge pixels)
 LUMA_FILL = (BLACK_Y,)  # output Y where no input is sampled
 CHROMA_FILL = (BLACK_UV, BLACK_UV)  # output U, V likewise
@@ -323,21 +325,31 @@ def fixed_canvas(first: StitchMaps, shapes_src_tgt: tuple[tuple[int, int], tuple
     return x0, y0, width, height
 
 
+def check_rig_settings(cfg: Config) -> None:
+    """InputError for a rig mode or re-estimation period that cannot be used (before any work)."""
+    if cfg.video_rig not in RIGS:
+        raise InputError(f"rig {cfg.video_rig!r} unknown; use one of {', '.join(RIGS)}")
+    if not (0 < cfg.video_reestimate_s < math.inf):
+        raise InputError(f"re-estimation period {cfg.video_reestimate_s} s must be a positive number of seconds "
+                         f"(--reestimate)")
+
+
 def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike, cfg: Config,
-                  options: VideoOptions, reference: str = "auto") -> dict:
+                  options: VideoOptions, reference: str = "auto", plan: OutputPlan | None = None) -> dict:
     """Stitch two videos into ``output`` with SENA maps; return the run's report.
 
     ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
     ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
-    The report is :func:`loop.run_video`'s plus ``stitch`` (see :meth:`SenaFrameCompositor.report`).
+    ``plan``: commit the video with that plan's other outputs (see ``sena_warp.outputs``).
+    The report is :func:`loop.run_video`'s plus ``run`` (tool, device, settings) and ``stitch`` (see
+    :meth:`SenaFrameCompositor.report`), its times in one ``timing_s`` block (``docs/report.md``).
     The Warp device of ``cfg`` is resolved here, once for the whole video.
     """
-    check_output_path(output, (left, right))  # before any decoding: an input, a folder, no writable folder
-    if cfg.video_rig not in RIGS:
-        raise InputError(f"rig {cfg.video_rig!r} unknown; use one of {', '.join(RIGS)}")
-    if cfg.video_reestimate_s <= 0:
-        raise InputError(f"re-estimation period {cfg.video_reestimate_s} s must be positive")
+    check_rig_settings(cfg)
     cfg = resolve_config(cfg)
+    t0 = time.perf_counter()
+    prewarm(cfg.device)  # before the run's clock: a first run's kernel compile is not frame time
+    load_kernels_s = time.perf_counter() - t0
     built: list[SenaFrameCompositor] = []
 
     def factory(first_l: YuvFrame, first_r: YuvFrame) -> SenaFrameCompositor:
@@ -345,9 +357,10 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
         return built[0]
 
     try:
-        report = run_video(left, right, output, factory, options)
+        report = run_video(left, right, output, factory, options, plan)
     finally:
         for compositor in built:
             compositor.close()
-    report["stitch"] = built[0].report()
-    return report
+    stitch = built[0].report()
+    report["timing_s"] = {"load_kernels": round(load_kernels_s, 4), **report["timing_s"], **stitch.pop("timing_s")}
+    return {"run": run_info(cfg), **report, "stitch": stitch}

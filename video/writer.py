@@ -1,15 +1,16 @@
 """Encoding the stitched frames with PyAV, and copying one input's audio alongside.
 
-The caller writes into a temporary path (``sena_warp.imageio.atomic_output``) so a failed or
-interrupted run never leaves a partial file under the final name. Video is H.264 in yuv420p, at the
-input's frame rate: the encoder's time base is ``1 / fps`` and each frame's pts comes from the tick
-input's presentation time, so timing is carried through rather than recounted. Audio is remuxed
+The caller writes into a temporary path (``sena_warp.outputs``) so a failed or interrupted run
+never leaves a partial file under the final name. Video is H.264 in yuv420p, at the input's frame
+rate; the stitch gives the encoder the left input's own time base and each frame's pts from that
+input's presentation time, so timing (a variable frame rate too) is carried through, not recounted. Audio is remuxed
 (packets copied, no re-encoding) when the output container accepts its codec, else re-encoded to AAC;
 either way it is trimmed to the span of the video that was written.
 """
 
 from __future__ import annotations
 
+import io
 import os
 from fractions import Fraction
 from pathlib import Path
@@ -63,12 +64,39 @@ def _encodable_layout(layout: av.AudioLayout, source) -> str:
     if not layout.name.endswith("channels"):
         return layout.name
     if layout.nb_channels not in _DEFAULT_LAYOUTS:
-        raise VideoError(f"{source}: audio has {layout.nb_channels} unnamed channels; use audio 'none'")
+        raise VideoError(f"{source}: its audio has {layout.nb_channels} channels without a layout, which AAC "
+                         f"cannot be given")
     return _DEFAULT_LAYOUTS[layout.nb_channels]
+
+
+def remux_refusal(source: str | os.PathLike, format_name: str) -> str | None:
+    """None when a ``format_name`` muxer stores the packets of ``source``'s audio as they are, else why not.
+
+    The codec list says which codecs a container takes, but some muxers refuse a layout only when
+    they write their index at the end (MP4 with PCM in a layout it has no code for): so one packet
+    is muxed into memory, trailer included.
+    """
+    with open_input(source) as probe_in:
+        stream = probe_in.streams.audio[0]
+        name = stream.codec_context.name
+        try:
+            with av.open(io.BytesIO(), "w", format=format_name) as probe:
+                if name not in probe.supported_codecs:
+                    return f"the {format_name} container does not take {name}"
+                out = probe.add_stream_from_template(stream)
+                packet = next(p for p in probe_in.demux(stream) if p.pts is not None)
+                packet.stream = out
+                probe.mux(packet)
+        except (av.error.FFmpegError, StopIteration) as exc:
+            return f"the {format_name} muxer refuses a copy of its {name} audio ({getattr(exc, 'strerror', exc)})"
+    return None
 
 
 class AudioCopier:
     """Copy the audio of ``source`` into ``out`` on the output clock, trimmed to ``[0, end)``.
+
+    Packets are copied when the output's muxer takes them (:func:`remux_refusal`), else re-encoded
+    to AAC (``note`` says why); VideoError when AAC cannot take the channel layout either.
 
     ``shift_s``: output time = source audio time - ``shift_s``. Packets (or decoded frames, when
     re-encoding) are kept when they start inside the span, so the audio matches the video within
@@ -85,12 +113,18 @@ class AudioCopier:
         self._out = out
         self._time_base = Fraction(self._in_stream.time_base)
         self._shift_s = shift_s
-        self.remux = self._in_stream.codec_context.name in out.supported_codecs
+        refusal = remux_refusal(source, out.format.name)
+        self.remux = refusal is None
+        self.note = None if self.remux else f"{source}: audio re-encoded to AAC ({refusal})"
         if self.remux:
             self._out_stream = out.add_stream_from_template(self._in_stream)
         else:
             ctx = self._in_stream.codec_context
-            layout = _encodable_layout(ctx.layout, source)
+            try:
+                layout = _encodable_layout(ctx.layout, source)
+            except VideoError:
+                self._input.close()
+                raise
             self._out_stream = out.add_stream("aac", rate=ctx.sample_rate, layout=layout)
             self._resampler = av.AudioResampler(
                 format="fltp", layout=layout, rate=ctx.sample_rate, frame_size=_AAC_FRAME_SAMPLES
@@ -160,8 +194,10 @@ class VideoWriter:
     """H.264/yuv420p encoder into ``path`` at ``rate`` frames per second (optionally with audio).
 
     ``width``/``height`` are cropped to even values (see :func:`even_size`); :meth:`write` takes
-    planes at least that large. Frame pts are in units of ``1 / rate`` and must increase.
+    planes at least that large. Frame pts are in units of ``time_base`` (default ``1 / rate``; a
+    finer one such as the input's keeps a variable frame rate's times) and must increase.
     Use as a context manager: a clean exit flushes the encoder; an exception just closes the file.
+    ``threads``: encoder threads (``Config.cpu_threads``; 0 lets the encoder choose, x264: 1.5 per core).
     """
 
     def __init__(
@@ -173,32 +209,72 @@ class VideoWriter:
         codec: str = FALLBACK_CODEC,
         crf: int = Config.video_crf,
         preset: str = Config.video_preset,
+        threads: int = Config.cpu_threads,
+        time_base: Fraction | None = None,
     ):
         self.path = Path(path)
         self.width, self.height = even_size(width, height)
         if self.width < 2 or self.height < 2:
             raise VideoError(f"{self.path}: output frame {width}x{height} is too small to encode")
         self.rate = Fraction(rate)
-        self.codec, self.note = choose_codec(codec, self.width, self.height, self.rate)
-        try:
-            self.container = av.open(str(self.path), mode="w")
-        except av.error.FFmpegError as exc:
-            raise OutputError(f"{self.path}: cannot create the video file ({exc.strerror})") from exc
-        self.stream = self.container.add_stream(
-            self.codec, rate=self.rate, options=encoder_options(self.codec, crf, preset)
-        )
-        self.stream.width, self.stream.height = self.width, self.height
-        self.stream.pix_fmt = PIX_FMT
-        self.stream.time_base = self.stream.codec_context.time_base = 1 / self.rate
+        self.time_base = Fraction(time_base) if time_base is not None else 1 / self.rate
+        self.requested_codec = codec
+        self.codec, note = choose_codec(codec, self.width, self.height, self.rate)
+        self.notes = [note] if note else []  # fallbacks the report should mention
+        self.audio_refusal: str | None = None  # why the audio was left out (see add_audio)
+        self._options = encoder_options(self.codec, crf, preset)
+        self.crf, self.preset, self.threads = crf, preset, threads
+        self._open()
         self.audio: AudioCopier | None = None
         self.frames = 0
         self._last_pts: int | None = None
         self._finished = False
 
-    def add_audio(self, source: str | os.PathLike, shift_s: Fraction) -> AudioCopier:
-        """Copy ``source``'s audio (output time = its time - ``shift_s``); call before :meth:`write`."""
-        self.audio = AudioCopier(source, self.container, shift_s)
-        return self.audio
+    def encoder_settings(self) -> dict:
+        """The encoder as opened: codec (and the one asked for), quality, preset and thread count."""
+        preset = self.preset if self.codec == FALLBACK_CODEC else None  # NVENC has no x264 preset
+        return {"codec": self.codec, "requested": self.requested_codec, "crf": self.crf, "preset": preset,
+                "threads": self.stream.codec_context.thread_count, "pix_fmt": PIX_FMT}
+
+    def _open(self) -> None:
+        """(Re)create the file with its video stream, nothing written yet."""
+        try:
+            self.container = av.open(str(self.path), mode="w")
+        except av.error.FFmpegError as exc:
+            raise OutputError(f"{self.path}: cannot create the video file ({exc.strerror})") from exc
+        self.stream = self.container.add_stream(self.codec, rate=self.rate, options=self._options)
+        self.stream.width, self.stream.height = self.width, self.height
+        self.stream.pix_fmt = PIX_FMT
+        self.stream.time_base = self.stream.codec_context.time_base = self.time_base
+        self.stream.codec_context.thread_count = self.threads  # before the encoder opens on the first frame
+
+    def add_audio(self, source: str | os.PathLike, shift_s: Fraction) -> AudioCopier | None:
+        """Copy ``source``'s audio (output time = its time - ``shift_s``); call before :meth:`write`.
+
+        Copied or re-encoded to AAC as :class:`AudioCopier` decides (a re-encode is said in
+        ``notes``); when neither is possible (a channel layout AAC cannot take, or the muxer refuses
+        the stream) the video is written without audio. The file's header is written here, so the
+        muxer's answer comes before any frame. Returns the copier, or None without audio (and
+        ``audio_refusal`` says why).
+        """
+        try:
+            copier = AudioCopier(source, self.container, shift_s)
+        except VideoError as exc:
+            reason = str(exc)
+        else:
+            try:
+                self.container.start_encoding()
+            except av.error.FFmpegError as exc:
+                copier.close()
+                reason = f"{source}: the {self.path.suffix} muxer refuses its audio ({exc.strerror})"
+            else:
+                self.notes += [copier.note] if copier.note else []
+                self.audio = copier
+                return copier
+        self.container.close()
+        self._open()
+        self.audio_refusal = reason
+        return None
 
     def __enter__(self) -> "VideoWriter":
         return self
@@ -224,16 +300,20 @@ class VideoWriter:
                 )
             rows = np.frombuffer(plane, dtype=np.uint8, count=plane.height * plane.line_size)
             rows.reshape(plane.height, plane.line_size)[:, : plane.width] = src[: plane.height, : plane.width]
-        frame.pts, frame.time_base = pts, 1 / self.rate
+        frame.pts, frame.time_base = pts, self.time_base
         self.container.mux(self.stream.encode(frame))
         self._last_pts = pts
         self.frames += 1
         if self.audio is not None:
-            self.audio.advance((pts + 1) / self.rate)
+            self.audio.advance(self._frame_end_s(pts))
+
+    def _frame_end_s(self, pts: int) -> Fraction:
+        """When frame ``pts`` stops being shown (output seconds), taking it to last one frame period."""
+        return pts * self.time_base + 1 / self.rate
 
     def finish(self) -> None:
         """Flush the encoder and write the audio to the end of the last frame."""
         self._finished = True
         self.container.mux(self.stream.encode(None))
         if self.audio is not None and self._last_pts is not None:
-            self.audio.finish((self._last_pts + 1) / self.rate)
+            self.audio.finish(self._frame_end_s(self._last_pts))

@@ -7,5 +7,6 @@
 - ``baselines``: the warps SENA is compared with (global affine, SIFT homography, OpenCV's stitcher);
 - ``alignment``: steps 1-6 against the baselines on one pair (``benchmarks/eval_warp.py``);
 - ``evaluate``: ``sena-warp eval`` (with the contact ``sheets``);
-- ``bench``: ``sena-warp bench``, frame rates of the video path.
+- ``bench``: ``sena-warp bench``, frame rates of the video path;
+- ``sync_bench``: accuracy of ``--offset auto`` on clips cut at known shifts (``benchmarks/bench_sync.py``).
 """

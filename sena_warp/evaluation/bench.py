@@ -30,13 +30,15 @@ import cv2
 import numpy as np
 
 from sena_warp.config import Config
-from sena_warp.errors import InputError, StitchError
-from sena_warp.imageio import atomic_output, read_image
+from sena_warp.errors import InputError, error_for_exit_code
+from sena_warp.imageio import read_image
+from sena_warp.outputs import OutputPlan, atomic_output, make_folder
 
 SIZES = {"720p": (1280, 720), "1080p": (1920, 1080), "4k": (3840, 2160)}
 REPO = Path(__file__).resolve().parents[2]
 DATA_DIR = REPO.parent / "shared" / "data"
 PAIR = "rew_lawn_2160"
+ERROR_PREFIX = "sena-warp: error: "
 
 
 @dataclass(frozen=True)
@@ -132,7 +134,7 @@ def transcode_baseline(left: Path, right: Path, output: Path, cfg: Config) -> di
     """Decode both, place side by side, encode with the stitcher's settings; frames, seconds, fps."""
     from sena_warp.video.loop import VideoOptions, run_video
 
-    report = run_video(left, right, output, SideBySide, VideoOptions.from_config(cfg, audio="none", progress=False))
+    report = run_video(left, right, output, SideBySide, VideoOptions.from_config(cfg, audio="none"))
     seconds = report["timing_s"]["total"]
     return {"frames": report["frames_out"], "seconds": seconds, "fps": report["frames_out"] / seconds,
             "size": (report["output"]["width"], report["output"]["height"])}
@@ -151,10 +153,11 @@ def stitch_in_child(left: Path, right: Path, output: Path, device: str) -> dict:
     """``sena-warp video`` in a child process; its report plus ``max_rss_mib`` (the child's peak RSS)."""
     report_path = output.with_suffix(".json")
     cmd = [sys.executable, "-c", _CHILD, "video", str(left), str(right), "-o", str(output),
-           "--report", str(report_path), "--audio", "none", "--device", device]
+           "--report", str(report_path), "--audio", "none", "--device", device, "-y"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        raise StitchError(f"sena-warp video failed on {left.name}: {(proc.stderr or proc.stdout).strip()[-500:]}")
+    if proc.returncode != 0:  # the child's own error, with its exit code
+        said = (proc.stderr or proc.stdout).strip().splitlines() or [f"exit {proc.returncode}"]
+        raise error_for_exit_code(proc.returncode)(f"stitching {left.name}: {said[-1].removeprefix(ERROR_PREFIX)}")
     hwm_kib = int(proc.stdout.strip().splitlines()[-1].split()[1])  # "VmHWM:  123456 kB"
     report = json.loads(report_path.read_text())
     report["max_rss_mib"] = hwm_kib / 1024
@@ -337,10 +340,11 @@ def run_bench(sizes: list[str], seconds: float, work: Path, cfg: Config, data_di
     """
     from sena_warp.kernels.runtime import resolve_config
 
+    parsed = [parse_size(size) for size in sizes]  # all of them before anything is read or made
     pair = pair_paths(data_dir)
-    work.mkdir(parents=True, exist_ok=True)
+    make_folder(work, "--work")
     cfg = resolve_config(cfg)
-    return [bench_size(*parse_size(size), seconds, work, pair, cfg, settings) for size in sizes]
+    return [bench_size(*size, seconds, work, pair, cfg, settings) for size in parsed]
 
 
 def machine_line() -> str:
@@ -351,7 +355,14 @@ def machine_line() -> str:
 
 def cmd_bench(args: argparse.Namespace) -> int:
     """``sena-warp bench``: print the table (and write it as Markdown with --markdown)."""
+    from sena_warp.jobs import checked
+
     data, sizes = Path(args.data or DATA_DIR), args.sizes or list(SIZES)
+    plan = OutputPlan((), args.overwrite)
+    if args.markdown:
+        plan.add(args.markdown, "--markdown")
+    if not checked(plan):
+        return 0
     rows = run_bench(sizes, args.seconds, Path(args.work), Config(device=args.device), data)
     rss_rows = [measure_rss(seconds, Path(args.work), args.device, data) for seconds in args.rss]
     text = format_table(rows)
@@ -359,7 +370,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     for rss in rss_rows:
         print(f"peak RSS, 1080p {rss['seconds']:g} s ({rss['frames']} frames): {rss['rss_mib']:.0f} MiB")
     if args.markdown:
-        with atomic_output(args.markdown) as tmp:
+        with plan, atomic_output(args.markdown, plan=plan) as tmp:
             lines = [f"Machine: {machine_line()}", "", format_table(rows, markdown=True), ""]
             lines += [f"- peak RSS of `sena-warp video`, 1080p {r['seconds']:g} s ({r['frames']} frames): "
                       f"{r['rss_mib']:.0f} MiB" for r in rss_rows]

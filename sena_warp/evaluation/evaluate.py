@@ -43,9 +43,10 @@ import numpy as np
 from sena_warp.config import Config
 from sena_warp.errors import InputError, StitchError
 from sena_warp.features import match_images
-from sena_warp.imageio import atomic_output, check_output_folder, make_folder, read_image, write_image
+from sena_warp.imageio import read_image, write_image
 from sena_warp.kernels.runtime import resolve_config
-from sena_warp.progress import Progress
+from sena_warp.outputs import OutputPlan, atomic_output, staged
+from sena_warp.progress import Count, echo
 from sena_warp.rig import Rig, detect_rig, image_to_working
 from sena_warp.stitch import Panorama, stitch_images
 from sena_warp.warp_map import forward_points
@@ -122,14 +123,14 @@ class PairImages:
 
 
 def pair_folders(data_dir: str | os.PathLike) -> list[Path]:
-    """The pair folders of ``data_dir`` (each with one ``a.*`` and one ``b.*`` image), sorted; the folder
-    itself when it is one. InputError when there is none."""
+    """The pair folders of ``data_dir`` (each with an ``a.*`` or a ``b.*`` image: one lacking the other
+    is evaluated as failed), sorted; the folder itself when it is one. InputError when there is none."""
     data_dir = Path(data_dir)
     if not data_dir.is_dir():
         raise InputError(f"{data_dir}: not a folder; give a folder of pair folders (each with a.* and b.*)")
 
     def is_pair(folder: Path) -> bool:
-        return all(_image_named(folder, stem) is not None for stem in ("a", "b"))
+        return any(p.suffix.lower() in IMAGE_SUFFIXES for stem in ("a", "b") for p in folder.glob(f"{stem}.*"))
 
     if is_pair(data_dir):
         return [data_dir]
@@ -210,12 +211,15 @@ def failure_message(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}".strip()
 
 
-def read_inputs(folder: Path) -> tuple[list[np.ndarray | None], str]:
-    """The pair's two images (None where unreadable) and the reading errors, joined."""
+def read_inputs(folder: Path, max_megapixels: float) -> tuple[list[np.ndarray | None], str]:
+    """The pair's two images (None where missing or unreadable) and the reading errors, joined."""
     images, errors = [], []
     for stem in ("a", "b"):
+        path = _image_named(folder, stem)
         try:
-            images.append(read_image(_image_named(folder, stem)))
+            if path is None:
+                raise InputError(f"{folder}: no {stem}.* image, or more than one")
+            images.append(read_image(path, max_megapixels))
         except StitchError as exc:
             images.append(None)
             errors.append(str(exc))
@@ -401,50 +405,57 @@ def pair_line(results: list[MethodResult]) -> str:
     return f"{results[0].pair}: " + ", ".join(parts)
 
 
-def run_eval(data_dir: str | os.PathLike, out_dir: str | os.PathLike, cfg: Config, progress: bool | None = None
-             ) -> list[MethodResult]:
+def run_eval(data_dir: str | os.PathLike, out_dir: str | os.PathLike, cfg: Config,
+             plan: OutputPlan | None = None) -> list[MethodResult]:
     """Evaluate every pair of ``data_dir`` into ``out_dir`` (see the module docstring); the rows of results.csv.
 
-    The Warp device of ``cfg`` is resolved once, here, for every pair and method.
+    The Warp device of ``cfg`` is resolved once, here, for every pair and method. ``plan``: commit the
+    folder with that plan's other outputs (see ``sena_warp.outputs``).
     """
     t0 = time.perf_counter()
     cfg = resolve_config(cfg)
     folders = pair_folders(data_dir)
-    out_dir = check_output_folder(out_dir)
-    sheets_dir = make_folder(Path(out_dir) / "sheets")
-    show = sys.stderr.isatty() if progress is None else progress
-    bar = Progress(len(folders), show, sys.stderr, "sena-warp eval", "pairs")
-    rows, overview = [], []
-    for done, folder in enumerate(folders):
-        bar.update(done, force=True)
-        images, read_error = read_inputs(folder)
-        if read_error:
-            results = [MethodResult(folder.name, name, error=read_error) for name in METHODS]
-        else:
-            results = evaluate_pair(folder, *images, cfg)
-        write_image(sheets_dir / f"{folder.name}.png",
-                    tile(input_cells(folder, images, PAIR_THUMB_WH) + method_cells(results, PAIR_THUMB_WH, True), COLUMNS))
-        overview += input_cells(folder, images, OVERVIEW_THUMB_WH) + method_cells(results, OVERVIEW_THUMB_WH, False)
-        for r in results:
-            r.panorama = None  # drawn; memory stays flat over many pairs
-        rows += results
-        if show:
-            sys.stderr.write("\r\x1b[K")  # clear the progress line before the pair's own line
-        print(pair_line(results), flush=True)
-    bar.close(len(folders))
-    write_csv(Path(out_dir) / "results.csv", rows)
-    write_image(Path(out_dir) / "overview.jpg", tile(overview, COLUMNS),
-                params=(cv2.IMWRITE_JPEG_QUALITY, OVERVIEW_JPEG_QUALITY))
-    with atomic_output(Path(out_dir) / "summary.md") as tmp:
-        tmp.write_text(summary_markdown(rows, Path(data_dir), cfg, time.perf_counter() - t0))
+    with staged(plan, out_dir, (data_dir,), folder=True) as plan, plan.writing(out_dir) as out_dir:
+        sheets_dir = out_dir / "sheets"
+        sheets_dir.mkdir()
+        bar = Count("pairs", len(folders))
+        rows, overview = [], []
+        for done, folder in enumerate(folders):
+            bar.update(done)
+            images, read_error = read_inputs(folder, cfg.max_input_megapixels)
+            if read_error:
+                results = [MethodResult(folder.name, name, error=read_error) for name in METHODS]
+            else:
+                results = evaluate_pair(folder, *images, cfg)
+            write_image(sheets_dir / f"{folder.name}.png",
+                        tile(input_cells(folder, images, PAIR_THUMB_WH) + method_cells(results, PAIR_THUMB_WH, True),
+                             COLUMNS))
+            overview += input_cells(folder, images, OVERVIEW_THUMB_WH) + method_cells(results, OVERVIEW_THUMB_WH, False)
+            for r in results:
+                r.panorama = None  # drawn; memory stays flat over many pairs
+            rows += results
+            echo(pair_line(results))
+        bar.close(len(folders))
+        write_csv(out_dir / "results.csv", rows)
+        write_image(out_dir / "overview.jpg", tile(overview, COLUMNS),
+                    params=(cv2.IMWRITE_JPEG_QUALITY, OVERVIEW_JPEG_QUALITY))
+        with atomic_output(out_dir / "summary.md") as tmp:
+            tmp.write_text(summary_markdown(rows, Path(data_dir), cfg, time.perf_counter() - t0))
     return rows
 
 
 def cmd_eval(args: argparse.Namespace) -> int:
     """``sena-warp eval``: evaluate, then print where the results are."""
-    cfg = Config(features=args.features, device=args.device)
-    rows = run_eval(args.data_dir, args.out, cfg, args.progress or None)
+    from sena_warp.jobs import checked, job_config
+
+    cfg = job_config(args.settings)
+    plan = OutputPlan((args.data_dir,), args.overwrite)
+    plan.add(args.out, "--out", folder=True)
+    if not checked(plan):
+        return 0
+    with plan:
+        rows = run_eval(args.data_dir, args.out, cfg, plan)
     stitched = sum(r.ok for r in rows if r.method == "sena")
-    print(f"{args.out}: results.csv, summary.md, overview.jpg, sheets/ ({stitched}/{len(rows) // len(METHODS)} "
+    echo(f"{args.out}: results.csv, summary.md, overview.jpg, sheets/ ({stitched}/{len(rows) // len(METHODS)} "
           f"pairs stitched by SENA)")
     return 0

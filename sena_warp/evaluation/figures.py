@@ -76,6 +76,9 @@ def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Conf
     img_tgt = compensated(img_tgt, gains.gain_tgt, gains.bias_tgt)
     placed_tgt, valid_tgt = remap_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
     seam_src, valid_seam_src = remap_image(img_src, seam.maps.map_src_canvas, cfg)
+    seam_mad = transition_mad(seam_src, placed_tgt, valid_seam_src & valid_tgt, seam.maps.seam_x_canvas,
+                              cfg.transition_px)
+    del seam_src, valid_seam_src  # one canvas image fewer alive at a time (a large pair's peak memory)
     step6_src, valid_step6_src = remap_image(img_src, warp.map_src_canvas, cfg)
     residuals = anchor_residuals_px(warp.map_src_canvas, seam.maps.map_src_canvas,
                                     seam.anchors_src_canvas, seam.anchors_tgt_canvas)
@@ -84,8 +87,7 @@ def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Conf
         "anchors": int(len(seam.anchors_tgt_canvas)),
         "anchor_residual_px": float(np.median(finite)) if finite.size else math.nan,
         "anchor_residual_max_px": float(finite.max()) if finite.size else math.nan,
-        "seam_mad": transition_mad(seam_src, placed_tgt, valid_seam_src & valid_tgt, seam.maps.seam_x_canvas,
-                                   cfg.transition_px),
+        "seam_mad": seam_mad,
         "feather_mad": feather_mad(step6_src, valid_step6_src, placed_tgt, valid_tgt, warp.overlap.mask_canvas),
     }
 

@@ -1,0 +1,371 @@
+"""``sena-warp batch JOBS --out DIR``: many stitches, on local worker processes or as Ray tasks, resumable.
+
+JOBS is a folder of pair folders (each holding images ``a.*`` + ``b.*`` or videos ``left.*`` +
+``right.*``; the folder's name names the job), or a job list: TOML (``[defaults]`` and ``[[job]]``
+tables) or CSV (a header row, one job per row). A job gives its inputs (``a``/``b`` or
+``left``/``right``, relative to the list's folder) and optionally ``name``, ``output`` (relative to
+DIR), ``reference``, ``crop`` (images), ``offset`` (videos: seconds, or "auto" to estimate them) and
+any setting of ``sena-warp config``. Settings apply in this order, the later winning: defaults, ``--config``, command-line
+options, the list's ``[defaults]``, the job's own.
+
+Each job writes ``DIR/NAME.png`` or ``DIR/NAME.mp4`` and then ``DIR/reports/NAME.json`` (its report
+with a ``job`` block: status, error, time). A job whose report says "ok" and whose output exists is
+complete and skipped by the next run, so an interrupted batch resumes where it stopped; a failed job
+is recorded with its error, the others go on, and it is tried again next time. At the end: a table
+on stdout, ``DIR/summary.json``, and exit code 7 when any job failed.
+
+The same job function, :func:`run_entry`, runs in ``--jobs N`` local worker processes or as Ray
+tasks (``--ray ADDRESS``, extra ``sena-warp[cluster]``); a job that asks for ``device = "cuda"`` gets
+one GPU per task. On a cluster, inputs and DIR must be on storage every node sees.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import logging
+import os
+import socket
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Callable, Iterator
+
+from .config import OFFSET_AUTO
+from .config_file import check_value, field_types, read_toml, unknown_key_error
+from .errors import InputError, StitchError
+from .jobs import INPUT_SUFFIXES, OUTPUT_SUFFIXES, PAIR_STEMS, Job, pair_inputs, run_job, summary_line
+from .outputs import atomic_output, make_folder
+from .progress import LOGGER, Count, echo
+
+# Job keys besides the settings: name -> (type, the kind it applies to or None for both).
+JOB_KEYS = {"name": (str, None), "output": (str, None), "reference": (str, None), "crop": (bool, "image"),
+            "offset": (float, "video"), "a": (str, "image"), "b": (str, "image"), "left": (str, "video"),
+            "right": (str, "video")}
+WORDS = {"offset": (OFFSET_AUTO,)}  # words a number key also takes
+REFERENCES = ("auto", "a", "b")
+TRUE_WORDS, FALSE_WORDS = ("true", "yes", "1"), ("false", "no", "0")  # CSV cells of a yes/no option
+TOML_TABLES = ("defaults", "job")
+REPORTS = "reports"  # DIR/reports/NAME.json
+SUMMARY = "summary.json"
+RAY_LOCAL = "local"
+
+
+class BatchError(StitchError):
+    """The batch ran to its end, but some of its jobs failed (each report says why)."""
+
+    exit_code = 7
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One job of a batch: its name, the job, and where its report goes."""
+
+    name: str
+    job: Job
+    report: str
+
+
+def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: dict) -> list[Entry]:
+    """The batch's jobs from a folder of pair folders or a .toml / .csv list; ``settings``: for every job.
+
+    Paths come back absolute (a Ray task may run elsewhere); names, outputs and inputs are checked.
+    """
+    source, out_dir = Path(source).resolve(), Path(out_dir).resolve()
+    if source.is_dir():
+        rows = _folder_rows(source)
+        defaults: dict = {}
+    elif not source.exists():
+        raise InputError(f"{source}: not found; give a folder of pair folders or a .toml or .csv job list")
+    elif source.suffix.lower() == ".toml":
+        defaults, rows = _toml_rows(source)
+    elif source.suffix.lower() == ".csv":
+        defaults, rows = {}, _csv_rows(source)
+    else:
+        raise InputError(f"{source}: a job list is a .toml or .csv file (or give a folder of pair folders)")
+    if not rows:
+        raise InputError(f"{source}: no jobs found")
+    entries = [_entry({**defaults, **row}, where, source, out_dir, settings) for where, row in rows]
+    _check_unique(entries, source)
+    return entries
+
+
+def _folder_rows(folder: Path) -> list[tuple[str, dict]]:
+    pairs = [folder] if pair_inputs(folder) else sorted(p for p in folder.iterdir() if p.is_dir() and pair_inputs(p))
+    if not pairs:
+        raise InputError(f"{folder}: no pair folders (sub-folders holding a.* + b.* images or left.* + right.* videos)")
+    rows = []
+    for pair in pairs:
+        kind, inputs = pair_inputs(pair)
+        rows.append((str(pair), {"name": pair.name, **dict(zip(PAIR_STEMS[kind], map(str, inputs)))}))
+    return rows
+
+
+def _toml_rows(path: Path) -> tuple[dict, list[tuple[str, dict]]]:
+    data = read_toml(path)
+    for key in data:
+        if key not in TOML_TABLES:
+            raise unknown_key_error(key, list(TOML_TABLES), str(path))
+    jobs = data.get("job", [])
+    if not isinstance(jobs, list) or not all(isinstance(j, dict) for j in jobs):
+        raise InputError(f"{path}: jobs are [[job]] tables")
+    defaults = data.get("defaults", {})
+    if not isinstance(defaults, dict):
+        raise InputError(f"{path}: defaults is a [defaults] table")
+    return defaults, [(f"{path}: job {i + 1}", job) for i, job in enumerate(jobs)]
+
+
+def _csv_rows(path: Path) -> list[tuple[str, dict]]:
+    try:
+        with open(path, newline="", encoding="utf-8") as handle:
+            table = list(csv.DictReader(handle))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise InputError(f"{path}: cannot read it as a CSV job list ({exc})") from exc
+    rows = []
+    for line_no, cells in enumerate(table, start=2):
+        where = f"{path}: line {line_no}"
+        if None in cells:
+            raise InputError(f"{where}: more cells than the header has names")
+        rows.append((where, {key.strip(): _from_text(key.strip(), text.strip(), where)
+                             for key, text in cells.items() if text and text.strip()}))
+    return rows
+
+
+def _from_text(key: str, text: str, where: str):
+    """A CSV cell as the value its column takes: a number, yes/no, or text; unknown columns pass through."""
+    kind = JOB_KEYS[key][0] if key in JOB_KEYS else field_types().get(key, str)
+    if text in WORDS.get(key, ()):
+        return text
+    if kind is bool:
+        if text.lower() not in TRUE_WORDS + FALSE_WORDS:
+            raise InputError(f"{where}: {key} = {text!r} is not one of {', '.join(TRUE_WORDS + FALSE_WORDS)}")
+        return text.lower() in TRUE_WORDS
+    if kind in (int, float):
+        try:
+            return int(text) if kind is int else float(text)
+        except ValueError:
+            raise InputError(f"{where}: {key} = {text!r} is not {'a whole number' if kind is int else 'a number'}") from None
+    return text
+
+
+def _entry(row: dict, where: str, source: Path, out_dir: Path, settings: dict) -> Entry:
+    types = field_types()
+    for key in row:
+        if key not in JOB_KEYS and key not in types:
+            raise unknown_key_error(key, [*JOB_KEYS, *types], where)
+    kinds = [kind for kind, stems in PAIR_STEMS.items() if any(stem in row for stem in stems)]
+    if len(kinds) != 1 or not all(stem in row for stem in PAIR_STEMS[kinds[0]]):
+        raise InputError(f"{where}: give the inputs as a and b (images) or left and right (videos)")
+    kind = kinds[0]
+    options = {key: _job_value(key, value, kind, where) for key, value in row.items() if key in JOB_KEYS}
+    base = source if source.is_dir() else source.parent
+    inputs = tuple(str((base / options[stem]).resolve()) for stem in PAIR_STEMS[kind])
+    name = options.get("name") or Path(inputs[0]).parent.name
+    if not name or "/" in name or "\\" in name or name.startswith("."):
+        raise InputError(f"{where}: job name {name!r} cannot name a file; give a plain name")
+    output = out_dir / options.get("output", name + OUTPUT_SUFFIXES[kind][0])
+    job_settings = {**settings, **{key: check_value(key, value, where) for key, value in row.items() if key in types}}
+    # A job still to run replaces what an earlier, unfinished run left (complete jobs are skipped before).
+    job = Job(kind, inputs, str(output), job_settings, reference=options.get("reference", "auto"),
+              crop=options.get("crop", False), offset_s=options.get("offset", 0.0), overwrite="overwrite")
+    return Entry(name, job, str(out_dir / REPORTS / f"{name}.json"))
+
+
+def _job_value(key: str, value, kind: str, where: str):
+    wanted, applies_to = JOB_KEYS[key]
+    if applies_to is not None and applies_to != kind:
+        raise InputError(f"{where}: {key} is for {applies_to} jobs; this one is a {kind} job")
+    if value in WORDS.get(key, ()):
+        return value
+    if wanted is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if not isinstance(value, wanted) or (wanted is not bool and isinstance(value, bool)):
+        words = "".join(f" or {word!r}" for word in WORDS.get(key, ()))
+        raise InputError(f"{where}: {key} = {value!r} is not {'yes/no' if wanted is bool else 'a ' + wanted.__name__}"
+                         f"{words}")
+    if key == "reference" and value not in REFERENCES:
+        raise InputError(f"{where}: reference = {value!r} is not one of {', '.join(REFERENCES)}")
+    if key in PAIR_STEMS[kind] and Path(value).suffix.lower() not in INPUT_SUFFIXES[kind]:
+        raise InputError(f"{where}: {key} = {value!r} is not a {kind} file ({', '.join(INPUT_SUFFIXES[kind])})")
+    return value
+
+
+def _check_unique(entries: list[Entry], source: Path) -> None:
+    for attribute in ("name", "output"):
+        seen: set[str] = set()
+        for entry in entries:
+            value = entry.name if attribute == "name" else entry.job.output
+            if value in seen:
+                raise InputError(f"{source}: two jobs have the {attribute} {value}; give each job its own")
+            seen.add(value)
+
+
+def is_complete(entry: Entry) -> bool:
+    """Whether an earlier run finished ``entry``: its report says ok (written after the output) and the output is there."""
+    try:
+        status = json.loads(Path(entry.report).read_text())["job"]["status"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    return status == "ok" and Path(entry.job.output).is_file()
+
+
+def run_entry(entry: Entry) -> dict:
+    """Run one job here and write its report; its result record (a job's failure is recorded, not raised).
+
+    The function every worker runs, a local process or a Ray task alike.
+    """
+    t0 = time.perf_counter()
+    report: dict = {}
+    try:
+        report = run_job(entry.job)
+        error, exit_code = None, 0
+    except StitchError as exc:
+        error, exit_code = str(exc), exc.exit_code
+    except Exception as exc:  # a bug in one job must not stop the batch: recorded with its type
+        error, exit_code = f"{type(exc).__name__}: {exc}", 1
+    result = {
+        "name": entry.name, "kind": entry.job.kind, "status": "failed" if error else "ok",
+        "inputs": list(entry.job.inputs), "output": entry.job.output, "error": error, "exit_code": exit_code,
+        "seconds": round(time.perf_counter() - t0, 3), "host": socket.gethostname(),
+        "summary": summary_line(entry.job.kind, report) if report else None,
+    }
+    _write_report(entry.report, {"job": result, **report})
+    return result
+
+
+def _write_report(path: str, data: dict) -> None:
+    from .report import write_json
+
+    make_folder(Path(path).parent, "the reports folder")
+    write_json(path, data)
+
+
+def _failed(entry: Entry, error: str) -> dict:
+    """The result record of a job whose worker itself failed (a crashed process, a lost Ray task)."""
+    return {"name": entry.name, "kind": entry.job.kind, "status": "failed", "inputs": list(entry.job.inputs),
+            "output": entry.job.output, "error": error, "exit_code": 1, "seconds": None, "host": None,
+            "summary": None}
+
+
+def run_local(entries: list[Entry], workers: int) -> Iterator[dict]:
+    """Run ``entries`` in ``workers`` fresh processes; yield each result as its job finishes."""
+    # spawn, not fork: the parent may hold Warp, onnxruntime and decoder threads, which fork does not copy
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        futures = {pool.submit(run_entry, entry): entry for entry in entries}
+        try:
+            while futures:
+                done, _ = wait(futures, return_when=FIRST_COMPLETED)
+                for future in done:
+                    entry = futures.pop(future)
+                    try:
+                        yield future.result()
+                    except Exception as exc:  # the worker process died (out of memory, a crash)
+                        yield _failed(entry, f"worker failed: {type(exc).__name__}: {exc}")
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+
+
+def run_ray(entries: list[Entry], address: str, cpus: int) -> Iterator[dict]:
+    """Run ``entries`` as Ray tasks on the cluster at ``address`` (or a Ray started here with ``cpus``);
+    yield each result as its job finishes. A task reserves its job's threads as CPUs, and a GPU when the
+    job asks for CUDA."""
+    try:
+        import ray
+    except ImportError:
+        raise InputError("--ray needs Ray: pip install 'sena-warp[cluster]'") from None
+    quiet = dict(logging_level=logging.ERROR, log_to_driver=False)
+    try:
+        if address == RAY_LOCAL:
+            ray.init(num_cpus=cpus, include_dashboard=False, **quiet)
+        else:
+            ray.init(address=address, **quiet)
+    except (ConnectionError, ValueError, RuntimeError) as exc:
+        raise InputError(f"--ray {address}: cannot connect ({' '.join(str(exc).split())})") from exc
+    try:
+        task = ray.remote(run_entry)
+        pending = {
+            task.options(num_cpus=max(entry.job.settings.get("cpu_threads", 1), 1),
+                         num_gpus=1 if entry.job.settings.get("device") == "cuda" else 0,
+                         max_retries=0).remote(entry): entry
+            for entry in entries
+        }
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            entry = pending.pop(done[0])
+            try:
+                yield ray.get(done[0])
+            except ray.exceptions.RayError as exc:
+                yield _failed(entry, f"Ray task failed: {' '.join(str(exc).split())[:500]}")
+    finally:
+        ray.shutdown()
+
+
+def run_batch(entries: list[Entry], out_dir: str | os.PathLike, runner: Callable[[list[Entry]], Iterator[dict]],
+              runner_name: str) -> dict:
+    """Skip the complete entries, run the others with ``runner``, write ``DIR/summary.json``; the summary."""
+    t0 = time.perf_counter()
+    todo = [e for e in entries if not is_complete(e)]
+    results = {e.name: {**json.loads(Path(e.report).read_text())["job"], "status": "skipped"}
+               for e in entries if e not in todo}
+    if results:
+        LOGGER.info("%d of %d jobs complete from an earlier run: skipped", len(results), len(entries))
+    count = Count("jobs", len(todo), "jobs/s")
+    for done, result in enumerate(runner(todo) if todo else (), start=1):
+        results[result["name"]] = result
+        if result["status"] == "ok":
+            LOGGER.info("%s: ok (%.1f s)", result["name"], result["seconds"])
+        else:
+            LOGGER.warning("%s: failed: %s", result["name"], result["error"])
+        count.update(done)
+    count.close(len(todo))
+    wall_s = time.perf_counter() - t0
+    ran_ok = sum(r["status"] == "ok" for r in results.values())
+    summary = {
+        "runner": runner_name, "jobs": len(entries), "ok": ran_ok,
+        "failed": sum(r["status"] == "failed" for r in results.values()),
+        "skipped": sum(r["status"] == "skipped" for r in results.values()), "wall_s": round(wall_s, 3),
+        "jobs_per_hour": round(ran_ok / wall_s * 3600, 1) if ran_ok else 0.0,
+        "results": [results[e.name] for e in entries],
+    }
+    with atomic_output(Path(out_dir) / SUMMARY) as tmp:
+        tmp.write_text(json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def summary_table(summary: dict) -> str:
+    """The summary as a fixed-width text table, one row per job, then the totals."""
+    rows = [("job", "kind", "status", "time_s", "result")]
+    for r in summary["results"]:
+        seconds = "" if r["seconds"] is None else f"{r['seconds']:.1f}"
+        rows.append((r["name"], r["kind"], r["status"], seconds, r["error"] or r["summary"] or ""))
+    widths = [max(len(row[i]) for row in rows) for i in range(4)]
+    lines = [f"{n:<{widths[0]}}  {k:<{widths[1]}}  {s:<{widths[2]}}  {t:>{widths[3]}}  {res}"
+             for n, k, s, t, res in rows]
+    lines.append(f"{summary['ok']} ok, {summary['failed']} failed, {summary['skipped']} skipped in "
+                 f"{summary['wall_s']:.1f} s ({summary['runner']}, {summary['jobs_per_hour']:g} jobs/h)")
+    return "\n".join(lines)
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    """``sena-warp batch``: run every job, print the table; BatchError (exit 7) when any failed."""
+    out_dir = make_folder(args.out, "--out")
+    cores = os.cpu_count() or 1
+    if args.ray:
+        cpus = args.workers or cores
+        # A task takes one thread unless told otherwise; Ray packs tasks onto the cluster's cores.
+        entries = read_jobs(args.jobs, out_dir, {"cpu_threads": 1, **args.settings})
+        summary = run_batch(entries, out_dir, lambda todo: run_ray(todo, args.ray, cpus), f"ray {args.ray}")
+    else:
+        workers = args.workers or 1
+        # Workers share the cores: each job's Warp bands, onnxruntime and codecs get its part of them.
+        entries = read_jobs(args.jobs, out_dir, {"cpu_threads": max(cores // workers, 1), **args.settings})
+        summary = run_batch(entries, out_dir, lambda todo: run_local(todo, workers), f"{workers} local workers")
+    echo(summary_table(summary))
+    if summary["failed"]:
+        raise BatchError(f"{summary['failed']} of {summary['jobs']} jobs failed; their reports in "
+                         f"{out_dir / REPORTS} say why (run the batch again to retry them)")
+    return 0

@@ -1,0 +1,347 @@
+"""Issue 15 items 2, 5, 6 and 8: inputs too large, turned by metadata, with alpha or float pixels,
+and failures that say what is the matter. Through the CLI where the promise is the CLI's (one stderr
+line, exit code, nothing left, inputs unchanged); on the reader where it is about pixels.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from fractions import Fraction
+
+import av
+import cv2
+import numpy as np
+import pytest
+
+from sena_warp import imageio
+from sena_warp.config import Config
+from sena_warp.errors import InputError, MatchError
+from sena_warp.features import match_images
+from sena_warp.image_header import read_header
+from sena_warp.imageio import read_image, read_image_masked
+from sena_warp.video.loop import VideoOptions, run_video
+from helpers import (assert_one_line_error, decoded_frames, png_claiming, reencode_with_black_start, run_cli,
+                     with_orientation)
+from test_video_loop import SideBySide
+
+FAST_VIDEO = ["--audio", "none", "--crf", "35"]
+
+
+@pytest.fixture(scope="module")
+def pair(bundled_dir):
+    d = bundled_dir / "udisd_test_000001"
+    return d / "a.jpg", d / "b.jpg"
+
+
+@pytest.fixture(scope="module")
+def img_a(pair):
+    return cv2.imread(str(pair[0]))
+
+
+@pytest.fixture(scope="module")
+def baseline(pair, tmp_path_factory, warp_device):
+    """The panorama (BGRA) of the bundled pair as it is."""
+    out = tmp_path_factory.mktemp("base") / "pano.png"
+    from sena_warp.cli import main
+    assert main(["image", *map(str, pair), "-o", str(out), "--device", warp_device]) == 0
+    return cv2.imread(str(out), cv2.IMREAD_UNCHANGED)
+
+
+def stitch_png(args, out, capfd, warp_device):
+    rc, err, _ = run_cli(["image", *args, "-o", out, "--report", out.with_suffix(".json")], capfd, warp_device)
+    assert rc == 0 and err == [], err
+    return cv2.imread(str(out), cv2.IMREAD_UNCHANGED), json.loads(out.with_suffix(".json").read_text())
+
+
+# --- 2. sizes read from the header, refused before decoding --------------------------------------------
+
+def claiming(ext: str, width: int, height: int, img: np.ndarray) -> bytes:
+    """A small real ``ext`` file whose header is patched to claim width x height."""
+    if ext == ".png":
+        return png_claiming(width, height)
+    data = bytearray(cv2.imencode(ext, img)[1].tobytes())
+    if ext == ".jpg":
+        sof = next(i for i in range(2, len(data) - 1) if data[i] == 0xFF and data[i + 1] in (0xC0, 0xC2))
+        struct.pack_into(">HH", data, sof + 5, height, width)
+    elif ext == ".tif":
+        order = "<" if data[:2] == b"II" else ">"
+        (ifd,) = struct.unpack_from(order + "I", data, 4)
+        (count,) = struct.unpack_from(order + "H", data, ifd)
+        for i in range(count):
+            entry = ifd + 2 + 12 * i
+            tag, kind = struct.unpack_from(order + "HH", data, entry)
+            if tag in (256, 257):
+                fmt = order + ("H" if kind == 3 else "I")
+                struct.pack_into(fmt, data, entry + 8, width if tag == 256 else height)
+    elif ext == ".webp":
+        assert data[12:16] == b"VP8L"  # OpenCV writes lossless WebP: 14-bit width - 1, height - 1 after 0x2f
+        (bits,) = struct.unpack_from("<I", data, 21)
+        struct.pack_into("<I", data, 21, (bits & ~0xFFFFFFF) | (width - 1) | ((height - 1) << 14))
+    elif ext == ".bmp":
+        struct.pack_into("<ii", data, 18, width, height)
+    return bytes(data)
+
+
+@pytest.mark.parametrize("ext, size", [(".png", (25000, 25000)), (".jpg", (30000, 20000)), (".tif", (20000, 20000)),
+                                       (".webp", (16000, 16000)), (".bmp", (12000, 12000))])
+def test_a_huge_image_is_refused_from_its_header_before_decoding(ext, size, pair, img_a, dirs, capfd, warp_device,
+                                                                 monkeypatch):
+    folder_in, folder_out = dirs
+    huge = folder_in / f"huge{ext}"
+    huge.write_bytes(claiming(ext, *size, img_a))
+    assert (read_header(huge.read_bytes()).width, read_header(huge.read_bytes()).height) == size
+    monkeypatch.setattr(imageio, "_decode_quietly", lambda data: pytest.fail("decoded a refused image"))
+    before = huge.read_bytes()
+    rc, err, _ = run_cli(["image", huge, pair[0], "-o", folder_out / "p.png"], capfd, warp_device)
+    assert rc == InputError.exit_code
+    assert_one_line_error(err, str(huge), f"{size[0]}x{size[1]} px", "above the limit of 100 MP per input",
+                          "--max-megapixels")
+    assert list(folder_out.iterdir()) == [] and huge.read_bytes() == before
+
+
+def test_an_image_above_opencvs_decoder_limit_is_refused_whatever_the_limit(pair, dirs, capfd, warp_device):
+    folder_in, folder_out = dirs
+    huge = folder_in / "huge.png"
+    huge.write_bytes(png_claiming(40000, 40000))
+    rc, err, _ = run_cli(["image", pair[0], huge, "-o", folder_out / "p.png", "--max-megapixels", "5000"],
+                         capfd, warp_device)
+    assert rc == InputError.exit_code
+    assert_one_line_error(err, "40000x40000 px (1600 MP), above the 1074 MP OpenCV decodes")
+    assert list(folder_out.iterdir()) == []
+
+
+def test_max_megapixels_sets_the_limit_for_images_and_video_frames(pair, bundled_dir, dirs, capfd, warp_device):
+    _, folder_out = dirs
+    rc, err, _ = run_cli(["image", *pair, "-o", folder_out / "p.png", "--max-megapixels", "0.2"], capfd, warp_device)
+    assert rc == InputError.exit_code
+    assert_one_line_error(err, "image is 512x512 px", "above the limit of 0.2 MP")
+    clips = bundled_dir / "video"
+    rc, err, _ = run_cli(["video", clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", "-o", folder_out / "v.mp4",
+                          "--max-megapixels", "0.1"], capfd, warp_device)
+    assert rc == InputError.exit_code
+    assert_one_line_error(err, "a frame is 270x480 px", "above the limit of 0.1 MP")
+    assert list(folder_out.iterdir()) == []
+
+
+# --- 5. EXIF orientation and video display matrices: stitched upright --------------------------------------
+
+# The stored pixels of an upright image that each EXIF orientation turns upright again.
+STORED_FOR = {1: lambda u: u, 2: lambda u: u[:, ::-1], 3: lambda u: u[::-1, ::-1], 4: lambda u: u[::-1],
+              5: lambda u: u.swapaxes(0, 1), 6: lambda u: np.rot90(u, 1), 7: lambda u: u[::-1, ::-1].swapaxes(0, 1),
+              8: lambda u: np.rot90(u, -1)}
+
+
+@pytest.mark.parametrize("ext", [".jpg", ".png"])
+@pytest.mark.parametrize("orientation", range(1, 9))
+def test_every_exif_orientation_reads_upright_like_opencvs_own_handling(orientation, ext, img_a, tmp_path):
+    stored = np.ascontiguousarray(STORED_FOR[orientation](img_a[:200, :300]))
+    path = tmp_path / f"o{ext}"
+    path.write_bytes(with_orientation(cv2.imencode(ext, stored)[1].tobytes(), ext, orientation))
+    upright = read_image(path)
+    assert np.array_equal(upright, cv2.imread(str(path), cv2.IMREAD_COLOR))  # OpenCV applies EXIF in this mode
+    if ext == ".png":  # lossless: exactly the pixels before they were stored turned
+        assert np.array_equal(upright, img_a[:200, :300])
+
+
+def test_a_photo_stored_turned_stitches_exactly_like_the_upright_one(pair, img_a, baseline, dirs, capfd, warp_device):
+    """A phone's usual portrait photo: stored turned, EXIF 6. (All eight read upright: the test above.)"""
+    folder_in, folder_out = dirs
+    orientation = 6
+    turned = folder_in / "a_turned.png"
+    stored = np.ascontiguousarray(STORED_FOR[orientation](img_a))
+    turned.write_bytes(with_orientation(cv2.imencode(".png", stored)[1].tobytes(), ".png", orientation))
+    pano, _ = stitch_png([turned, pair[1]], folder_out / "pano.png", capfd, warp_device)
+    assert np.array_equal(pano, baseline)
+
+
+def lossless_clip(frames, path, turn_ccw: int, count: int) -> None:
+    """The first ``count`` frames stored turned clockwise by ``turn_ccw`` quarter turns, with a display
+    matrix turning them back (lossless x264, so decoding gives the stored planes exactly)."""
+    first = frames[0]
+    h, w = first.y.shape if turn_ccw % 2 == 0 else first.y.shape[::-1]
+    with av.open(str(path), "w") as c:
+        stream = c.add_stream("libx264", rate=30, options={"qp": "0", "preset": "ultrafast"})
+        stream.width, stream.height, stream.pix_fmt = w, h, "yuv420p"
+        if turn_ccw:
+            stream.set_display_rotation(90 * turn_ccw)
+        for i, f in enumerate(frames[:count]):
+            planes = [np.ascontiguousarray(np.rot90(p, -turn_ccw)) for p in (f.y, f.u, f.v)]
+            frame = av.VideoFrame(w, h, "yuv420p")
+            for plane, src in zip(frame.planes, planes):
+                rows = np.frombuffer(plane, np.uint8, count=plane.height * plane.line_size)
+                rows.reshape(plane.height, plane.line_size)[:, : plane.width] = src
+            frame.pts, frame.time_base = i, Fraction(1, 30)
+            c.mux(stream.encode(frame))
+        c.mux(stream.encode(None))
+
+
+def test_a_phone_video_with_a_display_matrix_stitches_like_the_upright_one(bundled_dir, dirs, capfd, warp_device):
+    folder_in, folder_out = dirs
+    clips = bundled_dir / "video"
+    frames = decoded_frames(clips / "rooftop_left.mp4")
+    upright, turned = folder_in / "upright.mp4", folder_in / "turned.mp4"
+    lossless_clip(frames, upright, 0, 20)
+    lossless_clip(frames, turned, 1, 20)
+    assert [np.array_equal(a.y, b.y) for a, b in zip(decoded_frames(upright), decoded_frames(turned))] == [True] * 20
+    reports, outs = [], []
+    for name, left in (("u", upright), ("t", turned)):
+        out, report = folder_out / f"{name}.mp4", folder_out / f"{name}.json"
+        rc, err, _ = run_cli(["video", left, clips / "rooftop_right.mp4", "-o", out, "--report", report, *FAST_VIDEO],
+                             capfd, warp_device)
+        reports.append(json.loads(report.read_text()))
+        # The rotation is a note, said on stderr as it is found (the upright clip has none).
+        assert rc == 0 and err == [f"sena-warp: warning: {note}" for note in reports[-1]["notes"]], err
+        outs.append(decoded_frames(out))
+    assert reports[1]["inputs"]["left"]["rotation_deg"] == 90
+    assert (reports[1]["inputs"]["left"]["width"], reports[1]["inputs"]["left"]["height"]) == (270, 480)
+    assert any("displayed turned 90 degrees" in note for note in reports[1]["notes"])
+    assert reports[0]["stitch"]["first_estimate"]["inliers"] == reports[1]["stitch"]["first_estimate"]["inliers"]
+    assert len(outs[0]) == len(outs[1]) == 20
+    assert all(np.array_equal(a.y, b.y) for a, b in zip(*outs))
+
+
+# --- 6. input semantics: alpha as validity, float ranges --------------------------------------------------
+
+MAGENTA = (255, 0, 255)
+
+
+@pytest.fixture(scope="module")
+def transparent_b(pair, tmp_path_factory):
+    """b (the source SENA warps in this pair) with its left 40 % fully transparent and magenta there."""
+    img_b = cv2.imread(str(pair[1]))
+    rgba = cv2.cvtColor(img_b, cv2.COLOR_BGR2BGRA)
+    cut = int(0.4 * img_b.shape[1])
+    rgba[:, :cut, :3] = MAGENTA
+    rgba[:, :cut, 3] = 0
+    path = tmp_path_factory.mktemp("rgba") / "b.png"
+    cv2.imwrite(str(path), rgba)
+    return path, cut
+
+
+def magenta_pixels(img: np.ndarray) -> int:
+    return int((np.abs(img[:, :, :3].astype(int) - MAGENTA).max(axis=2) < 40).sum())
+
+
+def test_no_keypoint_is_kept_on_or_near_transparent_pixels(pair, transparent_b):
+    path, cut = transparent_b
+    img_b, transparent = read_image_masked(path)
+    assert transparent is not None and transparent[:, :cut].all() and not transparent[:, cut:].any()
+    cfg = Config(device="cpu")
+    matches = match_images(read_image(pair[0]), img_b, cfg, (None, transparent))
+    assert len(matches) > 100
+    assert matches.pts_b[:, 0].min() >= cut + cfg.alpha_margin_px - 0.5
+
+
+def test_transparent_pixels_are_not_content_on_the_canvas(pair, transparent_b, baseline, dirs, capfd, warp_device):
+    _, folder_out = dirs
+    path, _ = transparent_b
+    pano, report = stitch_png([pair[0], path], folder_out / "pano.png", capfd, warp_device)
+    assert report["rig"]["source"] == "b" and report["global_affine"]["inliers"] >= 100
+    assert magenta_pixels(pano) == 0  # not one pixel of the fill under alpha 0
+    # What only b's transparent part would cover is uncovered now (alpha 0), the rest as before.
+    assert (pano[:, :, 3] == 0).sum() > (baseline[:, :, 3] == 0).sum() + 10000
+    # The same colours as an opaque file: the fill shows.
+    opaque = path.with_name("opaque.png")
+    cv2.imwrite(str(opaque), cv2.imread(str(path), cv2.IMREAD_COLOR))
+    rc, err, _ = run_cli(["image", pair[0], opaque, "-o", folder_out / "opaque.png"], capfd, warp_device)
+    assert rc == 0 and magenta_pixels(cv2.imread(str(folder_out / "opaque.png"))) > 10000
+
+
+@pytest.mark.parametrize("scale", [1.0, 255.0, 65535.0])
+def test_float_images_are_scaled_by_their_range(scale, img_a, tmp_path):
+    path = tmp_path / "f.tiff"
+    assert cv2.imwrite(str(path), (img_a.astype(np.float32) * np.float32(scale / 255.0)))
+    assert np.abs(read_image(path).astype(int) - img_a).max() <= (0 if scale <= 255 else 1)
+
+
+def test_a_float_tiff_of_0_255_values_stitches_like_the_8_bit_file(pair, img_a, baseline, dirs, capfd, warp_device):
+    folder_in, folder_out = dirs
+    path = folder_in / "a.tiff"
+    assert cv2.imwrite(str(path), img_a.astype(np.float32))
+    pano, _ = stitch_png([path, pair[1]], folder_out / "pano.png", capfd, warp_device)
+    assert np.array_equal(pano, baseline)
+
+
+# --- 8. failures that say what is the matter ---------------------------------------------------------------
+
+def test_images_far_apart_in_size_say_so(pair, img_a, dirs, capfd, warp_device):
+    folder_in, folder_out = dirs
+    small = folder_in / "small.png"
+    cv2.imwrite(str(small), cv2.resize(cv2.imread(str(pair[1])), (64, 64), interpolation=cv2.INTER_AREA))
+    rc, err, _ = run_cli(["image", pair[0], small, "-o", folder_out / "p.png"], capfd, warp_device)
+    assert rc in (MatchError.exit_code, 4)
+    assert_one_line_error(err, "the images differ 8.0x in size (a 512x512 px, b 64x64 px)",
+                          "resize the larger one")
+    assert list(folder_out.iterdir()) == []
+
+
+def test_a_video_starting_black_names_the_times_tried_and_the_blank_frames(bundled_dir, dirs, capfd, warp_device):
+    folder_in, folder_out = dirs
+    clips = bundled_dir / "video"
+    black = folder_in / "black_start.mp4"
+    reencode_with_black_start(clips / "rooftop_left.mp4", black, 30)
+    rc, err, _ = run_cli(["video", black, clips / "rooftop_right.mp4", "-o", folder_out / "v.mp4", *FAST_VIDEO],
+                         capfd, warp_device)
+    assert rc == MatchError.exit_code
+    assert_one_line_error(err, "no stitch found on the first frame pairs (left frames at 0.00, 0.17, 0.33, 0.50, "
+                          "0.67 s)", "the left frames there are blank", "trim the blank start")
+    assert "right frames there are blank" not in err[0]
+    assert list(folder_out.iterdir()) == []
+
+
+def test_videos_of_other_cameras_and_resolutions_say_both_resolutions(bundled_dir, dirs, capfd, warp_device):
+    _, folder_out = dirs
+    clips = bundled_dir / "video"
+    rc, err, _ = run_cli(["video", clips / "rooftop_left.mp4", clips / "office_cam1.mp4", "-o", folder_out / "v.mp4",
+                          *FAST_VIDEO], capfd, warp_device)
+    assert rc in (MatchError.exit_code, 4)
+    assert_one_line_error(err, "the inputs' resolutions differ (left 270x480, right 640x480)")
+    assert list(folder_out.iterdir()) == []
+
+
+# --- 7. an audio layout the output cannot take: re-encoded, or left out with a warning ----------------------
+
+def with_audio(src, dst, codec: str, layout: str, container: str) -> None:
+    """``src``'s video packets with 2 s of noise as ``codec`` audio in ``layout``."""
+    rate = 48000
+    with av.open(str(src)) as cin, av.open(str(dst), "w", format=container) as cout:
+        video_in = cin.streams.video[0]
+        video_out = cout.add_stream_from_template(video_in)
+        audio = cout.add_stream(codec, rate=rate, layout=layout)
+        fmt, channels = audio.codec_context.format.name, audio.codec_context.layout.nb_channels
+        samples = 960
+        for i in range(2 * rate // samples):
+            noise = (0.1 * np.random.default_rng(i).standard_normal((channels, samples))).astype(np.float32)
+            if fmt.startswith("s16"):
+                noise = (noise * 3000).astype(np.int16)
+            frame = av.AudioFrame.from_ndarray(noise if fmt.endswith("p") else noise.T.reshape(1, -1), format=fmt,
+                                               layout=layout)
+            frame.sample_rate, frame.pts = rate, i * samples
+            cout.mux(audio.encode(frame))
+        cout.mux(audio.encode(None))
+        for packet in cin.demux(video_in):
+            if packet.dts is not None:
+                packet.stream = video_out
+                cout.mux(packet)
+
+
+@pytest.mark.parametrize("codec, layout, container, out_ext, mode, words", [
+    # Matroska keeps PCM without a layout name; MP4's muxer refuses 3 such channels, AAC cannot take them.
+    ("pcm_s16le", "2.1", "matroska", ".mp4", None, "3 channels without a layout"),
+    # The MOV muxer refuses Opus in 7.1: re-encoded to AAC.
+    ("libopus", "7.1", "matroska", ".mov", "aac", "the mov muxer refuses a copy of its opus audio"),
+])
+def test_audio_the_muxer_refuses_is_reencoded_or_left_out_with_a_note(codec, layout, container, out_ext, mode, words,
+                                                                      bundled_dir, tmp_path):
+    clips = bundled_dir / "video"
+    source = tmp_path / "with_audio.mkv"
+    with_audio(clips / "rooftop_left.mp4", source, codec, layout, container)
+    out = tmp_path / f"out{out_ext}"
+    report = run_video(source, clips / "rooftop_right.mp4", out, SideBySide, VideoOptions())
+    assert report["output"]["audio_mode"] == mode and report["frames_out"] == 60
+    assert any(words in said for said in report["notes"] + report["warnings"])
+    left_out = [w for w in report["warnings"] if "the output has no audio" in w]
+    assert len(left_out) == (1 if mode is None else 0)
+    with av.open(str(out)) as c:
+        assert len(c.streams.audio) == (0 if mode is None else 1)
