@@ -257,7 +257,7 @@ class SenaFrameCompositor:
         self._chroma.set_gains(2, cgain_src, cbias_src, cgain_tgt, cbias_tgt)
         t1 = time.perf_counter()
         self._luma.load(y_src, y_tgt)
-        last = self._seam.positions.copy()
+        last = (self._seam.positions if self._seam.shown is None else self._seam.shown).copy()
         positions, diff, both = self._seam.next(self._luma)
         self._seam_motion_px.append(float(np.abs(positions - last).max()))
         self._luma.set_seam(positions.astype(np.float32))
