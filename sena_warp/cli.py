@@ -107,7 +107,16 @@ def cmd_video(args: argparse.Namespace) -> int:
     options = VideoOptions.from_config(cfg, offset_s=args.offset, audio=args.audio, codec=codec,
                                        crf=cfg.video_crf if args.crf is None else args.crf,
                                        preset=args.preset or cfg.video_preset, progress=args.progress or None)
-    report = stitch_videos(args.left, args.right, args.output, cfg, options, reference=args.reference)
+    observer = None
+    if args.figures:
+        # The front end measures the video for its report; the pipeline only calls the observer.
+        from sena_warp.evaluation.video_figures import VideoFigures
+
+        observer = VideoFigures(cfg)
+    report = stitch_videos(args.left, args.right, args.output, cfg, options, reference=args.reference,
+                           observer=observer)
+    if observer is not None:
+        report["figures"] = observer.figures()
     if args.report:
         write_report(report, args.report)
     out, st = report["output"], report["stitch"]
@@ -116,6 +125,11 @@ def cmd_video(args: argparse.Namespace) -> int:
           f"re-estimations {st['reestimations']['accepted']} accepted / {st['reestimations']['rejected']} rejected, "
           f"seam jitter {st['jitter']['seam_jitter_px_mean']} px, dropped {report['dropped']}, "
           f"repeated {report['repeated']}, {report['output_fps']} fps")
+    if observer is not None:
+        fig = report["figures"]
+        print(f"figures: seam motion p99 {fig['seam_motion_px']['p99']} px, exposure step mean "
+              f"{fig['exposure_step_grey']['mean']}, misalignment median {fig['misalignment_px']['median']} px, "
+              f"stability {fig['stability']['value']}")
     return 0
 
 
@@ -174,6 +188,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--audio", choices=("left", "right", "none"), default=Config.video_audio,
                    help="whose audio to copy (default: %(default)s)")
     p.add_argument("--report", help="write a JSON report (frames, drops, re-estimations, jitter, time per stage)")
+    p.add_argument("--figures", action="store_true",
+                   help="measure the video over time (seam motion, exposure step, misalignment at the seam, "
+                        "stability) into the report's 'figures'; slows the run")
     p.add_argument("--reference", choices=("auto", "a", "b"), default="auto",
                    help="input kept unwarped: a = left, b = right (default: auto = the right or bottom view)")
     p.add_argument("--progress", action="store_true", help="show progress on stderr even when it is not a terminal")
