@@ -18,7 +18,7 @@ import pytest
 from sena_warp.config import Config
 from sena_warp.evaluation import naturalness
 from sena_warp.evaluation.video_figures import (VideoFigures, band_flow, forward_on_canvas, source_lattice, stability,
-                                                texture)
+                                                stability_per_point, texture)
 from sena_warp.video.loop import VideoOptions
 from sena_warp.video.stitch import stitch_videos
 from helpers import run_cli
@@ -36,6 +36,8 @@ def test_stability_of_a_path_that_alternates_by_a():
     assert stability(paths) == pytest.approx(4 * a * a)
     assert stability(paths + 100.0) == pytest.approx(4 * a * a)  # where the lattice sits does not matter
     assert stability(np.ones((40, 63, 2))) == 0.0
+    per_point = stability_per_point(np.concatenate([paths, np.zeros((40, 63, 2))], axis=1))
+    assert per_point[:63] == pytest.approx(np.full(63, 4 * a * a)) and not per_point[63:].any()
     assert np.isnan(stability(np.zeros((6, 63, 2))))
 
 
@@ -130,8 +132,8 @@ def test_office_figures_static_rig(office):
     fig = observer.figures()
     assert fig["frames"] == 48 and all(len(v) == 48 for v in fig["per_frame"].values())
     # A static rig's maps never change: one map set, stability 0 exactly.
-    assert fig["stability"] == {"value": 0.0, "points": fig["stability"]["points"], "scale_to": [480, 360],
-                                "map_sets": 1}
+    assert fig["stability"]["value"] == 0.0 and fig["stability"]["map_sets"] == 1
+    assert fig["stability"]["scale_to"] == [480, 360] and len(fig["stability"]["per_point"]) == 63
     assert fig["stability"]["points"] >= 50  # of 63: the lattice's corners fall off this canvas
     # Nothing crosses the seam in these 2 s: measured 0 seam motion in every frame.
     assert fig["seam_motion_px"]["max"] == 0.0 and fig["seam_motion_px"]["where_still_max"] == 0.0

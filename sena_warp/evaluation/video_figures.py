@@ -121,22 +121,27 @@ class SeamBand:
         return y_out[self.index].astype(np.float32)
 
 
-def stability(paths: np.ndarray) -> float:
-    """StabStitch's stability of (T, N, 2) paths (module docstring); NaN with fewer than 7 frames.
+def stability_per_point(paths: np.ndarray) -> np.ndarray:
+    """StabStitch's stability of each of N (T, N, 2) paths: (N,) float64, all NaN with fewer than 7 frames.
 
-    Each term is the mean over frames t = 3 .. T-4, points and both coordinates of the squared
-    difference to frame t - d plus that to t + d.
+    Each term is the mean over frames t = 3 .. T-4 and both coordinates of the squared difference to
+    frame t - d plus that to t + d; :func:`stability` is their mean over the points.
     """
     paths = np.asarray(paths, np.float64)
     frames = len(paths)
     if frames < 7:
-        return math.nan
+        return np.full(paths.shape[1], np.nan)
     mid = paths[3:frames - 3]
-    total = 0.0
+    total = np.zeros(paths.shape[1])
     for d, weight in STABILITY_WEIGHTS.items():
         before, after = paths[3 - d:frames - 3 - d], paths[3 + d:frames - 3 + d]
-        total += weight * (np.mean((before - mid) ** 2) + np.mean((after - mid) ** 2))
-    return float(total)
+        total += weight * (np.mean((before - mid) ** 2, axis=(0, 2)) + np.mean((after - mid) ** 2, axis=(0, 2)))
+    return total
+
+
+def stability(paths: np.ndarray) -> float:
+    """StabStitch's stability of (T, N, 2) paths (module docstring); NaN with fewer than 7 frames."""
+    return float(np.mean(stability_per_point(paths)))
 
 
 def forward_on_canvas(map_src_canvas: np.ndarray, pts_src: np.ndarray, cfg: Config) -> np.ndarray:
@@ -327,13 +332,15 @@ class VideoFigures:
                             "lost": found.lost, "worst_px": round(found.worst_px, 3),
                             "apart_px": round(float(np.median(apart)), 3) if apart.size else None})
 
-    def stability(self) -> tuple[float, int]:
-        """(StabStitch stability, lattice points counted: those on the canvas in every frame)."""
+    def stability(self) -> tuple[float, np.ndarray]:
+        """(StabStitch stability, each lattice point's (63,), NaN for the points not on the canvas in
+        every frame, which do not count)."""
         if not self.paths or any(p is None for p in self.paths):
-            return math.nan, 0
+            return math.nan, np.full(LATTICE_ROWS * LATTICE_COLS, np.nan)
         paths = np.stack(self.paths)
         kept = np.isfinite(paths).all(axis=(0, 2))
-        return (stability(paths[:, kept]) if kept.any() else math.nan), int(kept.sum())
+        per_point = np.where(kept, stability_per_point(np.where(kept[None, :, None], paths, 0.0)), np.nan)
+        return (float(np.mean(per_point[kept])) if kept.any() else math.nan), per_point
 
     def figures(self) -> dict:
         """The run's figures, JSON-ready (module docstring); ``per_frame`` holds the series."""
@@ -349,7 +356,7 @@ class VideoFigures:
         still = [v for v in record["seam_motion_still_px"] if v is not None]
         pooled = np.concatenate(self._flow_cells) if self._flow_cells else np.zeros(0)
         cross = np.concatenate(self._flow_cross) if self._flow_cross else np.zeros(0)
-        value, points = self.stability()
+        value, per_point = self.stability()
         figures = {
             "frames": len(times),
             "band_half_px": self._half,
@@ -381,9 +388,10 @@ class VideoFigures:
                 "across_p95": round(float(np.percentile(cross, 95)), 4) if cross.size else None,
                 "worst_frame_median": _stats(record["misalignment_px"], 100),
             },
-            "stability": {"value": None if not np.isfinite(value) else round(value, 4), "points": points,
-                          "scale_to": list(STABILITY_SIZE),
-                          "map_sets": int(sum(record["maps_changed"]))},
+            "stability": {"value": None if not np.isfinite(value) else round(value, 4),
+                          "points": int(np.isfinite(per_point).sum()), "scale_to": list(STABILITY_SIZE),
+                          "map_sets": int(sum(record["maps_changed"])),
+                          "per_point": [None if not np.isfinite(v) else round(float(v), 5) for v in per_point]},
             "per_frame": {name: [None if v is None else (round(v, 4) if isinstance(v, float) else v) for v in values]
                           for name, values in record.items()},
         }
