@@ -138,10 +138,11 @@ def test_office_figures_static_rig(office):
     # Nothing crosses the seam in these 2 s: measured 0 seam motion in every frame.
     assert fig["seam_motion_px"]["max"] == 0.0 and fig["seam_motion_px"]["where_still_max"] == 0.0
     assert fig["seam_motion_px"]["still_lines_pct_mean"] > 95.0
-    # Measured 1.20 grey levels mean (1.29 p99), changing by 0.23 p99 frame to frame.
-    assert 0.9 < fig["exposure_step_grey"]["mean"] < 1.5
+    # Measured 0.86 grey levels mean (0.95 p99), changing by 0.25 p99 frame to frame (the rows where
+    # the views disagree about the scene's own change are left out of the step, issue 13).
+    assert 0.6 < fig["exposure_step_grey"]["mean"] < 1.2
     assert fig["exposure_step_change_grey"]["p99"] < 0.5
-    # Measured 6.9 px median, 17.6 px p95 at the textured seam cells of 24 sampled frames (near-field
+    # Measured 5.6 px median, 12.3 px p95 at the textured seam cells of 24 sampled frames (near-field
     # furniture the rig's two webcams see with parallax).
     mis = fig["misalignment_px"]
     assert mis["frames"] == 24 and mis["cells"] > 5000
