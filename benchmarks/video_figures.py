@@ -24,6 +24,7 @@ frame (main has no observer; its seam is per estimate, its alpha a map, its gain
 from __future__ import annotations
 
 import argparse
+import ast
 import io
 import json
 import re
@@ -57,15 +58,15 @@ STRIP_EVERY = 10
 FRAME_SHARES = (0.0, 0.33, 0.66, 0.99)  # whole frames kept at these shares of the video
 
 
-def config_for(mode: str) -> Config:
+def config_for(mode: str, changes: dict) -> Config:
     """The run's settings: ``static``, ``moving-S`` (``--rig moving --reestimate S``) or ``moving-S-onthread``
     (the same with the re-estimates on the loop's thread, ``video_estimate_workers=0``, as main makes them:
-    the same frames are estimated every run)."""
+    the same frames are estimated every run); ``changes``: ``Config`` fields set on top (``--set``)."""
     if mode == "static":
-        return Config(video_rig="static")
+        return Config(video_rig="static").replace(**changes)
     rig, period, *where = mode.split("-")
-    return Config(video_rig=rig, video_reestimate_s=float(period),
-                  video_estimate_workers=0 if where == ["onthread"] else Config.video_estimate_workers)
+    workers = 0 if where == ["onthread"] else Config.video_estimate_workers
+    return Config(video_rig=rig, video_reestimate_s=float(period), video_estimate_workers=workers).replace(**changes)
 
 
 def to_bgr(planes) -> np.ndarray:
@@ -153,14 +154,14 @@ def main_stitch_filled(positions: np.ndarray) -> np.ndarray:
     return np.interp(lines, lines[known], positions[known]).astype(np.float32)
 
 
-def run_one(recording: str, mode: str, offset_s: float, videos: Path, out: Path, code: str) -> dict:
+def run_one(recording: str, mode: str, offset_s: float, videos: Path, out: Path, code: str, changes: dict) -> dict:
     """One run (``--offset offset_s``): its report with ``figures``; writes the video, report and pictures."""
     left_name, right_name, _ = RECORDINGS[recording]
     left, right = videos / recording / left_name, videos / recording / right_name
     name = f"{recording}_{mode}" + (f"_offset{offset_s:+g}" if offset_s else "") + ("_main" if code == "main" else "")
     frames = min(probe_video(left).frame_count or 300, probe_video(right).frame_count or 300)
     keep = tuple(sorted({int(share * (frames - 1)) for share in FRAME_SHARES}))
-    cfg = resolve_config(config_for(mode))
+    cfg = resolve_config(config_for(mode, changes))
     observer = VideoFigures(cfg, strip_every=STRIP_EVERY, keep_frames=keep)
     output = out / f"{name}.mp4"
     if code == "main":
@@ -175,6 +176,7 @@ def run_one(recording: str, mode: str, offset_s: float, videos: Path, out: Path,
     report["figures"] = observer.figures()
     report["figures_code"] = code
     report["figures_mode"] = mode
+    report["figures_settings"] = changes
     write_report(report, out / f"{name}.json")
     write_pictures(observer, name, out, not report["stitch"]["rig"]["vertical"])
     return report
@@ -234,6 +236,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=REPO / "out" / "video_figures")
     parser.add_argument("--runs", nargs="*",
                         help="RECORDING:MODE[:OFFSET_S] (default: every recording, every mode, offset 0)")
+    parser.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE",
+                        help="Config changes for every run of this branch's code (e.g. video_warp_follow=0.5)")
     parser.add_argument("--code", choices=("branch", "main"), default="branch")
     parser.add_argument("--main-repo", type=Path, default=REPO.parent / "main")
     parser.add_argument("--tables", type=Path, nargs="+", metavar="DIR", help="only print the tables of these reports")
@@ -241,6 +245,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.tables:
         print_tables(args.tables)
         return 0
+    changes = {k: ast.literal_eval(v) for k, v in (item.split("=", 1) for item in args.set)}
     args.out.mkdir(parents=True, exist_ok=True)
     modes = MAIN_MODES if args.code == "main" else {name: spec[2] for name, spec in RECORDINGS.items()}
     runs = [(*r.split(":")[:2], float(r.split(":")[2]) if r.count(":") == 2 else 0.0) for r in args.runs] \
@@ -251,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.path.insert(0, str(temp))
     reports: dict[str, dict[str, dict]] = {}
     for recording, mode, offset_s in runs:
-        report = run_one(recording, mode, offset_s, args.videos, args.out, args.code)
+        report = run_one(recording, mode, offset_s, args.videos, args.out, args.code, changes)
         label = run_label(report)
         reports.setdefault(recording, {})[label] = report
         print(f"{recording} {label}: {json.dumps({k: v for k, v in report['figures'].items() if k != 'per_frame'})}",
