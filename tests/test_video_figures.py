@@ -165,8 +165,9 @@ def test_moving_rig_seam_glides_at_most_2px_per_frame_blends_included(bundled_di
     # The composited seam, blends included (before the fix of the glide's start it moved up to 4 px).
     motion = [v for v in fig["per_frame"]["seam_motion_px"] if v is not None]
     assert max(motion) <= cfg.video_seam_speed_px
-    # Measured 0.63 on these 60 frames with 3 re-estimates; maps that never change give 0.
-    assert 0.3 < fig["stability"]["value"] < 1.2
+    # Measured 0.24 on these 60 frames with 3 re-estimates (0.63 with video_warp_follow 1.0, each
+    # estimate taken all the way); maps that never change give 0.
+    assert 0.1 < fig["stability"]["value"] < 0.5
     assert fig["misalignment_px"]["median"] < 4.0
 
 

@@ -4,8 +4,9 @@
 fixes the output canvas (``estimate.py``); every frame pair is then composited in YUV 4:2:0 with
 those maps (``maps.py``) by the loop in ``loop.py``. With a moving rig the maps are re-estimated
 every ``cfg.video_reestimate_s`` seconds on the main thread between frames (simple, deterministic);
-implausible estimates are rejected, accepted ones are blended in over ``cfg.video_blend_frames``
-frames so the warp and the seam glide rather than jump. Jitter figures measure what remains.
+implausible estimates are rejected; the maps move ``cfg.video_warp_follow`` of the way to an accepted
+one (an exponential average over the estimates, causal), blended in over ``cfg.video_blend_frames``
+frames at least, so the warp and the seam glide rather than jump. Jitter figures measure what remains.
 
 An optional *observer* (``stitch_videos(observer=...)``) is called once per composited frame with a
 :class:`CompositedFrame`: what went in, what came out and what it was composited with. The pipeline
@@ -272,9 +273,12 @@ class SenaFrameCompositor:
             self._reestimations["rejections"].append({"time_s": round(time_s, 4), "reason": reason})
             return
         self._reestimations["accepted"] += 1
-        seam_move = float(np.nanmax(np.abs(candidate.seam_luma.positions - self._maps.seam_luma.positions)))
+        # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
+        # estimation noise, which an exponential average over the accepted estimates takes out.
+        goal = lerp_maps(self._maps, candidate, self._cfg.video_warp_follow)
+        seam_move = float(np.nanmax(np.abs(goal.seam_luma.positions - self._maps.seam_luma.positions)))
         frames = max(self._cfg.video_blend_frames, int(np.ceil(seam_move / self._cfg.video_seam_speed_px)), 1)
-        self._blend = (self._maps, candidate, 0, frames)
+        self._blend = (self._maps, goal, 0, frames)
         self._advance_blend()
 
     def _advance_blend(self) -> None:
