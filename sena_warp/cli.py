@@ -162,7 +162,7 @@ def cmd_video(args: argparse.Namespace) -> int:
         raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
     return _run_job(Job("video", (args.left, args.right), args.output, args.settings, report=args.report,
                         reference=args.reference, crop=args.crop, offset_s=args.offset, strict=args.strict,
-                        overwrite=args.overwrite))
+                        figures=args.figures, overwrite=args.overwrite))
 
 
 def cmd_config(args: argparse.Namespace) -> int:
@@ -231,6 +231,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="H.264 encoder (default: h264_nvenc when the device is cuda and it opens, else libx264)")
     p.add_argument("--audio", choices=CHOICES["video_audio"], help=f"whose audio to copy (default: {Config.video_audio})")
     p.add_argument("--report", help="write a JSON report (docs/report.md)")
+    p.add_argument("--figures", action="store_true",
+                   help="measure the video over time (seam motion, exposure step, misalignment at the seam, "
+                        "stability) into the report's 'figures'; slows the run")
     p.add_argument("--reference", choices=("auto", "a", "b"), default="auto",
                    help="input kept unwarped: a = left, b = right (default: auto = the right or bottom view)")
     p.add_argument("--strict", action="store_true",

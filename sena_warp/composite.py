@@ -166,6 +166,10 @@ class Compositor:
         """(Hc, Wc) uint8 255 where at least one side of images of these shapes is sampled, else 0."""
         return self._buffers_for(tuple(shape_src), tuple(shape_tgt)).coverage.numpy()
 
+    def seam_positions(self) -> np.ndarray:
+        """(L,) float32: the seam per line as the next :meth:`composite` uses it (after ``set_seam``'s clip)."""
+        return self.seam.numpy().copy()
+
     def seam_weights(self) -> tuple[np.ndarray, np.ndarray]:
         """(alpha, lf) (Hc, Wc) float32 for the current seam: the source weight where both views are
         valid and the weight of the low-frequency offsets (the frame kernel's rule)."""

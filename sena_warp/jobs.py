@@ -34,7 +34,8 @@ class Job:
     largest fully covered rectangle (images) or the largest the first estimate covers (videos, for the
     whole video); ``offset_s`` (videos): seconds the right video started after
     the left one, or "auto" to estimate them; ``strict`` (videos): damaged or truncated inputs fail the
-    job instead of a warning; ``debug`` (images): folder for one picture per stage; ``overwrite``: what
+    job instead of a warning; ``figures`` (videos): measure the video over time into the report's
+    ``figures`` (``evaluation.video_figures``); ``debug`` (images): folder for one picture per stage; ``overwrite``: what
     an existing output gets, one of ``outputs.OVERWRITE_MODES`` (the CLI's default refuses it, ``-y``
     replaces it, ``-n`` skips the job).
     """
@@ -48,6 +49,7 @@ class Job:
     crop: bool = False
     offset_s: float | str = 0.0
     strict: bool = False
+    figures: bool = False
     debug: str | None = None
     overwrite: str = "refuse"
 
@@ -156,8 +158,16 @@ def _video(job: Job, cfg: Config) -> dict | None:
         # Said even with -q, as a fallback is: the user must be able to check the offset the stitch used.
         LOGGER.warning(f"offset auto: {sync.summary()}", extra={"label": ""})
         options = replace(options, offset_s=sync.offset_s)
+    observer = None
+    if job.figures:  # the front end measures the video for its report; the pipeline only calls the observer
+        from sena_warp.evaluation.video_figures import VideoFigures
+
+        observer = VideoFigures(cfg)
     with plan:  # every output or none
-        report = stitch_videos(*job.inputs, job.output, cfg, options, reference=job.reference, plan=plan)
+        report = stitch_videos(*job.inputs, job.output, cfg, options, reference=job.reference, plan=plan,
+                               observer=observer)
+        if observer is not None:
+            report["figures"] = observer.figures()
         report["sync"] = (sync.as_dict() if sync is not None
                           else {"method": "manual", "offset_ms": options.offset_s * 1000})
         if job.report:
@@ -182,4 +192,13 @@ def summary_line(kind: str, report: dict) -> str:
             f"re-estimations {st['reestimations']['accepted']} accepted / {st['reestimations']['rejected']} rejected, "
             f"seam jitter {st['jitter']['seam_jitter_px_mean']} px, dropped {report['dropped']}, "
             f"repeated {report['repeated']}, damaged {sum(report['damaged'].values())}, "
-            f"{report['output_fps']} fps overall{steady}{warnings}")
+            f"{report['output_fps']} fps overall{steady}{warnings}{_figures_summary(report.get('figures'))}")
+
+
+def _figures_summary(fig: dict | None) -> str:
+    """``video --figures``' headline figures, appended to the summary line."""
+    if fig is None:
+        return ""
+    return (f"; seam motion p99 {fig['seam_motion_px']['p99']} px, exposure step mean "
+            f"{fig['exposure_step_grey']['mean']}, misalignment median {fig['misalignment_px']['median']} px, "
+            f"stability {fig['stability']['value']}")

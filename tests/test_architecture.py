@@ -1,7 +1,8 @@
 """Layering: the evaluation subpackage imports the pipeline, never the reverse (issue 12).
 
 Only the front end may reach ``sena_warp.evaluation``: the command line (lazily, for ``eval`` and
-``bench``) and the jobs it and ``batch`` run (the figures of an image's report).
+``bench``) and the jobs it and ``batch`` run (the figures of an image's report, and those of
+``video --figures``).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ def test_no_pipeline_module_imports_the_evaluation():
 
 def test_the_check_sees_the_front_ends_lazy_imports():
     cli, jobs, _ = FRONT_END
-    assert "sena_warp.evaluation.figures" in imported_modules(jobs)
+    assert {"sena_warp.evaluation.figures", "sena_warp.evaluation.video_figures"} <= imported_modules(jobs)
     assert {"evaluation.bench", "evaluation.evaluate"} <= set(_lazy_modules(cli))
 
 

@@ -46,10 +46,13 @@ class FrameSeam:
         self._solver = BandPath(len(home), self.width, 1, cfg)
         self._segment = np.array([[0, len(home) - 1, -1, -1]])
         self._diff = wp.zeros((len(home), self.width), dtype=float, device=cfg.device)
+        self.shown: np.ndarray | None = None  # the positions the last frame was composited with
         self.reset(home)
 
     def reset(self, home: np.ndarray) -> None:
-        """A new estimate's seam: the band follows it; the last path is kept where it still fits."""
+        """A new estimate's seam: the band follows it; the last path is kept where it still fits. The
+        glide still starts from the seam last shown (``shown``), so a band that moves with a blend does
+        not add its own step to the seam's."""
         self.home = np.asarray(home, np.float32)
         self.band_x0 = (np.rint(self.home) - self.band).astype(np.int32)
         last = getattr(self, "positions", self.home)
@@ -63,9 +66,12 @@ class FrameSeam:
         both = diff < 0.5 * NOT_BOTH
         change = np.where(both, np.maximum(np.abs(diff) - cfg.video_seam_noise, 0.0), cfg.video_seam_blocked_cost)
         cells = self.band_x0[:, None] + np.arange(self.width)[None, :]
-        cost = (change + cfg.video_seam_stay_cost * np.abs(cells - self.positions[:, None])
+        last = self.positions if self.shown is None else self.shown
+        cost = (change + cfg.video_seam_stay_cost * np.abs(cells - last[:, None])
                 + cfg.video_seam_home_cost * np.abs(cells - self.home[:, None]))
-        far = np.abs(cells - self.positions[:, None]) > cfg.video_seam_speed_px
+        # Where the band has moved past the last seam (rounding of a blend's step), its nearest cell is near enough.
+        outside = np.maximum(np.maximum(self.band_x0 - last, last - (self.band_x0 + self.width - 1)), 0)
+        far = np.abs(cells - last[:, None]) > np.maximum(cfg.video_seam_speed_px, outside)[:, None]
         glide = self._solver.solve(cost + far * np.float32(cfg.video_seam_blocked_cost * 10), self.band_x0,
                                    self._segment, cfg.seam_max_step_px, cfg.seam_step_cost)
         lines = np.arange(len(self.home))
@@ -80,6 +86,7 @@ class FrameSeam:
             path = free if along(glide) - along(free) > cfg.video_seam_jump_cost * lines_n else glide
         if along(self.positions) - along(path) > cfg.video_seam_margin * lines_n:
             self.positions = path.astype(np.int32)
+        self.shown = self.positions.copy()
         return self.positions, diff, both
 
 

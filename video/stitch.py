@@ -4,8 +4,13 @@
 fixes the output canvas (``estimate.py``); every frame pair is then composited in YUV 4:2:0 with
 those maps (``maps.py``) by the loop in ``loop.py``. With a moving rig the maps are re-estimated
 every ``cfg.video_reestimate_s`` seconds on the main thread between frames (simple, deterministic);
-implausible estimates are rejected, accepted ones are blended in over ``cfg.video_blend_frames``
-frames so the warp and the seam glide rather than jump. Jitter figures measure what remains.
+implausible estimates are rejected; the maps move ``cfg.video_warp_follow`` of the way to an accepted
+one (an exponential average over the estimates, causal), blended in over ``cfg.video_blend_frames``
+frames at least, so the warp and the seam glide rather than jump. Jitter figures measure what remains.
+
+An optional *observer* (``stitch_videos(observer=...)``) is called once per composited frame with a
+:class:`CompositedFrame`: what went in, what came out and what it was composited with. The pipeline
+only calls it; what it measures lives elsewhere (``sena_warp.evaluation.video_figures``).
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ import os
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 
@@ -78,13 +84,55 @@ class PlanePass:
                          spread(per_line_tgt), fill)
 
 
+@dataclass(frozen=True)
+class CompositedFrame:
+    """One composited frame as an observer sees it: read-only views, valid during the call only.
+
+    ``index``: output frame number from 0; ``time_s``: the left frame's time (None when
+    ``composite_yuv`` was called without ``update``); ``source``: which input is the source, "left"
+    or "right" (the other is the target). ``planes_src`` / ``planes_tgt``: the (y, u, v)
+    uint8 planes of the source / target input as decoded (``plane[row, col]``); ``planes_out``: the
+    output's (y, u, v) on the canvas. ``maps``: the :class:`~sena_warp.video.maps.PlaneMaps` composited
+    with (the same object for as long as the maps do not change; input-frame (x, y) sample positions
+    per canvas pixel). ``seam_home``: (L,) float32 the estimate's seam, the centre of the band in
+    which the frame's seam may move, at most ``seam_reach_px`` from it; ``seam``: (L,) float32 the
+    frame's seam as composited; a line is
+    a canvas row when ``lines_are_rows`` (positions are x; the source lies at smaller x), else a
+    column (positions are y). ``gains_luma``: (gain_src, bias_src, gain_tgt, bias_tgt), each (1,)
+    float64, the Y pass's affine gains (``out = gain * Y + bias``); ``offsets_luma``: ((L, 1), (L, 1))
+    float64 the seam blend's per-line offsets of each side, grey levels at the seam. ``weights()``:
+    (alpha, lf) (Hc, Wc) float32 of the Y pass (``Compositor.seam_weights``: one kernel launch over
+    the canvas, so call it only where needed).
+    """
+
+    index: int
+    time_s: float | None
+    source: str
+    planes_src: tuple[np.ndarray, np.ndarray, np.ndarray]
+    planes_tgt: tuple[np.ndarray, np.ndarray, np.ndarray]
+    planes_out: tuple[np.ndarray, np.ndarray, np.ndarray]
+    maps: PlaneMaps
+    seam_home: np.ndarray
+    seam_reach_px: float
+    seam: np.ndarray
+    lines_are_rows: bool
+    gains_luma: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    offsets_luma: tuple[np.ndarray, np.ndarray]
+    weights: Callable[[], tuple[np.ndarray, np.ndarray]]
+
+
+FrameObserver = Callable[[CompositedFrame], None]
+"""Called once per composited frame, on the loop's thread, before the frame is encoded; its time is
+reported as the stitch's ``timing_s.observer``."""
+
+
 class SenaFrameCompositor:
     """The loop's frame compositor for a SENA stitch (see ``loop.FrameCompositor``).
 
     Public surface: :meth:`from_videos` (estimate and build), ``output_size`` (width, height),
     :meth:`update` and :meth:`composite_yuv` (what the loop calls), :meth:`source_target` and
     :meth:`passes` (what a frame is composited with, for the bench's reference implementation),
-    :meth:`report`. Inside: one :class:`~sena_warp.composite.Compositor` for the Y plane and one for
+    :meth:`report`; ``observer`` (a :data:`FrameObserver` or None) sees every composited frame. Inside: one :class:`~sena_warp.composite.Compositor` for the Y plane and one for
     the U/V planes (stacked as two channels), both allocated once; every frame the seam is cut anew
     in its band (``frame_seam``) and the gains follow the cameras' exposure (``exposure``). A moving
     rig's re-estimates run on a worker thread while frames keep flowing on the current maps; an
@@ -93,12 +141,16 @@ class SenaFrameCompositor:
     """
 
     def __init__(self, first: StitchMaps, first_attempts: list[Attempt], first_pair: int, fps: float,
-                 frame_shapes: tuple[tuple[int, int], tuple[int, int]], cfg: Config):
+                 frame_shapes: tuple[tuple[int, int], tuple[int, int]], cfg: Config,
+                 observer: FrameObserver | None = None):
         """From the first estimate ``first`` (made on pair ``first_pair``; ``first_attempts``: every
         pair tried) for inputs at ``fps`` frames per second whose (rows, cols) are ``frame_shapes``
         (left, right); ``cfg.device`` resolved. With ``cfg.video_crop`` the fixed canvas is the largest
-        rectangle the first estimate covers."""
+        rectangle the first estimate covers. ``observer``: called with every composited frame."""
         self._cfg = cfg
+        self.observer = observer
+        self._frames = 0
+        self._time_s: float | None = None
         self._rig = first.rig
         self._reestimate_s = cfg.video_reestimate_s if cfg.video_rig == "moving" else None
         x0, y0, width, height = fixed_canvas(first, self._rig.pick(*frame_shapes), cfg.video_crop)
@@ -127,6 +179,8 @@ class SenaFrameCompositor:
         self._map_change_px: list[float] = []
         self._seam_motion_px: list[float] = []
         self._seconds = {"reestimate": 0.0, "maps_upload": 0.0, "frame_seam": 0.0, "exposure": 0.0}
+        if observer is not None:
+            self._seconds["observer"] = 0.0
 
     def _on_canvas(self, maps: StitchMaps, shape: tuple[int, int]) -> PlaneMaps:
         """An estimate on the fixed canvas, its plan band wide enough for the per-frame seam."""
@@ -137,14 +191,14 @@ class SenaFrameCompositor:
 
     @classmethod
     def from_videos(cls, left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
-                    reference: str) -> "SenaFrameCompositor":
+                    reference: str, observer: FrameObserver | None = None) -> "SenaFrameCompositor":
         """The compositor of two videos: maps from the best of their first frame pairs
         (``estimate.best_first_estimate``); ``offset_s`` as ``VideoOptions.offset_s``, ``reference`` as
         ``stitch_videos``; ``cfg.device`` resolved."""
         maps, pair, attempts = best_first_estimate(left, right, offset_s, cfg, reference)
         info_l, info_r = probe_video(left), probe_video(right)
         return cls(maps, attempts, pair, float(info_l.fps), ((info_l.height, info_l.width), (info_r.height, info_r.width)),
-                   cfg)
+                   cfg, observer)
 
     def source_target(self, item_left, item_right) -> tuple:
         """A (left, right) pair of per-input things (frames, planes, shapes) as (source, target)."""
@@ -158,6 +212,7 @@ class SenaFrameCompositor:
 
     def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         """Before compositing a pair: start, collect or blend in a re-estimate, and record the maps' change."""
+        self._time_s = float(frame_l.time_s)
         before = self._maps
         if self._blend is not None:
             self._advance_blend()
@@ -220,9 +275,12 @@ class SenaFrameCompositor:
             self._reestimations["rejections"].append({"time_s": round(time_s, 4), "reason": reason})
             return
         self._reestimations["accepted"] += 1
-        seam_move = float(np.nanmax(np.abs(candidate.seam_luma.positions - self._maps.seam_luma.positions)))
+        # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
+        # estimation noise, which an exponential average over the accepted estimates takes out.
+        goal = lerp_maps(self._maps, candidate, self._cfg.video_warp_follow)
+        seam_move = float(np.nanmax(np.abs(goal.seam_luma.positions - self._maps.seam_luma.positions)))
         frames = max(self._cfg.video_blend_frames, int(np.ceil(seam_move / self._cfg.video_seam_speed_px)), 1)
-        self._blend = (self._maps, candidate, 0, frames)
+        self._blend = (self._maps, goal, 0, frames)
         self._advance_blend()
 
     def _advance_blend(self) -> None:
@@ -259,7 +317,7 @@ class SenaFrameCompositor:
         self._chroma.set_gains(2, cgain_src, cbias_src, cgain_tgt, cbias_tgt)
         t1 = time.perf_counter()
         self._luma.load(y_src, y_tgt)
-        last = self._seam.positions.copy()
+        last = (self._seam.positions if self._seam.shown is None else self._seam.shown).copy()
         positions, diff, both = self._seam.next(self._luma)
         self._seam_motion_px.append(float(np.abs(positions - last).max()))
         self._luma.set_seam(positions.astype(np.float32))
@@ -272,7 +330,23 @@ class SenaFrameCompositor:
         y = self._luma.composite(LUMA_FILL).copy()
         self._chroma.load(np.dstack((u_src, v_src)), np.dstack((u_tgt, v_tgt)))
         uv = self._chroma.composite(CHROMA_FILL)
-        return y, uv[:, :, 0].copy(), uv[:, :, 1].copy()
+        out = (y, uv[:, :, 0].copy(), uv[:, :, 1].copy())
+        if self.observer is not None:
+            t3 = time.perf_counter()
+            self.observer(self._composited((y_src, u_src, v_src), (y_tgt, u_tgt, v_tgt), out))
+            self._seconds["observer"] += time.perf_counter() - t3
+        self._frames += 1
+        self._time_s = None
+        return out
+
+    def _composited(self, planes_src: tuple, planes_tgt: tuple, planes_out: tuple) -> CompositedFrame:
+        """The frame just composited, for the observer (copies of the small per-line state only)."""
+        return CompositedFrame(
+            index=self._frames, time_s=self._time_s, source="left" if self._rig.source == "a" else "right",
+            planes_src=planes_src, planes_tgt=planes_tgt,
+            planes_out=planes_out, maps=self._maps, seam_home=self._maps.seam_luma.positions,
+            seam_reach_px=float(self._maps.seam_luma.band_px), seam=self._luma.seam_positions(), lines_are_rows=self._maps.seam_luma.lines_are_rows,
+            gains_luma=self._luma.gains(1), offsets_luma=self._luma.offsets(1), weights=self._luma.seam_weights)
 
     def close(self) -> None:
         """Stop the re-estimation worker (a pending estimate is dropped)."""
@@ -335,7 +409,8 @@ def check_rig_settings(cfg: Config) -> None:
 
 
 def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike, cfg: Config,
-                  options: VideoOptions, reference: str = "auto", plan: OutputPlan | None = None) -> dict:
+                  options: VideoOptions, reference: str = "auto", plan: OutputPlan | None = None,
+                  observer: FrameObserver | None = None) -> dict:
     """Stitch two videos into ``output`` with SENA maps; return the run's report.
 
     ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
@@ -343,6 +418,7 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
     ``plan``: commit the video with that plan's other outputs (see ``sena_warp.outputs``).
     The report is :func:`loop.run_video`'s plus ``run`` (tool, device, settings) and ``stitch`` (see
     :meth:`SenaFrameCompositor.report`), its times in one ``timing_s`` block (``docs/report.md``).
+    ``observer``: called with every composited frame (:class:`CompositedFrame`).
     The Warp device of ``cfg`` is resolved here, once for the whole video.
     """
     check_rig_settings(cfg)
@@ -353,7 +429,7 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
     built: list[SenaFrameCompositor] = []
 
     def factory(first_l: YuvFrame, first_r: YuvFrame) -> SenaFrameCompositor:
-        built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference))
+        built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference, observer))
         return built[0]
 
     try:

@@ -113,38 +113,51 @@ def copy_figures(copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray, w
                        worst_px=float(distance[bad].max()) if bad.any() else 0.0)
 
 
+def seam_steps(pano_grey: np.ndarray, src_grey: np.ndarray, tgt_grey: np.ndarray, valid_src: np.ndarray,
+               valid_tgt: np.ndarray, seam_x: np.ndarray) -> np.ndarray:
+    """The signed seam step of each row, averaged over ``STEP_ROWS`` rows (module docstring): (H,) float64
+    grey levels, NaN where a row or too many of its neighbours lack both views on both strips or have
+    views that disagree about the scene's own change there (``STEP_AGREE_GREY``).
+
+    Arguments as :func:`seam_step`. A positive step: the panorama is brighter just left of the seam
+    than the views' own change explains.
+    """
+    height, width = pano_grey.shape
+    offsets = np.arange(STEP_NEAR_PX, STEP_FAR_PX + 1)
+    seam_x = np.asarray(seam_x, np.float64)
+    finite = np.isfinite(seam_x)
+    at = np.where(finite, seam_x, 0.0)[:, None]
+    left, right = np.floor(at - offsets).astype(int), np.ceil(at + offsets).astype(int)
+    known = finite & (left.min(axis=1) >= 0) & (right.max(axis=1) < width)
+    left, right = np.clip(left, 0, width - 1), np.clip(right, 0, width - 1)
+    rows = np.arange(height)[:, None]
+    both = np.asarray(valid_src) & np.asarray(valid_tgt)
+    known &= both[rows, left].all(axis=1) & both[rows, right].all(axis=1)
+
+    def across(img: np.ndarray) -> np.ndarray:
+        return img[rows, left].mean(axis=1) - img[rows, right].mean(axis=1)
+
+    change_src, change_tgt = across(src_grey), across(tgt_grey)
+    known &= np.abs(change_src - change_tgt) <= STEP_AGREE_GREY
+    steps = np.where(known, across(pano_grey) - 0.5 * (change_src + change_tgt), 0.0)
+    window = np.ones(STEP_ROWS)
+    total = np.convolve(steps, window, "same")
+    count = np.convolve(known.astype(np.float64), window, "same")
+    kept = known & (count >= STEP_ROWS / 2)
+    return np.where(kept, total / np.maximum(count, 1.0), np.nan)
+
+
 def seam_step(pano_grey: np.ndarray, src_grey: np.ndarray, tgt_grey: np.ndarray, valid_src: np.ndarray,
               valid_tgt: np.ndarray, seam_x: np.ndarray) -> float:
-    """The seam step in grey levels (module docstring); NaN when no row has both views on both strips.
+    """The seam step in grey levels (module docstring): the mean of |:func:`seam_steps`| over the rows
+    where it is defined; NaN when no row has both views on both strips.
 
     pano_grey, src_grey, tgt_grey: (H, W) float canvas images (the panorama, each view as it enters the
     panorama: warped, gain-compensated); valid_*: (H, W) bool; seam_x: (H,) seam x per row.
     """
-    height, width = pano_grey.shape
-    offsets = np.arange(STEP_NEAR_PX, STEP_FAR_PX + 1)
-    steps = np.full(height, np.nan)
-    for y in range(height):
-        s = seam_x[y]
-        if not np.isfinite(s):
-            continue
-        left, right = np.floor(s - offsets).astype(int), np.ceil(s + offsets).astype(int)
-        if left.min() < 0 or right.max() >= width:
-            continue
-        strips = np.r_[left, right]
-        if not (valid_src[y, strips].all() and valid_tgt[y, strips].all()):
-            continue
-        across = lambda img: img[y, left].mean() - img[y, right].mean()  # noqa: E731
-        if abs(across(src_grey) - across(tgt_grey)) > STEP_AGREE_GREY:
-            continue
-        steps[y] = across(pano_grey) - 0.5 * (across(src_grey) + across(tgt_grey))
+    steps = seam_steps(pano_grey, src_grey, tgt_grey, valid_src, valid_tgt, seam_x)
     known = np.isfinite(steps)
-    if not known.any():
-        return float("nan")
-    window = np.ones(STEP_ROWS)
-    total = np.convolve(np.where(known, steps, 0.0), window, "same")
-    count = np.convolve(known.astype(np.float64), window, "same")
-    smooth = total[known & (count >= STEP_ROWS / 2)] / count[known & (count >= STEP_ROWS / 2)]
-    return float(np.mean(np.abs(smooth))) if smooth.size else float("nan")
+    return float(np.mean(np.abs(steps[known]))) if known.any() else float("nan")
 
 
 def line_segments(img: np.ndarray) -> np.ndarray:
