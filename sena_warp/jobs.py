@@ -32,12 +32,12 @@ class Job:
 
     ``reference``: input kept unwarped ("a" / "b", "auto" = the right or bottom view); ``crop``: keep the
     largest fully covered rectangle (images) or the largest the first estimate covers (videos, for the
-    whole video); ``offset_s`` (videos): seconds the right video started after
-    the left one, or "auto" to estimate them; ``strict`` (videos): damaged or truncated inputs fail the
-    job instead of a warning; ``figures`` (videos): measure the video over time into the report's
-    ``figures`` (``evaluation.video_figures``); ``debug`` (images): folder for one picture per stage; ``overwrite``: what
-    an existing output gets, one of ``outputs.OVERWRITE_MODES`` (the CLI's default refuses it, ``-y``
-    replaces it, ``-n`` skips the job).
+    whole video); ``offset_s`` (videos): seconds the right video started after the left one, or "auto"
+    to estimate them; ``strict`` (videos): damaged or truncated inputs fail the job instead of a
+    warning; ``figures`` (videos): measure the video over time into the report's ``figures``
+    (``evaluation.video_figures``); ``debug`` (images): folder for one picture per stage;
+    ``overwrite``: what an existing output gets, one of ``outputs.OVERWRITE_MODES`` (the CLI's default
+    refuses it, ``-y`` replaces it, ``-n`` skips the job).
     """
 
     kind: str
