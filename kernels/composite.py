@@ -4,7 +4,10 @@ The source is shown on one side of the seam, the target on the other; across a t
 the two are mixed by ``kernels/seam.py``'s ``source_alpha`` (the rule the seam maps' alpha follows). Each side gets its own per-channel affine gain (exposure
 compensation) and, within ``lf_px`` of the seam, a per-line offset that fades linearly to 0 (the
 low-frequency part of the seam blend: what is left of an exposure difference after the gains is
-spread over a wide band, while detail switches sides within T).
+spread over a wide band, while detail switches sides within T). The same kind of offset, per position
+along it, fades out from each of the target's two borders across the seam's direction (its top and
+bottom edges for a horizontal rig): beyond the seam's ends the canvas switches from the target to the
+source there, and the border blend hides what the gains leave of that step too.
 
 The seam is one position per *line*: per canvas row (x of the seam) when ``lines_are_rows`` is 1,
 per canvas column (y of the seam) for a vertical rig. The source lies at positions below the seam.
@@ -38,6 +41,29 @@ def lf_weight(d: float, lf_px: float) -> float:
     if lf_px <= 0.0:
         return 0.0
     return wp.max(0.0, 1.0 - wp.abs(d) / lf_px)
+
+
+@wp.func
+def side_offset(lf: float, lf_line: wp.array(dtype=int), lo: int, border: wp.vec2, border_pos: wp.array(dtype=int),
+                bo: int, second: int) -> int:
+    """A side's low-frequency offset of one channel: its seam line's (element ``lo``) weighted ``lf``,
+    plus each border's at this position (elements ``bo`` and ``bo + second``) weighted ``border``."""
+    off = float(0.0)
+    if lf > 0.0:
+        off = lf * float(lf_line[lo])
+    if border[0] > 0.0:
+        off += border[0] * float(border_pos[bo])
+    if border[1] > 0.0:
+        off += border[1] * float(border_pos[bo + second])
+    return int(off)
+
+
+@wp.func
+def border_weights(line: int, border_lines: wp.vec2, border_on: int, lf_px: float) -> wp.vec2:
+    """How much of each border's offsets a pixel on ``line`` gets (0 without a border blend)."""
+    if border_on == 0:
+        return wp.vec2(0.0, 0.0)
+    return wp.vec2(lf_weight(float(line) - border_lines[0], lf_px), lf_weight(float(line) - border_lines[1], lf_px))
 
 
 @wp.func
@@ -182,6 +208,11 @@ def _composite_frame_kernel(channels: int):
         lf_px: float,
         lf_src: wp.array(dtype=int),
         lf_tgt: wp.array(dtype=int),
+        border_on: int,
+        border_lines: wp.vec2,
+        second: int,
+        border_src: wp.array(dtype=int),
+        border_tgt: wp.array(dtype=int),
         gain_src: wp.vec4i,
         bias_src: wp.vec4i,
         gain_tgt: wp.vec4i,
@@ -189,10 +220,12 @@ def _composite_frame_kernel(channels: int):
         fill: wp.vec4i,
         out: wp.array(dtype=wp.uint8),
     ):
-        """out[y, x, c] from the plan; per side ``gain * sample + bias + lf_weight * lf[line, c]``.
+        """out[y, x, c] from the plan; per side ``gain * sample + bias + lf_weight * lf[line, c]`` plus,
+        with ``border_on``, ``lf_weight(line - border_lines[k]) * border[k, position, c]`` for both borders
+        (``second``: the element offset of border 1, positions x C).
 
-        Flat arrays: ``img_*`` (H, W, C), ``out`` (Hc, Wc, C), ``plan*`` (Hc, Wc), ``lf_*`` (lines, C)
-        in 1/2**20 grey levels; gains in 1/2**12, biases in 1/2**20 grey levels. ``steps`` = (src x
+        Flat arrays: ``img_*`` (H, W, C), ``out`` (Hc, Wc, C), ``plan*`` (Hc, Wc), ``lf_*`` (lines, C) and
+        ``border_*`` (2, positions, C) in 1/2**20 grey levels; gains in 1/2**12, biases in 1/2**20 grey levels. ``steps`` = (src x
         step, src y step, tgt x step, tgt y step) in elements. Thread (i, j) does row ``row0 + i``,
         columns j, j + col_step, ... (see ``runtime.launch_row_loops``).
         """
@@ -211,6 +244,8 @@ def _composite_frame_kernel(channels: int):
             d = float(lp[1]) - seam[lp[0]]
             lf = lf_weight(d, lf_px)
             lo = lp[0] * wp.static(channels)
+            bw = border_weights(lp[0], border_lines, border_on, lf_px)
+            bo = lp[1] * wp.static(channels)
             a = float(1.0)
             if kind == KIND_TARGET:
                 a = 0.0
@@ -223,9 +258,7 @@ def _composite_frame_kernel(channels: int):
             fy = word_fy(word)
             if a >= 1.0:
                 for c in range(wp.static(channels)):
-                    off = int(0)
-                    if lf > 0.0:
-                        off = int(lf * float(lf_src[lo + c]))
+                    off = side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second)
                     v = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], off)
                     out[o + c] = grey_level(v)
             elif a <= 0.0:
@@ -235,9 +268,7 @@ def _composite_frame_kernel(channels: int):
                     fx = word_fx(word)
                     fy = word_fy(word)
                 for c in range(wp.static(channels)):
-                    off = int(0)
-                    if lf > 0.0:
-                        off = int(lf * float(lf_tgt[lo + c]))
+                    off = side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second)
                     v = adjusted(sample_fixed(img_tgt, p + c, fx, fy, steps[2], steps[3]), gain_tgt[c], bias_tgt[c], off)
                     out[o + c] = grey_level(v)
             else:
@@ -247,9 +278,9 @@ def _composite_frame_kernel(channels: int):
                 fy_t = word_fy(word_t)
                 for c in range(wp.static(channels)):
                     vs = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c],
-                                  int(lf * float(lf_src[lo + c])))
+                                  side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second))
                     vt = adjusted(sample_fixed(img_tgt, p_t + c, fx_t, fy_t, steps[2], steps[3]), gain_tgt[c], bias_tgt[c],
-                                  int(lf * float(lf_tgt[lo + c])))
+                                  side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second))
                     out[o + c] = grey_level(int(a * float(vs) + (1.0 - a) * float(vt)))
 
     return composite_frame

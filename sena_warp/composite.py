@@ -3,7 +3,8 @@
 ``Compositor`` uploads the maps to the Warp device once and turns them, once per input shape, into a
 fixed-point plan (see ``kernels/composite.py``). Per frame it takes the two images and, when they
 change, the seam positions (video: the seam re-optimised in its band), the per-side gains and the
-seam blend's low-frequency offsets; one integer-plan kernel launch composites the frame.
+seam blend's low-frequency offsets (per seam line, and per position along the target's two borders
+beyond the seam's ends); one integer-plan kernel launch composites the frame.
 """
 
 from __future__ import annotations
@@ -94,6 +95,7 @@ class Compositor:
         self.seam_static = wp.array(np.ascontiguousarray(seam.positions, np.float32), dtype=float, device=device)
         self.seam = wp.clone(self.seam_static)
         self._lf = {}
+        self._border = {}
         self._gains = {}
         self._buffers: dict[tuple, _Buffers] = {}
         self._loaded: tuple[_Buffers, int, bool] | None = None
@@ -148,6 +150,18 @@ class Compositor:
                                            wp.zeros(self.lines * channels, dtype=int, device=self.device))
         arrays[0].assign(np.rint(np.ascontiguousarray(lf_src, np.float64).ravel() * LEVEL).astype(np.int32))
         arrays[1].assign(np.rint(np.ascontiguousarray(lf_tgt, np.float64).ravel() * LEVEL).astype(np.int32))
+
+    def set_border_offsets(self, border_lines: tuple[float, float], border_src: np.ndarray, border_tgt: np.ndarray) -> None:
+        """Low-frequency offsets (2, P, C) float32 of each side along the target's two borders (grey levels
+        at the border, fading like the seam's over ``lf_px``): border k lies at line coordinate
+        ``border_lines[k]``, P positions along it (canvas columns when lines are rows, else rows)."""
+        positions = self.canvas_shape[1] if self.layout.lines_are_rows else self.canvas_shape[0]
+        channels = border_src.shape[2]
+        if border_src.shape != (2, positions, channels) or border_tgt.shape != border_src.shape:
+            raise ValueError(f"border offsets need shape (2, {positions}, C), got {border_src.shape} and {border_tgt.shape}")
+        self._border[channels] = (1, wp.vec2(*border_lines), positions * channels,
+                                  *(wp.array(np.rint(np.ascontiguousarray(v, np.float64).ravel() * LEVEL).astype(np.int32),
+                                             dtype=int, device=self.device) for v in (border_src, border_tgt)))
 
     def _buffers_for(self, shape_src: tuple, shape_tgt: tuple) -> _Buffers:
         key = (shape_src, shape_tgt)
@@ -215,6 +229,9 @@ class Compositor:
         if channels not in self._lf:
             zeros = np.zeros((self.lines, channels), np.float32)
             self.set_offsets(zeros, zeros)
+        if channels not in self._border:
+            none = wp.zeros(1, dtype=int, device=self.device)
+            self._border[channels] = (0, wp.vec2(0.0, 0.0), 0, none, none)
 
     def band_difference(self, band_x0: np.ndarray, width: int, out: wp.array) -> np.ndarray:
         """Source minus target (channel 0, with gains; grey levels) of the loaded pair on a band of
@@ -237,7 +254,8 @@ class Compositor:
             raise ValueError(f"fill has {len(values)} values for {channels} channels")
         lf_src, lf_tgt = self._lf[channels]
         inputs = [*buf.frame_inputs, self.seam, int(self.layout.lines_are_rows), float(self.layout.transition_px),
-                  float(self.layout.smooth_sigma_px), float(self.layout.lf_px), lf_src, lf_tgt, *self._gains[channels],
+                  float(self.layout.smooth_sigma_px), float(self.layout.lf_px), lf_src, lf_tgt, *self._border[channels],
+                  *self._gains[channels],
                   wp.vec4i(*values, *[0] * (MAX_CHANNELS - channels)), buf.out_flat]
         runtime.launch_row_loops(COMPOSITE_FRAME_KERNELS[channels], *self.canvas_shape, inputs, self.device,
                                  self.threads)

@@ -15,7 +15,9 @@ anchor (issue 13); with ``cfg.seam_model == "path"`` it is a smoothing spline th
 What is left of an exposure difference after the gains is hidden by the seam blend's low-frequency
 part (``seam_offsets``): per row, half the mean difference of the two views next to the seam is taken
 off the brighter side and added to the darker one, fading to nothing ``cfg.seam_blend_ratio`` x the
-image diagonal away, while detail still switches sides within the narrow transition.
+image diagonal away, while detail still switches sides within the narrow transition. Beyond the
+seam's ends the canvas also switches views, along the target's top and bottom borders where the source
+goes on beyond them; ``border_offsets`` does the same there, per canvas column (``cfg.border_blend``).
 Convention: the source is the LEFT view on the canvas (the caller transposes/flips other rigs).
 """
 
@@ -203,3 +205,94 @@ def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, 
     per_row = diff.sum(axis=1) / np.maximum(count, 1)[:, None]
     delta = running_mean(per_row, count > 0, cfg.seam_blend_rows).astype(np.float32)
     return SeamOffsets(-0.5 * delta, 0.5 * delta, float(cfg.seam_blend_ratio * diag_px))
+
+
+@dataclass(frozen=True)
+class BorderOffsets:
+    """The seam blend along the target's two borders (its top and bottom edges on the working canvas):
+    ``lines`` the two borders' y (between the target's first row and the one above it, between its
+    last and the one below); ``src``, ``tgt``: (2, W, C) float32 grey levels added to each view per
+    canvas column at that border, fading linearly to 0 at ``fade_px`` from it; ``on``: False when
+    off (all zero)."""
+
+    lines: tuple[float, float]
+    src: np.ndarray
+    tgt: np.ndarray
+    on: bool
+
+
+def with_seam_offsets(img: np.ndarray, rows: slice, seam_x_canvas: np.ndarray, per_row: np.ndarray,
+                      fade_px: float) -> np.ndarray:
+    """(R, W, C) float32: rows ``rows`` of a canvas view with the seam blend's offsets ``per_row`` (H, C)
+    added as the compositor adds them (full at the seam, fading linearly to 0 at ``fade_px`` > 0)."""
+    cols = np.arange(img.shape[1], dtype=np.float32)[None, :]
+    weight = np.maximum(0.0, 1.0 - np.abs(cols - seam_x_canvas[rows, None]) / fade_px)
+    return img[rows].astype(np.float32) + weight[:, :, None] * per_row[rows, None, :]
+
+
+def block_medians(diff: np.ndarray, used: np.ndarray, block: int, mad_limit: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per block of ``block`` columns of a strip: (centres (K,), medians (K,)) of the channel-mean
+    differences ``diff`` (R, W, C) where ``used`` (R, W) (a brightness residual: the gains took the
+    colour), for the blocks where at least a third of the strip is used
+    and every channel's median absolute deviation of the differences is at most ``mad_limit`` (above it
+    the two views show different things there, not one thing at two exposures)."""
+    centres, medians = [], []
+    for x0 in range(0, diff.shape[1], block):
+        mask = used[:, x0:x0 + block]
+        if mask.sum() < mask.size / 3:
+            continue
+        values = diff[:, x0:x0 + block][mask]
+        if np.median(np.abs(values - np.median(values, axis=0)), axis=0).max() > mad_limit:
+            continue
+        centres.append(x0 + 0.5 * (mask.shape[1] - 1))
+        medians.append(np.median(values.mean(axis=1)))
+    return np.asarray(centres), np.asarray(medians)
+
+
+def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamOffsets, offset_tgt: tuple[float, float],
+                   height_tgt: int, cfg: Config) -> BorderOffsets:
+    """Offsets that take half the two views' difference along each of the target's horizontal borders
+    off one side and add it to the other, per canvas column, where the panorama switches from the
+    target to the source across that border (the target shown inside it, the source going on beyond
+    it): from 0 at the seam (where the seam blend has met the views) to the measured difference, fading
+    to nothing over ``cfg.seam_blend_rows`` columns where the source does not go on.
+
+    The difference is measured on the ``cfg.seam_blend_strip_px`` rows just inside the border, after
+    the seam offsets, as the median of each block of ``cfg.seam_blend_rows`` columns, and interpolated
+    between blocks; a block whose views show different things (``block_medians``,
+    ``cfg.border_blend_mad_grey``) follows its neighbours. All zero when ``cfg.border_blend`` is off or
+    the seam blend is.
+
+    views: the gain-compensated canvas views; seam_x_canvas: (H,) seam x per row; offsets: the seam
+    blend's; offset_tgt: the target's (x, y) on the canvas; height_tgt: its rows.
+    """
+    height, width = views.both.shape
+    channels = views.src.shape[2]
+    oy = int(round(offset_tgt[1]))
+    lines = (oy - 0.5, oy + height_tgt - 0.5)
+    zeros = np.zeros((2, width, channels), np.float32)
+    if not cfg.border_blend or offsets.fade_px <= 0:
+        return BorderOffsets(lines, zeros, zeros.copy(), False)
+    strip = max(1, cfg.seam_blend_strip_px)
+    block = max(1, cfg.seam_blend_rows)
+    inside_rows = (slice(max(oy, 0), min(oy + strip, height)),
+                   slice(max(oy + height_tgt - strip, 0), min(oy + height_tgt, height)))
+    beyond_rows = (oy - 1, oy + height_tgt)
+    seam_x = np.asarray(seam_x_canvas, np.float32)
+    cols = np.arange(width)
+    delta = zeros.copy()
+    for k, (rows, beyond) in enumerate(zip(inside_rows, beyond_rows)):
+        if not 0 <= beyond < height or rows.start >= rows.stop:
+            continue
+        shown_tgt = views.both[rows] & (cols[None, :] > seam_x[rows, None] + 0.5 * cfg.transition_px)
+        diff = (with_seam_offsets(views.src, rows, seam_x, offsets.src, offsets.fade_px)
+                - with_seam_offsets(views.tgt, rows, seam_x, offsets.tgt, offsets.fade_px))
+        centres, medians = block_medians(diff, shown_tgt & views.valid_src[beyond][None, :], block, cfg.border_blend_mad_grey)
+        seam_at = float(seam_x[rows.start if k == 0 else rows.stop - 1])
+        if not len(centres) or not np.isfinite(seam_at):
+            continue
+        right = centres > seam_at  # at the seam the seam blend has met the views already: the offsets start at 0 there
+        along = np.interp(cols, np.r_[seam_at, centres[right]], np.r_[0.0, medians[right]], left=0.0)
+        goes_on = np.convolve(views.valid_src[beyond].astype(np.float64), np.ones(block) / block, "same")
+        delta[k] = (along * goes_on)[:, None]
+    return BorderOffsets(lines, -0.5 * delta, 0.5 * delta, True)

@@ -12,7 +12,8 @@ compositor never transposes frames.
 
 Where this departs from the paper (issue 13, ``docs/evaluation.md``), the paper's version stays one
 setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
-``seam_model="paper"`` (steps 8-9), ``gain_model="none"``, ``seam_blend_ratio=0``, ``transition_px=24``.
+``seam_model="paper"`` (steps 8-9), ``gain_model="none"``, ``seam_blend_ratio=0``, ``border_blend=False``,
+``transition_px=24``.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from .gate import gate_canvas, guard_field
 from .global_affine import GlobalAffine, fit_global_affine, near_model
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
-from .partition import SeamMaps, SeamOffsets, seam_maps, seam_offsets
+from .partition import BorderOffsets, SeamMaps, SeamOffsets, border_offsets, seam_maps, seam_offsets
 from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .seam_path import SeamPath, seam_line
@@ -89,13 +90,15 @@ class Warp:
 @dataclass(frozen=True)
 class Seam:
     """Steps 7-9 in the working frame (positions and maps on the working canvas): the zone, the seam's
-    path and anchors, the seam maps, each view's gains and the seam blend's offsets."""
+    path and anchors, the seam maps, each view's gains and the seam blend's offsets (along the seam and
+    along the target's borders beyond its ends)."""
 
     zone: Zone
     path: SeamPath
     maps: SeamMaps
     gains: Gains
     offsets: SeamOffsets
+    border: BorderOffsets
 
     @property
     def anchors_src_canvas(self) -> np.ndarray:
@@ -201,7 +204,8 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndar
         maps = seam_maps(warp.map_src_canvas, canvas, path, cfg)
     with clock("seam_blend"):
         offsets = seam_offsets(views, path.seam_x_canvas, _diagonal_px(img_src, img_tgt), cfg)
-    return Seam(zone, path, maps, gains, offsets)
+        border = border_offsets(views, path.seam_x_canvas, offsets, canvas.offset_tgt, img_tgt.shape[0], cfg)
+    return Seam(zone, path, maps, gains, offsets, border)
 
 
 def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
@@ -255,6 +259,8 @@ def panorama_compositor(maps: StitchMaps, cfg: Config,
     gains, offsets = maps.seam.gains, maps.seam.offsets
     compositor.set_gains(len(gains.gain_src), gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt)
     compositor.set_offsets(offsets.src, offsets.tgt)
+    if maps.seam.border.on:
+        compositor.set_border_offsets(maps.seam.border.lines, maps.seam.border.src, maps.seam.border.tgt)
     return compositor
 
 

@@ -28,8 +28,9 @@ def layout(scene, lines_are_rows=True, band_px=12.0, lf_px=40.0, wobble=15.0) ->
     return SeamLayout(positions.astype(np.float32), lines_are_rows, band_px, 8.0, 1.5, lf_px)
 
 
-def reference(comp: Compositor, img_src, img_tgt, map_src, map_tgt):
-    """(values (Hc, Wc, C) float64, covered (Hc, Wc) bool) of the compositing rule."""
+def reference(comp: Compositor, img_src, img_tgt, map_src, map_tgt, border=None):
+    """(values (Hc, Wc, C) float64, covered (Hc, Wc) bool) of the compositing rule; ``border``: the
+    (lines, src, tgt) given to ``set_border_offsets``, or None."""
     img_src = img_src if img_src.ndim == 3 else img_src[:, :, None]
     img_tgt = img_tgt if img_tgt.ndim == 3 else img_tgt[:, :, None]
     channels = img_src.shape[2]
@@ -44,6 +45,15 @@ def reference(comp: Compositor, img_src, img_tgt, map_src, map_tgt):
         off_src, off_tgt = off_src[:, None, :], off_tgt[:, None, :]
     src = gain_src * v_src + bias_src + lf[..., None] * off_src
     tgt = gain_tgt * v_tgt + bias_tgt + lf[..., None] * off_tgt
+    if border is not None:
+        lines, border_src, border_tgt = border
+        height, width = alpha.shape
+        line = np.arange(height)[:, None] if comp.layout.lines_are_rows else np.arange(width)[None, :]
+        for k in range(2):
+            weight = np.clip(1 - np.abs(line - lines[k]) / comp.layout.lf_px, 0, None)[..., None]
+            along_src, along_tgt = (b[k][None, :, :] if comp.layout.lines_are_rows else b[k][:, None, :]
+                                    for b in (border_src, border_tgt))
+            src, tgt = src + weight * along_src, tgt + weight * along_tgt
     a = np.where(ok_src, np.where(ok_tgt, alpha, 1.0), 0.0)[..., None]
     covered = ok_src | ok_tgt
     return np.where(covered[..., None], np.clip(a * src + (1 - a) * tgt, 0, 255), 0.0), covered
@@ -83,6 +93,29 @@ def test_compositor_matches_reference_with_gains_and_offsets(scene, device, line
     np.testing.assert_array_equal(coverage, np.where(covered, 255, 0))
     assert np.abs(out.astype(np.float64) - expected).max() <= 1.0
     assert 0.3 < covered.mean() < 1.0
+
+
+@pytest.mark.parametrize("lines_are_rows", [True, False])
+def test_border_offsets_fade_from_both_borders_on_each_side(scene, lines_are_rows, warp_device):  # noqa: F811
+    """The border blend adds each side's offsets per position along the two borders, fading over lf_px
+    across them, on top of the seam's offsets (the reference adds them in float64)."""
+    img_src, img_tgt, map_src, map_tgt, _ = scene
+    seam = layout(scene, lines_are_rows)
+    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
+    lines = len(seam.positions)
+    ramp = np.linspace(-6, 6, lines, dtype=np.float32)[:, None]
+    comp.set_offsets(np.hstack([ramp, -ramp, ramp * 0]), np.hstack([-ramp, ramp, ramp * 0 + 2]))
+    positions = map_src.shape[1] if lines_are_rows else map_src.shape[0]
+    along = np.linspace(-9, 9, positions, dtype=np.float32)[:, None] * np.array([1.0, -0.5, 0.25], np.float32)
+    border = ((10.5, lines - 20.5), np.stack([along, -along]), np.stack([-along, 2 * along + 3]))
+    plain = comp.apply(img_src, img_tgt)
+    comp.set_border_offsets(*border)
+    out = comp.apply(img_src, img_tgt)
+    expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt, border)
+    assert np.abs(out.astype(np.float64) - expected).max() <= 1.0
+    near = np.abs(np.arange(lines) - 10.5) < 0.5 * seam.lf_px
+    changed = np.abs(out.astype(int) - plain.astype(int)).max(axis=2)
+    assert (changed[near] if lines_are_rows else changed[:, near]).max() >= 4  # the offsets are there to see
 
 
 @pytest.mark.parametrize("device", DEVICES)

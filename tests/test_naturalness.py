@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from sena_warp.evaluation import naturalness as nat
 
@@ -63,3 +64,20 @@ def test_seam_step_equals_its_per_row_definition_on_a_real_pair(udisd_pair):
         expected, disagree = seam_step_per_row(pano, src, tgt, valid_src, valid_tgt, seam_x)
         assert 0 < disagree < height / 2, trial  # the filter leaves some rows out, not most
         assert nat.seam_step(pano, src, tgt, valid_src, valid_tgt, seam_x) == expected, trial
+
+
+def test_border_step_is_the_exposure_step_across_the_targets_border(udisd_pair):
+    """A real image as the source everywhere and, inside rows 100-399 right of a seam, as the target
+    too, 8 grey levels brighter: the border step is that 8 (the scene's own change across the border
+    cancels), and 0 without the step; columns where the source is shown on both sides do not count."""
+    grey = cv2.cvtColor(udisd_pair[1], cv2.COLOR_BGR2GRAY).astype(np.float32)
+    height, width = grey.shape
+    rows, cols = np.mgrid[0:height, 0:width]
+    weight_tgt = ((rows >= 100) & (rows < 400) & (cols > 200)).astype(np.float32)
+    valid_src = np.ones(grey.shape, bool)
+    for step in (8.0, 0.0):
+        pano = grey + step * weight_tgt
+        assert nat.border_step(pano, grey, valid_src, weight_tgt, (99.5, 399.5)) == pytest.approx(step, abs=1e-3)
+    pano = grey + 8.0 * weight_tgt
+    weight_tgt[:, :] = 0.0
+    assert np.isnan(nat.border_step(pano, grey, valid_src, weight_tgt, (99.5, 399.5)))

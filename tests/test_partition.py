@@ -10,7 +10,7 @@ from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.evaluation.metrics import anchor_residuals_px, transition_mad
 from sena_warp.imageio import read_image
-from sena_warp.partition import seam_maps, seam_offsets, seam_rows, smooth_curve
+from sena_warp.partition import SeamOffsets, border_offsets, seam_maps, seam_offsets, seam_rows, smooth_curve
 from sena_warp.seam_path import straight_path
 from sena_warp.warp_map import CanvasViews
 
@@ -147,3 +147,35 @@ def test_real_image_shifted_source_meets_target_in_the_transition(bundled_dir):
     assert mad_after < 0.05
     residual = anchor_residuals_px(map_identity, maps.map_src_canvas, src[1:2], tgt[1:2])
     assert residual[0] < 0.1
+
+
+def _border_views(img: np.ndarray, oy: int, height_tgt: int, x0: int, tgt: np.ndarray) -> CanvasViews:
+    """The source: ``img`` on the whole canvas; the target: ``tgt`` in rows [oy, oy + height_tgt), x >= x0."""
+    valid_tgt = np.zeros(img.shape[:2], bool)
+    valid_tgt[oy:oy + height_tgt, x0:] = True
+    return CanvasViews(img, np.where(valid_tgt[:, :, None], tgt, 0).astype(np.uint8), np.ones(img.shape[:2], bool),
+                       valid_tgt)
+
+
+def test_border_offsets_meet_halfway_across_the_targets_borders_and_leave_other_content_alone(bundled_dir):
+    """A real image as both views, the target 10 levels darker inside rows 100-399 right of x 150 and a
+    seam at x 120: both borders get half the difference on each side where the source goes on beyond
+    them; a target that shows other content there (the image upside down) gets nothing."""
+    img = read_image(bundled_dir / "udisd_test_000001" / "a.jpg")
+    height, width = img.shape[:2]
+    cfg = Config(device=DEVICE)
+    seam_x = np.full(height, 120.0, np.float32)
+    zero = np.zeros((height, 3), np.float32)
+    none = SeamOffsets(zero, zero.copy(), 60.0)
+    darker = np.clip(img.astype(np.int16) - 10, 0, 255).astype(np.uint8)
+    border = border_offsets(_border_views(img, 100, 300, 150, darker), seam_x, none, (150.0, 100.0), 300, cfg)
+    assert border.on and border.lines == (99.5, 399.5)
+    inside = slice(200, width - 20)
+    for k in range(2):
+        np.testing.assert_allclose(border.src[k, inside], -5.0, atol=1.0)
+        np.testing.assert_allclose(border.tgt[k, inside], 5.0, atol=1.0)
+    other = border_offsets(_border_views(img, 100, 300, 150, img[::-1]), seam_x, none, (150.0, 100.0), 300, cfg)
+    assert np.abs(other.src).max() == 0 and np.abs(other.tgt).max() == 0
+    off = border_offsets(_border_views(img, 100, 300, 150, darker), seam_x, none, (150.0, 100.0), 300,
+                         cfg.replace(border_blend=False))
+    assert not off.on and np.abs(off.tgt).max() == 0

@@ -38,7 +38,8 @@ def test_target_is_pasted_unwarped_right_of_the_seam(pano, udisd_pair):
     img_tgt = target_as_shown(maps, maps.rig.pick(*udisd_pair)[1])
     ox, oy = (int(round(v)) for v in maps.warp.overlap.canvas.offset_tgt)
     seam_x = maps.seam.maps.seam_x_canvas
-    rows = np.arange(oy + 20, oy + img_tgt.shape[0] - 20)
+    fade = int(np.ceil(maps.seam.offsets.fade_px)) + 1  # the border blend's reach from the top and bottom borders
+    rows = np.arange(oy + fade, oy + img_tgt.shape[0] - fade)
     x = int(np.nanmax(seam_x[rows])) + beyond_seam_px(maps)
     region = pano.image[rows, x:ox + img_tgt.shape[1] - 5, :3]
     expect = img_tgt[rows - oy, x - ox:img_tgt.shape[1] - 5]
@@ -82,8 +83,9 @@ def test_vertical_rig_is_stitched_like_the_transposed_horizontal_one(pano, udisd
     ox, oy = (int(round(v)) for v in maps.warp.overlap.canvas.offset_tgt)
     seam_row = int(np.nanmax(maps.seam.maps.seam_x_canvas)) + beyond_seam_px(maps)
     h_t, w_t = img_tgt.shape[:2]
-    region = vertical.image[seam_row:ox + h_t - 5, oy + 5:oy + w_t - 5, :3]
-    expect = img_tgt[seam_row - ox:h_t - 5, 5:w_t - 5]
+    fade = int(np.ceil(maps.seam.offsets.fade_px)) + 1  # the border blend's reach from the target's side borders
+    region = vertical.image[seam_row:ox + h_t - 5, oy + fade:oy + w_t - fade, :3]
+    expect = img_tgt[seam_row - ox:h_t - 5, fade:w_t - fade]
     assert region.shape == expect.shape and region.shape[0] > 50
     assert np.abs(region.astype(int) - expect).max() <= 1
 

@@ -62,7 +62,7 @@ SENA_RUNS = ("sena", "sena_ba", "sena_paper")
 METHODS = (*SENA_RUNS, "affine", "homography", *OPENCV_MODES)
 # SENA as the paper has it: every departure of issue 13 undone (docs/evaluation.md, "Ablations").
 PAPER_SETTINGS = dict(ffd_model="blend", gate_model="paper", seam_model="paper", gain_model="none",
-                      seam_blend_ratio=0.0, transition_px=24)
+                      seam_blend_ratio=0.0, border_blend=False, transition_px=24)
 # The methods that make a panorama (the pictures show them), with their names on the pictures.
 SHEET_METHODS = {"sena": "SENA", "sena_paper": "SENA (paper)", "opencv_panorama": "OpenCV PANORAMA",
                  "opencv_scans": "OpenCV SCANS"}
@@ -100,6 +100,7 @@ class MethodResult:
     dup_lost_over_4px: int = 0
     dup_lost_worst_px: float = math.nan
     seam_step: float = math.nan
+    border_step: float = math.nan
     visible_bend_max_pct: float = math.nan
     continuity_px: float = math.nan
     cut_lines: int = 0
@@ -372,29 +373,31 @@ def natural_markdown(pairs: list[str], table: dict) -> list[str]:
     """The summary's issue-13 section: the targets per SENA run over all pairs, then each pair."""
     lines = ["", "## Natural appearance (issue 13)", "",
              "Duplicated / lost: reliable matches in the overlap whose two copies are > 2 px apart and both "
-             "visible or neither (`naturalness`); seam step in grey levels; bend: largest of the long lines each "
+             "visible or neither (`naturalness`); seam step and border step (across the target's border beyond "
+             "the seam's ends) in grey levels; bend: largest of the long lines each "
              "view shows whole (%); continuity: median offset of the lines the seam cuts (px); order: largest "
              "difference of the `b a` panorama from `a b`'s (grey levels).", "",
-             "| run | pairs with a point > 4 px | pairs > 0.5 % | worst % | seam step median / max | bend max % "
-             "(pairs > 2 %) | continuity median px | seam MAD < feather MAD | order diff max |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "| run | pairs with a point > 4 px | pairs > 0.5 % | worst % | seam step median / max | border step median / "
+             "max | bend max % (pairs > 2 %) | continuity median px | seam MAD < feather MAD | order diff max |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for run in SENA_RUNS:
         done = [table[p, run] for p in pairs if table[p, run].ok]
         lines.append(
             f"| {run} | {sum(r.dup_lost_over_4px > 0 for r in done)} | {sum(r.dup_lost_pct > 0.5 for r in done)} | "
             f"{_fmt(_max(r.dup_lost_pct for r in done), 2)} | {_fmt(_median(r.seam_step for r in done), 2)} / "
-            f"{_fmt(_max(r.seam_step for r in done), 2)} | {_fmt(_max(r.visible_bend_max_pct for r in done), 2)} "
+            f"{_fmt(_max(r.seam_step for r in done), 2)} | {_fmt(_median(r.border_step for r in done), 2)} / "
+            f"{_fmt(_max(r.border_step for r in done), 2)} | {_fmt(_max(r.visible_bend_max_pct for r in done), 2)} "
             f"({sum(r.visible_bend_max_pct > 2 for r in done)}) | {_fmt(_median(r.continuity_px for r in done), 2)} | "
             f"{sum(r.seam_mad < r.feather_mad for r in done)}/{len(done)} | "
             f"{_fmt(_max(r.order_diff_grey for r in done), 1)} |")
-    lines += ["", "| pair | run | dup/lost % (> 4 px, worst px) | seam step | bend max % | continuity px (cut lines) |",
-              "|---|---|---:|---:|---:|---:|"]
+    lines += ["", "| pair | run | dup/lost % (> 4 px, worst px) | seam step | border step | bend max % | "
+              "continuity px (cut lines) |", "|---|---|---:|---:|---:|---:|---:|"]
     for p in pairs:
         for run in SENA_RUNS:
             r = table[p, run]
             if r.ok:
                 lines.append(f"| {p} | {run} | {r.dup_lost_pct:.2f} ({r.dup_lost_over_4px}, {_fmt(r.dup_lost_worst_px, 1)}) | "
-                             f"{_fmt(r.seam_step, 2)} | {_fmt(r.visible_bend_max_pct, 2)} | "
+                             f"{_fmt(r.seam_step, 2)} | {_fmt(r.border_step, 2)} | {_fmt(r.visible_bend_max_pct, 2)} | "
                              f"{_fmt(r.continuity_px, 2)} ({r.cut_lines}) |")
     return lines
 

@@ -131,7 +131,7 @@ def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: C
 
     ``copies``: reliable matches whose target copy is in the overlap; ``dup_lost_pct``: of them, %
     duplicated or lost (copies > 2 px apart); ``dup_lost_over_4px`` how many by more than 4 px,
-    ``dup_lost_worst_px`` the worst; ``seam_step``: grey levels; ``visible_bend_max_pct``: largest bend
+    ``dup_lost_worst_px`` the worst; ``seam_step``, ``border_step``: grey levels; ``visible_bend_max_pct``: largest bend
     of a segment its own view shows whole; ``continuity_px``: median offset of the segments the seam
     cuts, ``cut_lines`` how many. ``cfg.device`` resolved.
     """
@@ -153,6 +153,7 @@ def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: C
     pano_working = image_to_working(pano.image, maps.rig)[:, :, :3]
     step = naturalness.seam_step(grey(pano_working), grey(views.src), grey(views.tgt), views.valid_src, views.valid_tgt,
                                  seam.maps.seam_x_canvas)
+    border = naturalness.border_step(grey(pano_working), grey(views.src), views.valid_src, weight_tgt, seam.border.lines)
     bends, continuity = naturalness.line_figures(naturalness.line_segments(img_src), forward, weight_src,
                                                  naturalness.line_segments(img_tgt), canvas.tgt_to_canvas, weight_tgt)
     return {
@@ -161,6 +162,7 @@ def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: C
         "dup_lost_over_4px": copies.over_strict,
         "dup_lost_worst_px": copies.worst_px,
         "seam_step": step,
+        "border_step": border,
         "visible_bend_max_pct": float(bends.max()) if bends.size else math.nan,
         "continuity_px": float(np.median(continuity)) if continuity.size else math.nan,
         "cut_lines": int(continuity.size),

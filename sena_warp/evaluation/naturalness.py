@@ -15,6 +15,11 @@ top to bottom, ``seam_x[y]`` per row) on plain arrays, so that SENA's variants a
   about that change by more than ``STEP_AGREE_GREY`` show different things there (parallax, something
   that moved): a brightness step cannot be told from the content on them, and they are left out (the
   duplicated / lost points and the continuity measure them).
+* *Border step*: beyond the seam's ends the panorama switches from the target to the source across
+  the target's top or bottom border, where the source goes on beyond it. Per canvas column there, the
+  panorama's mean luma ``STEP_NEAR_PX`` to ``STEP_FAR_PX`` rows outside the border minus inside it,
+  less the source's own change across those rows (the source is defined on both sides), averaged
+  over ``STEP_ROWS`` columns; its absolute value's mean over the columns of both borders.
 * *Line bend / continuity*: long straight segments of each input (LSD, at least ``MIN_LINE_PX``)
   mapped to the canvas; a segment the panorama shows from its own view all along gets its bend
   (largest distance from the chord, % of its length); a segment the seam cuts gets its continuity:
@@ -158,6 +163,37 @@ def seam_step(pano_grey: np.ndarray, src_grey: np.ndarray, tgt_grey: np.ndarray,
     steps = seam_steps(pano_grey, src_grey, tgt_grey, valid_src, valid_tgt, seam_x)
     known = np.isfinite(steps)
     return float(np.mean(np.abs(steps[known]))) if known.any() else float("nan")
+
+
+def border_step(pano_grey: np.ndarray, src_grey: np.ndarray, valid_src: np.ndarray, weight_tgt: np.ndarray,
+                borders: tuple[float, float]) -> float:
+    """The border step in grey levels (module docstring); NaN where no column switches views across a border.
+
+    pano_grey, src_grey: (H, W) float canvas images (the panorama, the source as it enters it);
+    valid_src: (H, W) bool; weight_tgt: (H, W) the target's weight in the panorama; borders: the y of
+    the target's top and bottom borders (half-integers between its edge rows and the rows beyond).
+    """
+    height, width = pano_grey.shape
+    offsets = np.arange(STEP_NEAR_PX, STEP_FAR_PX + 1) - 0.5
+    steps = []
+    for border, outward in zip(borders, (-1.0, 1.0)):
+        outside = np.rint(border + outward * offsets).astype(int)
+        inside = np.rint(border - outward * offsets).astype(int)
+        if min(outside.min(), inside.min()) < 0 or max(outside.max(), inside.max()) >= height:
+            continue
+        switch = (valid_src[outside].all(axis=0) & valid_src[inside].all(axis=0)
+                  & (weight_tgt[inside] >= 0.5).all(axis=0) & (weight_tgt[outside] == 0).all(axis=0))
+
+        def across(img: np.ndarray) -> np.ndarray:
+            return img[outside].mean(axis=0) - img[inside].mean(axis=0)
+
+        step = np.where(switch, across(pano_grey) - across(src_grey), 0.0)
+        window = np.ones(STEP_ROWS)
+        count = np.convolve(switch.astype(np.float64), window, "same")
+        kept = switch & (count >= STEP_ROWS / 2)
+        steps.append((np.convolve(step, window, "same") / np.maximum(count, 1.0))[kept])
+    steps = np.concatenate(steps) if steps else np.zeros(0)
+    return float(np.mean(np.abs(steps))) if steps.size else float("nan")
 
 
 def line_segments(img: np.ndarray) -> np.ndarray:
