@@ -225,8 +225,8 @@ def _composite_frame_kernel(channels: int):
         (``second``: the element offset of border 1, positions x C).
 
         Flat arrays: ``img_*`` (H, W, C), ``out`` (Hc, Wc, C), ``plan*`` (Hc, Wc), ``lf_*`` (lines, C) and
-        ``border_*`` (2, positions, C) in 1/2**20 grey levels; gains in 1/2**12, biases in 1/2**20 grey levels. ``steps`` = (src x
-        step, src y step, tgt x step, tgt y step) in elements. Thread (i, j) does row ``row0 + i``,
+        ``border_*`` (2, positions, C) in 1/2**20 grey levels; gains in 1/2**12, biases in 1/2**20 grey
+        levels. ``steps`` = (src x step, src y step, tgt x step, tgt y step) in elements. Thread (i, j) does row ``row0 + i``,
         columns j, j + col_step, ... (see ``runtime.launch_row_loops``).
         """
         i, j = wp.tid()

@@ -151,17 +151,19 @@ class Compositor:
         arrays[0].assign(np.rint(np.ascontiguousarray(lf_src, np.float64).ravel() * LEVEL).astype(np.int32))
         arrays[1].assign(np.rint(np.ascontiguousarray(lf_tgt, np.float64).ravel() * LEVEL).astype(np.int32))
 
-    def set_border_offsets(self, border_lines: tuple[float, float], border_src: np.ndarray, border_tgt: np.ndarray) -> None:
+    def set_border_offsets(self, border_lines: tuple[float, float], border_src: np.ndarray,
+                           border_tgt: np.ndarray) -> None:
         """Low-frequency offsets (2, P, C) float32 of each side along the target's two borders (grey levels
         at the border, fading like the seam's over ``lf_px``): border k lies at line coordinate
         ``border_lines[k]``, P positions along it (canvas columns when lines are rows, else rows)."""
         positions = self.canvas_shape[1] if self.layout.lines_are_rows else self.canvas_shape[0]
         channels = border_src.shape[2]
         if border_src.shape != (2, positions, channels) or border_tgt.shape != border_src.shape:
-            raise ValueError(f"border offsets need shape (2, {positions}, C), got {border_src.shape} and {border_tgt.shape}")
-        self._border[channels] = (1, wp.vec2(*border_lines), positions * channels,
-                                  *(wp.array(np.rint(np.ascontiguousarray(v, np.float64).ravel() * LEVEL).astype(np.int32),
-                                             dtype=int, device=self.device) for v in (border_src, border_tgt)))
+            raise ValueError(f"border offsets need shape (2, {positions}, C), got {border_src.shape} "
+                             f"and {border_tgt.shape}")
+        src, tgt = (wp.array(np.rint(np.ascontiguousarray(v, np.float64).ravel() * LEVEL).astype(np.int32), dtype=int,
+                             device=self.device) for v in (border_src, border_tgt))
+        self._border[channels] = (1, wp.vec2(*border_lines), positions * channels, src, tgt)
 
     def _buffers_for(self, shape_src: tuple, shape_tgt: tuple) -> _Buffers:
         key = (shape_src, shape_tgt)

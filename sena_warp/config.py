@@ -126,8 +126,8 @@ class Config:
     seam_blend_ratio: float = 0.08  # seam blend: low-frequency offsets fade over this x image diagonal (0: off)
     seam_blend_strip_px: int = 12  # seam blend: the offsets are measured within this of the seam
     seam_blend_rows: int = 31  # seam blend: and averaged over this many rows
-    border_blend: bool = True  # seam blend along the target's borders beyond the seam's ends too (blocks of seam_blend_rows columns)
-    border_blend_mad_grey: float = 6.0  # border blend: a block whose views differ more than this (MAD) shows other content: left out
+    border_blend: bool = True  # the seam blend along the target's borders beyond the seam's ends too
+    border_blend_mad_grey: float = 6.0  # border blend: a block whose views differ by more (MAD) shows other content
 
     # --- Exposure compensation (Brown & Lowe 2007; no step of the paper) ------------------------
     gain_model: str = "channels"  # "channels": per-channel gains (gains.py); "opencv": cv2's ChannelsCompensator; "none"

@@ -287,7 +287,8 @@ def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamO
         shown_tgt = views.both[rows] & (cols[None, :] > seam_x[rows, None] + 0.5 * cfg.transition_px)
         diff = (with_seam_offsets(views.src, rows, seam_x, offsets.src, offsets.fade_px)
                 - with_seam_offsets(views.tgt, rows, seam_x, offsets.tgt, offsets.fade_px))
-        centres, medians = block_medians(diff, shown_tgt & views.valid_src[beyond][None, :], block, cfg.border_blend_mad_grey)
+        used = shown_tgt & views.valid_src[beyond][None, :]
+        centres, medians = block_medians(diff, used, block, cfg.border_blend_mad_grey)
         seam_at = float(seam_x[rows.start if k == 0 else rows.stop - 1])
         if not len(centres) or not np.isfinite(seam_at):
             continue
