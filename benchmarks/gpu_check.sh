@@ -29,6 +29,7 @@ DATA=${DATA:-../shared/data}
 CLIP_S=${CLIP_S:-3}
 mkdir -p "$OUT"
 OUT=$(cd "$OUT" && pwd)
+rm -f "$OUT"/*.json "$OUT"/*.log "$OUT/summary.txt"  # an earlier check's figures (its clips in work/ are reused)
 PY=.venv/bin/python
 
 # run NAME CAP_S COMMAND...: COMMAND with a timeout of CAP_S or the time left, whichever is less;
@@ -75,7 +76,7 @@ else  # Warp's own count is missing: count what the driver lists
 fi
 
 # The CUDA cases of the kernel tests ([cuda] in their ids), and the device choice's own tests.
-run cuda_tests 90 $PY -m pytest -q -rs -k "cuda or resolve_device" tests/test_kernels_maps.py \
+run cuda_tests 120 $PY -m pytest -q -rs -k "cuda or resolve_device" tests/test_kernels_maps.py \
   tests/test_kernels_remap.py tests/test_composite.py tests/test_kernels_runtime.py
 TESTS_RC=$?
 [[ -f $DATA/pairs/rew_lawn_2160/a.jpg ]] || echo "gpu_check: no benchmark pair at $DATA/pairs/rew_lawn_2160" \
