@@ -143,6 +143,7 @@ class Config:
     video_codec: str = "libx264"  # H.264 encoder: "libx264" or "h264_nvenc" (falls back to libx264)
     video_crf: int = 20  # constant rate factor (libx264 crf, nvenc cq): lower = better, larger files
     video_preset: str = "veryfast"  # libx264 speed/size preset
+    video_encoder_thread_type: str = "slice"  # libx264 threads: "slice" (parts of one frame) or "frame" (frames in flight)
     video_queue_frames: int = 8  # decoded frames buffered per input between decoder thread and loop
     video_audio: str = "left"  # audio copied into the output: "left", "right" or "none"
     video_estimate_pairs: int = 5  # first frame pairs tried for the first estimate; most inliers wins
@@ -205,6 +206,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "video_preset": ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower",
                      "veryslow", "placebo"),
     "video_audio": ("left", "right", "none"),
+    "video_encoder_thread_type": ("slice", "frame"),
     "video_rig": ("static", "moving"),
     "ffd_model": ("fit", "blend"),
     "gate_model": ("none", "paper"),

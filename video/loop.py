@@ -64,7 +64,8 @@ class VideoOptions:
 
     ``offset_s`` shifts the right (second) input's clock: its frame at time t is paired as if it
     were at t + offset_s (+0.5: the right camera started 0.5 s after the left one). ``audio``: whose
-    audio to copy. ``threads``: decoder and encoder threads (0: FFmpeg chooses). ``strict``: a
+    audio to copy. ``threads``: decoder and encoder threads (0: FFmpeg chooses); ``thread_type``: how
+    libx264 uses its threads (``Config.video_encoder_thread_type``). ``strict``: a
     damaged frame, a truncated input or audio left out fails the run (VideoError) instead of a
     warning. ``max_megapixels``: larger frames are refused. Values are checked here (InputError),
     before any file is opened.
@@ -75,6 +76,7 @@ class VideoOptions:
     codec: str = Config.video_codec
     crf: int = Config.video_crf
     preset: str = Config.video_preset
+    thread_type: str = Config.video_encoder_thread_type
     queue_frames: int = Config.video_queue_frames
     threads: int = Config.cpu_threads
     strict: bool = False
@@ -84,15 +86,16 @@ class VideoOptions:
         if not math.isfinite(self.offset_s):
             raise InputError(f"offset {self.offset_s} s is not a time; give a finite number of seconds (--offset)")
         # The encoder settings take the values of their Config fields, checked by the same rule.
-        for name, value in (("video_audio", self.audio), ("video_crf", self.crf), ("video_preset", self.preset)):
+        for name, value in (("video_audio", self.audio), ("video_crf", self.crf), ("video_preset", self.preset),
+                            ("video_encoder_thread_type", self.thread_type)):
             check_value(name, value, "video options")
 
     @classmethod
     def from_config(cls, cfg: Config, **changes) -> "VideoOptions":
         """Options taking their encoder, queue and thread settings from ``cfg``."""
-        base = dict(audio=cfg.video_audio, codec=cfg.video_codec, crf=cfg.video_crf,
-                    preset=cfg.video_preset, queue_frames=cfg.video_queue_frames, threads=cfg.cpu_threads,
-                    max_megapixels=cfg.max_input_megapixels)
+        base = dict(audio=cfg.video_audio, codec=cfg.video_codec, crf=cfg.video_crf, preset=cfg.video_preset,
+                    thread_type=cfg.video_encoder_thread_type, queue_frames=cfg.video_queue_frames,
+                    threads=cfg.cpu_threads, max_megapixels=cfg.max_input_megapixels)
         return cls(**{**base, **changes})
 
 
@@ -164,7 +167,7 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
         # The output clock is the left input's own time base, so every frame keeps its input time.
         with plan.writing(output) as tmp, VideoWriter(tmp, width, height, rate, options.codec, options.crf,
                                                       options.preset, options.threads,
-                                                      infos["left"].time_base) as writer:
+                                                      infos["left"].time_base, options.thread_type) as writer:
             problems = []  # (what is the matter, what was done about it): warnings, or errors with --strict
             if audio_side is not None:
                 # Audio time in its file -> output clock: the same shift as that input's video frames.

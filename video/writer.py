@@ -198,6 +198,8 @@ class VideoWriter:
     finer one such as the input's keeps a variable frame rate's times) and must increase.
     Use as a context manager: a clean exit flushes the encoder; an exception just closes the file.
     ``threads``: encoder threads (``Config.cpu_threads``; 0 lets the encoder choose, x264: 1.5 per core).
+    ``thread_type``: "slice" or "frame" (``Config.video_encoder_thread_type``); PyAV asks for slice
+    threads unless told, and FFmpeg's libx264 wrapper turns x264's frame threads on for anything else.
     """
 
     def __init__(
@@ -211,6 +213,7 @@ class VideoWriter:
         preset: str = Config.video_preset,
         threads: int = Config.cpu_threads,
         time_base: Fraction | None = None,
+        thread_type: str = Config.video_encoder_thread_type,
     ):
         self.path = Path(path)
         self.width, self.height = even_size(width, height)
@@ -223,7 +226,7 @@ class VideoWriter:
         self.notes = [note] if note else []  # fallbacks the report should mention
         self.audio_refusal: str | None = None  # why the audio was left out (see add_audio)
         self._options = encoder_options(self.codec, crf, preset)
-        self.crf, self.preset, self.threads = crf, preset, threads
+        self.crf, self.preset, self.threads, self.thread_type = crf, preset, threads, thread_type
         self._open()
         self.audio: AudioCopier | None = None
         self.frames = 0
@@ -231,10 +234,12 @@ class VideoWriter:
         self._finished = False
 
     def encoder_settings(self) -> dict:
-        """The encoder as opened: codec (and the one asked for), quality, preset and thread count."""
-        preset = self.preset if self.codec == FALLBACK_CODEC else None  # NVENC has no x264 preset
-        return {"codec": self.codec, "requested": self.requested_codec, "crf": self.crf, "preset": preset,
-                "threads": self.stream.codec_context.thread_count, "pix_fmt": PIX_FMT}
+        """The encoder as opened: codec (and the one asked for), quality, preset, thread count and type."""
+        x264 = self.codec == FALLBACK_CODEC  # NVENC has no x264 preset nor threads of its own
+        ctx = self.stream.codec_context
+        return {"codec": self.codec, "requested": self.requested_codec, "crf": self.crf,
+                "preset": self.preset if x264 else None, "threads": ctx.thread_count,
+                "thread_type": ctx.thread_type.name.lower() if x264 else None, "pix_fmt": PIX_FMT}
 
     def _open(self) -> None:
         """(Re)create the file with its video stream, nothing written yet."""
@@ -246,7 +251,9 @@ class VideoWriter:
         self.stream.width, self.stream.height = self.width, self.height
         self.stream.pix_fmt = PIX_FMT
         self.stream.time_base = self.stream.codec_context.time_base = self.time_base
-        self.stream.codec_context.thread_count = self.threads  # before the encoder opens on the first frame
+        # Both before the encoder opens on the first frame.
+        self.stream.codec_context.thread_count = self.threads
+        self.stream.codec_context.thread_type = self.thread_type.upper()
 
     def add_audio(self, source: str | os.PathLike, shift_s: Fraction) -> AudioCopier | None:
         """Copy ``source``'s audio (output time = its time - ``shift_s``); call before :meth:`write`.
