@@ -178,9 +178,18 @@ def grey_level(sample: int) -> wp.uint8:
 
 
 @wp.func
-def adjusted(sample: int, gain: int, bias: int, offset: int) -> int:
-    """gain * sample + bias + offset, all in 1/2**20 grey levels (gain in 1/2**GAIN_BITS)."""
-    return int((wp.int64(sample) * wp.int64(gain)) >> wp.int64(GAIN_BITS)) + bias + offset
+def adjusted(sample: int, gain: int, bias: int, offset: int, tone: wp.vec2i) -> int:
+    """gain * sample + bias + offset, all in 1/2**20 grey levels (gain in 1/2**GAIN_BITS), with a
+    highlight knee: above ``tone[0]`` the gain's line runs straight on to (``tone[1]``, ``tone[1]``),
+    so a view's white stays white whatever its gain (``tone[1]`` 0: no knee)."""
+    v = int((wp.int64(sample) * wp.int64(gain)) >> wp.int64(GAIN_BITS)) + bias
+    knee = tone[0]
+    white = tone[1]
+    if knee < white and sample > knee:
+        at_knee = int((wp.int64(knee) * wp.int64(gain)) >> wp.int64(GAIN_BITS)) + bias
+        if at_knee < white:
+            v = at_knee + int(wp.int64(sample - knee) * wp.int64(white - at_knee) / wp.int64(white - knee))
+    return v + offset
 
 
 def _composite_frame_kernel(channels: int):
@@ -217,6 +226,7 @@ def _composite_frame_kernel(channels: int):
         bias_src: wp.vec4i,
         gain_tgt: wp.vec4i,
         bias_tgt: wp.vec4i,
+        tone: wp.vec2i,
         fill: wp.vec4i,
         out: wp.array(dtype=wp.uint8),
     ):
@@ -259,7 +269,7 @@ def _composite_frame_kernel(channels: int):
             if a >= 1.0:
                 for c in range(wp.static(channels)):
                     off = side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second)
-                    v = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], off)
+                    v = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], off, tone)
                     out[o + c] = grey_level(v)
             elif a <= 0.0:
                 if kind == KIND_BAND:
@@ -269,7 +279,7 @@ def _composite_frame_kernel(channels: int):
                     fy = word_fy(word)
                 for c in range(wp.static(channels)):
                     off = side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second)
-                    v = adjusted(sample_fixed(img_tgt, p + c, fx, fy, steps[2], steps[3]), gain_tgt[c], bias_tgt[c], off)
+                    v = adjusted(sample_fixed(img_tgt, p + c, fx, fy, steps[2], steps[3]), gain_tgt[c], bias_tgt[c], off, tone)
                     out[o + c] = grey_level(v)
             else:
                 word_t = plan_tgt[q]
@@ -278,9 +288,9 @@ def _composite_frame_kernel(channels: int):
                 fy_t = word_fy(word_t)
                 for c in range(wp.static(channels)):
                     vs = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c],
-                                  side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second))
+                                  side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second), tone)
                     vt = adjusted(sample_fixed(img_tgt, p_t + c, fx_t, fy_t, steps[2], steps[3]), gain_tgt[c], bias_tgt[c],
-                                  side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second))
+                                  side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second), tone)
                     out[o + c] = grey_level(int(a * float(vs) + (1.0 - a) * float(vt)))
 
     return composite_frame
@@ -310,10 +320,11 @@ def band_difference_kernel(
     bias_src: wp.vec4i,
     gain_tgt: wp.vec4i,
     bias_tgt: wp.vec4i,
+    tone: wp.vec2i,
     diff: wp.array2d(dtype=float),
 ):
     """Per seam line l = row0 + i and band cell j (position band_x0[l] + j): channel 0 of the source
-    minus the target there, both with their gains (grey levels), or ``NOT_BOTH`` where the plan does
+    minus the target there, both with their gains and knee (grey levels), or ``NOT_BOTH`` where the plan does
     not hold both taps (outside the overlap or the band). The per-frame seam reads it."""
     i, j = wp.tid()
     line = row0 + i
@@ -330,9 +341,9 @@ def band_difference_kernel(
         if int(word & wp.int64(3)) == KIND_BAND:
             word_t = plan_tgt[q]
             vs = adjusted(sample_fixed(img_src, word_offset(word), word_fx(word), word_fy(word), steps[0], steps[1]),
-                          gain_src[0], bias_src[0], 0)
+                          gain_src[0], bias_src[0], 0, tone)
             vt = adjusted(sample_fixed(img_tgt, word_offset(word_t), word_fx(word_t), word_fy(word_t), steps[2],
-                                       steps[3]), gain_tgt[0], bias_tgt[0], 0)
+                                       steps[3]), gain_tgt[0], bias_tgt[0], 0, tone)
             value = float(vs - vt) / float(ONE20)
     diff[line, j] = value
 

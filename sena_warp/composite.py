@@ -77,11 +77,18 @@ class Compositor:
     ``map_src_canvas``, ``map_tgt_canvas``: (Hc, Wc, 2) float32 (x, y) sample positions in the source
     / target (input frame); ``seam``: its layout. Runs on ``cfg.device`` (resolved,
     ``runtime.resolve_config``) with ``cfg.cpu_threads``. Gains default to the identity and offsets to
-    zero until set.
+    zero until set; ``white``: the images' white level, where the gains' highlight knee runs to (None:
+    no knee, for planes without one such as chroma).
     """
 
-    def __init__(self, map_src_canvas: np.ndarray, map_tgt_canvas: np.ndarray, seam: SeamLayout, cfg: Config):
+    def __init__(self, map_src_canvas: np.ndarray, map_tgt_canvas: np.ndarray, seam: SeamLayout, cfg: Config,
+                 white: float | None = 255.0):
         device, threads = cfg.device, cfg.cpu_threads
+        # The gains' highlight knee (``gains.tone_curve``): at gain_knee_ratio x the white level of the
+        # images composited (None: no knee, e.g. chroma planes).
+        self._knee = None if white is None else (float(white) * cfg.gain_knee_ratio, float(white))
+        knee, white_level = self._knee or (0.0, 0.0)
+        self.tone = wp.vec2i(int(round(knee * LEVEL)), int(round(white_level * LEVEL)))
         self.canvas_shape = tuple(np.asarray(map_src_canvas).shape[:2])
         if map_tgt_canvas.shape[:2] != self.canvas_shape:
             raise ValueError("map_src_canvas and map_tgt_canvas must share one (Hc, Wc)")
@@ -197,6 +204,10 @@ class Compositor:
         runtime.launch_rows(seam_weights_kernel, *self.canvas_shape, inputs, self.device, self.threads)
         return alpha.numpy(), lf.numpy()
 
+    def knee(self) -> tuple[float, float] | None:
+        """(knee, white) grey levels of the gains' highlight knee (``gains.tone_curve``), or None."""
+        return self._knee
+
     def gains(self, channels: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(gain_src, bias_src, gain_tgt, bias_tgt), each (channels,) float64 grey levels, as applied."""
         self._ensure_defaults(channels)
@@ -243,7 +254,8 @@ class Compositor:
         gains = self._gains[channels]
         inputs = [buf.src.flatten(), buf.tgt.flatten(), buf.frame_inputs[2], buf.plan, buf.plan_tgt,
                   self.canvas_shape[1], self.canvas_shape[0], int(self.layout.lines_are_rows),
-                  wp.array(np.ascontiguousarray(band_x0, np.int32), dtype=int, device=self.device), *gains, out]
+                  wp.array(np.ascontiguousarray(band_x0, np.int32), dtype=int, device=self.device), *gains, self.tone,
+                  out]
         runtime.launch_rows(band_difference_kernel, self.lines, width, inputs, self.device, self.threads)
         return out.numpy()
 
@@ -257,7 +269,7 @@ class Compositor:
         lf_src, lf_tgt = self._lf[channels]
         inputs = [*buf.frame_inputs, self.seam, int(self.layout.lines_are_rows), float(self.layout.transition_px),
                   float(self.layout.smooth_sigma_px), float(self.layout.lf_px), lf_src, lf_tgt, *self._border[channels],
-                  *self._gains[channels],
+                  *self._gains[channels], self.tone,
                   wp.vec4i(*values, *[0] * (MAX_CHANNELS - channels)), buf.out_flat]
         runtime.launch_row_loops(COMPOSITE_FRAME_KERNELS[channels], *self.canvas_shape, inputs, self.device,
                                  self.threads)

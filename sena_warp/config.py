@@ -136,6 +136,7 @@ class Config:
     gain_outlier_fraction: float = 0.2  # the largest differences (misalignment, moving things) left out
     gain_dark_level: float = 5.0  # pixels at or below this in any channel left out (clipped)
     gain_bright_level: float = 250.0  # pixels at or above this left out (saturated)
+    gain_knee_ratio: float = 0.9  # gains: above this x white a view's gain line runs straight to white (1: none)
     gain_stride: int = 2  # every this-th overlap pixel in each direction is used
     gain_min_pixels: int = 500  # fewer agreeing pixels: no compensation
 

@@ -53,7 +53,8 @@ AT_MOST = {
     "xfeat_detection_threshold": 1.0, "min_cossim": 1.0, "sift_ratio": 1.0, "ransac_confidence": 1.0,
     "gamma_min": 1.0, "video_min_inlier_ratio": 1.0, "video_crf": 51, "sync_min_overlap": 1.0,
     "sync_min_confidence": 1.0, "sync_audio_min_peak": 1.0, "sync_motion_min_peak": 1.0,
-    "gain_outlier_fraction": 1.0, "gain_dark_level": 255.0, "gain_bright_level": 255.0, "video_warp_follow": 1.0,
+    "gain_outlier_fraction": 1.0, "gain_dark_level": 255.0, "gain_bright_level": 255.0,
+    "gain_knee_ratio": 1.0, "video_warp_follow": 1.0,
 }
 KIND_WORDS = {int: "a whole number", float: "a number", str: "text", bool: "true or false"}
 SECTION_MARK = "# ---"  # a comment line opening a group of fields in config.py

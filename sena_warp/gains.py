@@ -12,11 +12,16 @@ quarter of a 30-level difference in place for the pair to show, so ours is 0.5: 
 halfway). Unlike OpenCV's compensator the means are taken over the pixels that agree: the largest
 differences (misalignment, parallax, moving objects) and near-saturated pixels are left out, so what
 is measured is the exposure, not the content.
+
+A gain below 1 turns a view's saturated white grey, one above 1 clips its highlights flat: either way
+the two views' skies disagree however well their mid-tones are matched (issue 13, rew_theater). So a
+gain applies in full up to a knee (``Config.gain_knee_ratio`` x white) and above it the line runs
+straight on to white (``tone_curve``; the compositor's kernel applies the same rule).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -25,13 +30,16 @@ from .config import Config
 from .errors import InputError
 from .warp_map import CanvasViews
 
+WHITE = 255.0  # white of the 8-bit images the gains apply to
+
 
 @dataclass(frozen=True)
 class Gains:
     """Per-channel affine gains of both views: ``value' = gain * value + bias`` (grey levels).
 
     ``gain_src``, ``bias_src``, ``gain_tgt``, ``bias_tgt``: (C,) float64. ``pixels``: how many overlap
-    pixels the estimate used (0: none, the gains are the identity); ``model``: ``Config.gain_model``.
+    pixels the estimate used (0: none, the gains are the identity); ``model``: ``Config.gain_model``;
+    ``knee_grey``: where the highlight knee starts (``tone_curve``; 255: none).
     """
 
     gain_src: np.ndarray
@@ -40,6 +48,7 @@ class Gains:
     bias_tgt: np.ndarray
     pixels: int
     model: str
+    knee_grey: float = 255.0
 
     @staticmethod
     def identity(channels: int, model: str) -> "Gains":
@@ -107,22 +116,38 @@ def opencv_gains(views: CanvasViews) -> Gains:
 
 def view_gains(views: CanvasViews, cfg: Config) -> Gains:
     """The gains of ``cfg.gain_model``: "channels" (``overlap_gains``), "opencv" (``opencv_gains``) or
-    "none" (the paper: no compensation)."""
+    "none" (the paper: no compensation), with the knee of ``cfg.gain_knee_ratio``."""
+    knee = WHITE * cfg.gain_knee_ratio
     if cfg.gain_model == "channels":
-        return overlap_gains(views.src, views.tgt, views.both, cfg)
+        return replace(overlap_gains(views.src, views.tgt, views.both, cfg), knee_grey=knee)
     if cfg.gain_model == "opencv":
-        return opencv_gains(views)
+        return replace(opencv_gains(views), knee_grey=knee)
     if cfg.gain_model == "none":
         return Gains.identity(views.src.shape[2], "none")
     raise InputError(f"unknown gain model {cfg.gain_model!r}; choose channels, opencv or none")
 
 
-def compensated(img: np.ndarray, gain: np.ndarray, bias: np.ndarray) -> np.ndarray:
-    """``gain * img + bias`` per channel of a uint8 (H, W, C) image, rounded and clipped to uint8."""
-    return np.clip(img * gain.astype(np.float32) + bias.astype(np.float32) + 0.5, 0, 255).astype(np.uint8)
+def tone_curve(values: np.ndarray, gain: np.ndarray, bias: np.ndarray, knee: float, white: float = WHITE) -> np.ndarray:
+    """``gain * values + bias`` per channel (last axis) up to ``knee``; above it the line from the knee's
+    value runs straight on to (white, white), so white stays white whatever the gain (float32).
+    No knee where ``knee >= white`` or the knee's value is already white (a gain that large clips)."""
+    values = np.asarray(values, np.float32)
+    gain, bias = np.asarray(gain, np.float32), np.asarray(bias, np.float32)
+    out = values * gain + bias
+    at_knee = knee * gain + bias
+    if knee >= white:
+        return out
+    above = (values > knee) & (at_knee < white)
+    return np.where(above, at_knee + (values - knee) * (white - at_knee) / (white - knee), out)
+
+
+def compensated(img: np.ndarray, gain: np.ndarray, bias: np.ndarray, knee: float) -> np.ndarray:
+    """:func:`tone_curve` per channel of a uint8 (H, W, C) image, rounded and clipped to uint8."""
+    return np.clip(tone_curve(img, gain, bias, knee) + 0.5, 0, 255).astype(np.uint8)
 
 
 def compensated_views(views: CanvasViews, gains: Gains) -> CanvasViews:
-    """The views as they enter the panorama: each with its side's gains."""
-    return CanvasViews(compensated(views.src, gains.gain_src, gains.bias_src),
-                       compensated(views.tgt, gains.gain_tgt, gains.bias_tgt), views.valid_src, views.valid_tgt)
+    """The views as they enter the panorama: each with its side's gains (and their knee)."""
+    return CanvasViews(compensated(views.src, gains.gain_src, gains.bias_src, gains.knee_grey),
+                       compensated(views.tgt, gains.gain_tgt, gains.bias_tgt, gains.knee_grey), views.valid_src,
+                       views.valid_tgt)

@@ -2,7 +2,7 @@
 
 The reference takes the seam's weights from ``Compositor.seam_weights`` (the kernels' one rule, itself
 checked against its closed form below), samples both views with the host's bilinear rule and applies
-each side's gains and offsets in float64.
+each side's gains (with their highlight knee) and offsets in float64.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import pytest
 
 from sena_warp.composite import Compositor, SeamLayout
 from sena_warp.config import Config
+from sena_warp.gains import tone_curve
 from sena_warp.kernels.composite import NOT_BOTH
 from test_kernels_maps import DEVICES
 from test_kernels_remap import remap_reference, scene  # noqa: F401  (scene is a fixture)
@@ -43,8 +44,9 @@ def reference(comp: Compositor, img_src, img_tgt, map_src, map_tgt, border=None)
         off_src, off_tgt = off_src[None, :, :], off_tgt[None, :, :]
     else:
         off_src, off_tgt = off_src[:, None, :], off_tgt[:, None, :]
-    src = gain_src * v_src + bias_src + lf[..., None] * off_src
-    tgt = gain_tgt * v_tgt + bias_tgt + lf[..., None] * off_tgt
+    knee, white = comp.knee() or (math.inf, math.inf)
+    src = tone_curve(v_src, gain_src, bias_src, knee, white) + lf[..., None] * off_src
+    tgt = tone_curve(v_tgt, gain_tgt, bias_tgt, knee, white) + lf[..., None] * off_tgt
     if border is not None:
         lines, border_src, border_tgt = border
         height, width = alpha.shape
@@ -153,7 +155,9 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     rows = np.arange(len(band_x0))[:, None]
     cols = band_x0[:, None] + np.arange(17)[None, :]
     both = ok_src[rows, cols] & ok_tgt[rows, cols]
-    expected = 1.2 * v_src[rows, cols, 0] - 5.0 - v_tgt[rows, cols, 0]
+    knee, white = comp.knee()
+    expected = (tone_curve(v_src[rows, cols, 0], 1.2, -5.0, knee, white)
+                - tone_curve(v_tgt[rows, cols, 0], 1.0, 0.0, knee, white))
     np.testing.assert_array_equal(diff < 0.5 * NOT_BOTH, both)
     assert both.mean() > 0.5
     assert np.abs(diff[both] - expected[both]).max() < 0.25  # taps in 1/1024 px

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from sena_warp.config import Config
-from sena_warp.gains import agreeing_pixels, brown_lowe_gains, compensated, opencv_gains, overlap_gains
+from sena_warp.gains import (agreeing_pixels, brown_lowe_gains, compensated, opencv_gains, overlap_gains,
+                             tone_curve)
 from sena_warp.imageio import read_image
 from sena_warp.warp_map import CanvasViews
 
@@ -52,8 +53,8 @@ def test_overlap_gains_undo_an_exposure_difference_on_a_real_image():
     views = views_with_exposure(img, factor)
     def mean_step(g) -> np.ndarray:
         """Per channel |mean source - mean target| after the gains (grey levels)."""
-        return np.abs(compensated(views.src, g.gain_src, g.bias_src).astype(float).mean(axis=(0, 1))
-                      - compensated(views.tgt, g.gain_tgt, g.bias_tgt).mean(axis=(0, 1)))
+        return np.abs(compensated(views.src, g.gain_src, g.bias_src, g.knee_grey).astype(float).mean(axis=(0, 1))
+                      - compensated(views.tgt, g.gain_tgt, g.bias_tgt, g.knee_grey).mean(axis=(0, 1)))
 
     gains = overlap_gains(views.src, views.tgt, views.both, CFG)
     before = np.abs(views.src.astype(float).mean(axis=(0, 1)) - views.tgt.mean(axis=(0, 1)))
@@ -68,3 +69,33 @@ def test_too_few_agreeing_pixels_give_the_identity():
     views = views_with_exposure(img, np.ones(3))
     gains = overlap_gains(views.src, views.tgt, views.both, CFG)
     assert gains.pixels == 0 and np.all(gains.gain_src == 1) and np.all(gains.gain_tgt == 1)
+
+
+def test_the_tone_curve_is_the_gain_below_the_knee_and_keeps_white_white():
+    values = np.arange(256, dtype=np.float32)[:, None]
+    for gain in (0.8, 0.88, 1.0, 1.09):
+        curve = tone_curve(values, np.array([gain]), np.array([0.0]), 0.9 * 255)[:, 0]
+        np.testing.assert_allclose(curve[:230], gain * values[:230, 0], rtol=1e-6)
+        assert curve[255] == pytest.approx(255.0) and np.all(np.diff(curve) > 0)
+    # A gain that takes the knee itself past white clips as before.
+    np.testing.assert_allclose(tone_curve(values, np.array([1.2]), np.array([0.0]), 0.9 * 255)[:, 0], 1.2 * values[:, 0])
+    # No knee (ratio 1): the affine gain, clipping above white.
+    np.testing.assert_allclose(tone_curve(values, np.array([0.9]), np.array([2.0]), 255.0)[:, 0], 0.9 * values[:, 0] + 2)
+
+
+def test_with_the_knee_a_saturated_view_stays_as_white_as_the_other_one():
+    """A real image and a copy 30 % brighter (its highlights clipped to 255): the gains match the two
+    over the pixels that agree; without a knee the brighter view's clipped whites come out grey
+    (255 x its gain < 1), darker than the other view's copy of them; with it, less than half as much."""
+    img = read_image(BUNDLED / "udisd_test_000001" / "a.jpg")
+    views = views_with_exposure(img, np.array([1.3, 1.3, 1.3]))
+    gains = overlap_gains(views.src, views.tgt, views.both, CFG)
+    clipped = (views.tgt == 255).all(axis=2) & (img.min(axis=2) > 200)
+    assert gains.gain_tgt.max() < 1 and clipped.sum() > 500
+
+    def gap(knee: float) -> float:
+        src = compensated(views.src, gains.gain_src, gains.bias_src, knee).astype(float)
+        tgt = compensated(views.tgt, gains.gain_tgt, gains.bias_tgt, knee).astype(float)
+        return float(np.mean(src[clipped] - tgt[clipped]))
+
+    assert gap(255.0) > 8 and abs(gap(CFG.gain_knee_ratio * 255)) < 0.5 * gap(255.0)

@@ -21,6 +21,7 @@ from ..stitch import StitchMaps
 
 # Output pixels no input covers: black in limited-range BT.601, the range H.264 decoders assume.
 BLACK_Y, BLACK_UV = 16, 128
+WHITE_Y = 235  # limited-range white: where the gains' highlight knee runs to on the Y plane
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_rea
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, band_offsets
 from .loop import VideoOptions, run_video
-from .maps import (BLACK_UV, BLACK_Y, PlaneMaps, chroma_lines, lerp_maps, map_change_px, plane_maps, sampled_mask,
+from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, chroma_lines, lerp_maps, map_change_px, plane_maps, sampled_mask,
                    seam_change_px, target_offset)
 from .reader import YuvFrame, probe_video
 from .writer import even_size
@@ -54,7 +54,8 @@ class PlanePass:
 
     ``map_src`` / ``map_tgt``: (Hc, Wc, 2) float32 (x, y) sample positions in the source / target
     plane, NaN where nothing may be sampled; ``alpha``: (Hc, Wc) float32 source weight where both are
-    sampled; ``gains``: (gain_src, bias_src, gain_tgt, bias_tgt), each (C,); ``offsets_src`` /
+    sampled; ``gains``: (gain_src, bias_src, gain_tgt, bias_tgt), each (C,), with ``knee`` (knee, white)
+    grey levels of their highlight knee or None (``gains.tone_curve``); ``offsets_src`` /
     ``offsets_tgt``: (Hc, Wc, C) float32 the seam blend's offsets per pixel; ``fill``: the output value
     per channel where neither plane is sampled. The luma pass samples the Y planes, the chroma pass
     the U and V planes stacked as two channels (``np.dstack((u, v))``), at half resolution.
@@ -64,6 +65,7 @@ class PlanePass:
     map_tgt: np.ndarray
     alpha: np.ndarray
     gains: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    knee: tuple[float, float] | None
     offsets_src: np.ndarray
     offsets_tgt: np.ndarray
     fill: tuple[int, ...]
@@ -80,7 +82,7 @@ class PlanePass:
             lines = per_line[:, None, :] if rows else per_line[None, :, :]
             return (lf[:, :, None] * lines).astype(np.float32)
 
-        return PlanePass(map_src, map_tgt, alpha, compositor.gains(channels), spread(per_line_src),
+        return PlanePass(map_src, map_tgt, alpha, compositor.gains(channels), compositor.knee(), spread(per_line_src),
                          spread(per_line_tgt), fill)
 
 
@@ -99,7 +101,8 @@ class CompositedFrame:
     frame's seam as composited; a line is
     a canvas row when ``lines_are_rows`` (positions are x; the source lies at smaller x), else a
     column (positions are y). ``gains_luma``: (gain_src, bias_src, gain_tgt, bias_tgt), each (1,)
-    float64, the Y pass's affine gains (``out = gain * Y + bias``); ``offsets_luma``: ((L, 1), (L, 1))
+    float64, the Y pass's affine gains (``out = gain * Y + bias`` up to the knee), ``knee_luma`` their
+    highlight knee (knee, white) grey levels (``gains.tone_curve``); ``offsets_luma``: ((L, 1), (L, 1))
     float64 the seam blend's per-line offsets of each side, grey levels at the seam. ``weights()``:
     (alpha, lf) (Hc, Wc) float32 of the Y pass (``Compositor.seam_weights``: one kernel launch over
     the canvas, so call it only where needed).
@@ -117,6 +120,7 @@ class CompositedFrame:
     seam: np.ndarray
     lines_are_rows: bool
     gains_luma: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    knee_luma: tuple[float, float] | None
     offsets_luma: tuple[np.ndarray, np.ndarray]
     weights: Callable[[], tuple[np.ndarray, np.ndarray]]
 
@@ -160,8 +164,9 @@ class SenaFrameCompositor:
         self._offset_tgt = target_offset(first.map_tgt_input) - np.array([x0, y0], np.float64)
         self._maps = self._on_canvas(first, shape)
         self.output_size = (shape[1], shape[0])
-        self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.seam_luma, cfg)
-        self._chroma = Compositor(self._maps.map_src_chroma, self._maps.map_tgt_chroma, self._maps.seam_chroma, cfg)
+        self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.seam_luma, cfg, WHITE_Y)
+        self._chroma = Compositor(self._maps.map_src_chroma, self._maps.map_tgt_chroma, self._maps.seam_chroma, cfg,
+                                  None)
         self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, self._reestimate_s is None, cfg)
         self._fps = fps
         self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
@@ -346,7 +351,7 @@ class SenaFrameCompositor:
             planes_src=planes_src, planes_tgt=planes_tgt,
             planes_out=planes_out, maps=self._maps, seam_home=self._maps.seam_luma.positions,
             seam_reach_px=float(self._maps.seam_luma.band_px), seam=self._luma.seam_positions(), lines_are_rows=self._maps.seam_luma.lines_are_rows,
-            gains_luma=self._luma.gains(1), offsets_luma=self._luma.offsets(1), weights=self._luma.seam_weights)
+            gains_luma=self._luma.gains(1), knee_luma=self._luma.knee(), offsets_luma=self._luma.offsets(1), weights=self._luma.seam_weights)
 
     def close(self) -> None:
         """Stop the re-estimation worker (a pending estimate is dropped)."""

@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from sena_warp.config import Config
+from sena_warp.gains import tone_curve
 from sena_warp.errors import InputError, error_for_exit_code
 from sena_warp.imageio import read_image
 from sena_warp.outputs import OutputPlan, atomic_output, make_folder
@@ -186,20 +187,24 @@ class OpenCVReference:
         self.uncovered = np.flatnonzero(~(valid_src | valid_tgt))
         self.fill = np.asarray(plane.fill, dtype=np.uint8)
         gain_src, bias_src, gain_tgt, bias_tgt = plane.gains
-        self.affine_src = (gain_src.astype(np.float32), (bias_src + plane.offsets_src).astype(np.float32))
-        self.affine_tgt = (gain_tgt.astype(np.float32), (bias_tgt + plane.offsets_tgt).astype(np.float32))
+        self.knee = plane.knee
+        self.affine_src = (gain_src.astype(np.float32), bias_src, plane.offsets_src.astype(np.float32))
+        self.affine_tgt = (gain_tgt.astype(np.float32), bias_tgt, plane.offsets_tgt.astype(np.float32))
 
     @staticmethod
     def _fixed_maps(map_canvas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         outside = np.where(np.isnan(map_canvas), -1.0, map_canvas).astype(np.float32)  # NaN: sample nothing
         return cv2.convertMaps(outside[:, :, 0], outside[:, :, 1], cv2.CV_16SC2)
 
-    @staticmethod
-    def _adjusted(sampled: np.ndarray, affine: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-        """``gain * sampled + offset`` per channel, float32, in the shape of the offsets (Hc, Wc, C)."""
-        gain, offset = affine
-        scale = tuple(float(g) for g in gain) + (0.0,) * (4 - len(gain))  # an OpenCV scalar: one factor per channel
-        return cv2.add(cv2.multiply(sampled.reshape(offset.shape).astype(np.float32), scale), offset)
+    def _adjusted(self, sampled: np.ndarray, affine: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+        """``gain * sampled + bias`` per channel (with the knee, ``gains.tone_curve``) plus the offsets,
+        float32, in the shape of the offsets (Hc, Wc, C)."""
+        gain, bias, offset = affine
+        values = sampled.reshape(offset.shape)
+        if self.knee is None:
+            scale = tuple(float(g) for g in gain) + (0.0,) * (4 - len(gain))  # an OpenCV scalar: one factor per channel
+            return cv2.add(cv2.multiply(values.astype(np.float32), scale), offset + bias.astype(np.float32))
+        return cv2.add(tone_curve(values, gain, bias, *self.knee), offset)
 
     def apply(self, img_src: np.ndarray, img_tgt: np.ndarray) -> np.ndarray:
         """uint8 (Hc, Wc[, C]) composite of two uint8 (H, W[, C]) images."""

@@ -47,6 +47,7 @@ import numpy as np
 
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
+from sena_warp.gains import tone_curve
 from sena_warp.video.maps import sampled_mask, target_offset
 from sena_warp.video.stitch import CompositedFrame
 from sena_warp.warp_map import forward_points
@@ -239,8 +240,9 @@ class VideoFigures:
         src, tgt = band.views(y_src, y_tgt)
         out = band.output(y_out)
         gain_src, bias_src, gain_tgt, bias_tgt = (float(v[0]) for v in frame.gains_luma)
-        src_g = np.where(band.valid_src, gain_src * src + bias_src, 0.0).astype(np.float32)
-        tgt_g = np.where(band.valid_tgt, gain_tgt * tgt + bias_tgt, 0.0).astype(np.float32)
+        knee, white = frame.knee_luma or (math.inf, math.inf)  # no knee: the affine gains
+        src_g = np.where(band.valid_src, tone_curve(src, gain_src, bias_src, knee, white), 0.0).astype(np.float32)
+        tgt_g = np.where(band.valid_tgt, tone_curve(tgt, gain_tgt, bias_tgt, knee, white), 0.0).astype(np.float32)
         seam_band = np.asarray(frame.seam, np.float64) - band.x0
         steps = naturalness.seam_steps(out, src_g, tgt_g, band.valid_src, band.valid_tgt, seam_band)
         last = self._last
