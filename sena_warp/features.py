@@ -81,10 +81,17 @@ def match_mutual_nn(desc_a: np.ndarray, desc_b: np.ndarray,
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
     cossim = desc_a @ desc_b.T
     best_b = np.argmax(cossim, axis=1)
-    best_a = np.argmax(cossim, axis=0)
     idx_a = np.arange(len(desc_a))
     best_sim = cossim[idx_a, best_b]
-    keep = (best_a[best_b] == idx_a) & (best_sim >= min_cossim)
+    # i is j's best in a when it reaches j's column maximum: a max down the columns reads the matrix row
+    # by row, where an argmax down them strides across it (2.8 vs 126 ms for 4096 x 4096 on this CPU).
+    # Of rows tied at a column's maximum, the first is kept.
+    reaches = best_sim == cossim.max(axis=0)[best_b]
+    rows = idx_a[reaches]
+    keep_rows = rows[np.unique(best_b[rows], return_index=True)[1]]
+    mutual = np.zeros(len(desc_a), bool)
+    mutual[keep_rows] = True
+    keep = mutual & (best_sim >= min_cossim)
     return idx_a[keep], best_b[keep], best_sim[keep].astype(np.float64)
 
 

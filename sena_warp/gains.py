@@ -142,8 +142,11 @@ def tone_curve(values: np.ndarray, gain: np.ndarray, bias: np.ndarray, knee: flo
 
 
 def compensated(img: np.ndarray, gain: np.ndarray, bias: np.ndarray, knee: float) -> np.ndarray:
-    """:func:`tone_curve` per channel of a uint8 (H, W, C) image, rounded and clipped to uint8."""
-    return np.clip(tone_curve(img, gain, bias, knee) + 0.5, 0, 255).astype(np.uint8)
+    """:func:`tone_curve` per channel of a uint8 (H, W, C) image (C <= 4), rounded and clipped to uint8:
+    the curve is evaluated at the 256 levels once and looked up (``cv2.LUT``)."""
+    levels = np.repeat(np.arange(256, dtype=np.float32)[:, None], img.shape[2], axis=1)
+    table = np.clip(tone_curve(levels, gain, bias, knee) + 0.5, 0, 255).astype(np.uint8)
+    return cv2.LUT(img, table.reshape(256, 1, img.shape[2])).reshape(img.shape)
 
 
 def compensated_views(views: CanvasViews, gains: Gains) -> CanvasViews:
