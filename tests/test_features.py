@@ -63,6 +63,29 @@ def test_mutual_nn_recovers_a_permutation_and_drops_one_sided_matches():
     assert 50 not in idx_a and len(idx_a) == 50
 
 
+def test_mutual_nn_is_the_argmax_definition_on_real_descriptors(udisd_pair):
+    """The column maxima stand in for an argmax down the columns: the same pairs, in the same order, as
+    the definition (i's best in b is j and j's best in a is i) on the bundled pair's XFeat descriptors,
+    and with a tie (a duplicated descriptor) the first of the tied rows."""
+    cfg = Config()
+    (_, desc_a, _), (_, desc_b, _) = (detect(img, cfg) for img in udisd_pair)
+    matched = match_mutual_nn(desc_a, desc_b, cfg.min_cossim)[0][0]
+    desc_a = np.vstack([desc_a, desc_a[matched:matched + 1]])  # a matched row again, last: tied in every column
+
+    def definition(a, b):
+        cossim = a @ b.T
+        best_b, best_a = np.argmax(cossim, axis=1), np.argmax(cossim, axis=0)
+        idx = np.arange(len(a))
+        keep = (best_a[best_b] == idx) & (cossim[idx, best_b] >= cfg.min_cossim)
+        return idx[keep], best_b[keep]
+
+    got = match_mutual_nn(desc_a, desc_b, cfg.min_cossim)
+    expected = definition(desc_a, desc_b)
+    assert len(got[0]) > 500 and matched in got[0] and len(desc_a) - 1 not in got[0]
+    np.testing.assert_array_equal(got[0], expected[0])
+    np.testing.assert_array_equal(got[1], expected[1])
+
+
 def test_mutual_nn_cosine_threshold():
     desc_a = np.array([[1.0, 0.0], [0.0, 1.0]], np.float32)
     desc_b = np.array([[0.8, 0.6], [-0.6, 0.8]], np.float32)  # cosines 0.8 (a0-b0) and 0.8 (a1-b1)
