@@ -204,6 +204,30 @@ class Compositor:
         runtime.launch_rows(seam_weights_kernel, *self.canvas_shape, inputs, self.device, self.threads)
         return alpha.numpy(), lf.numpy()
 
+    def border_offsets(self, channels: int) -> tuple[np.ndarray, np.ndarray]:
+        """The border blend's offsets per canvas pixel (Hc, Wc, channels) float32 of each side, as the
+        frame kernel adds them (zeros without a border blend), for figures and reference implementations."""
+        self._ensure_defaults(channels)
+        on, lines, _, src, tgt = self._border[channels]
+        height, width = self.canvas_shape
+        if not on:
+            zeros = np.zeros((height, width, channels), np.float32)
+            return zeros, zeros.copy()
+        rows = self.layout.lines_are_rows
+        line = np.arange(height if rows else width, dtype=np.float32)
+        lf_px = max(self.layout.lf_px, 1e-6)
+        weights = [np.maximum(0.0, 1.0 - np.abs(line - lines[k]) / lf_px) for k in range(2)]
+
+        def spread(values: wp.array) -> np.ndarray:
+            along = values.numpy().reshape(2, -1, channels) / LEVEL
+            if rows:
+                total = sum(weights[k][:, None, None] * along[k][None, :, :] for k in range(2))
+            else:
+                total = sum(weights[k][None, :, None] * along[k][:, None, :] for k in range(2))
+            return total.astype(np.float32)
+
+        return spread(src), spread(tgt)
+
     def knee(self) -> tuple[float, float] | None:
         """(knee, white) grey levels of the gains' highlight knee (``gains.tone_curve``), or None."""
         return self._knee

@@ -89,7 +89,7 @@ def test_bench_sizes_and_missing_data(tmp_path):
 @pytest.mark.parametrize("channels", [1, 2])
 def test_opencv_reference_agrees_with_warp_compositor(scene, channels, warp_device):  # noqa: F811
     """Fairness of the benchmark: both compositors compute the same thing (maps on cv2's 1/32 px grid),
-    seam, gains and the seam blend's offsets included."""
+    seam, gains and the seam blend's offsets (along the seam and the borders) included."""
     img_src, img_tgt, map_src, map_tgt, _ = scene
     map_src = (np.round(map_src * INTER_STEPS) / INTER_STEPS).astype(np.float32)
     map_src[:40, :40] = np.nan  # a NaN patch: nothing sampled from the source there
@@ -100,6 +100,8 @@ def test_opencv_reference_agrees_with_warp_compositor(scene, channels, warp_devi
     comp.set_gains(channels, [1.1, 1.0][:channels], [-4.0, 2.0][:channels], [0.9, 1.0][:channels], [3.0, -2.0][:channels])
     lines = comp.lines
     comp.set_offsets(np.full((lines, channels), -5.0, np.float32), np.full((lines, channels), 5.0, np.float32))
+    along = np.linspace(-8.0, 8.0, map_src.shape[1], dtype=np.float32)[:, None].repeat(channels, 1)
+    comp.set_border_offsets((12.5, lines - 15.5), np.stack([along, -along]), np.stack([-along, along]))
     out = comp.apply(plane_src, plane_tgt, fill).reshape(*map_src.shape[:2], channels)
     reference = OpenCVReference(PlanePass.of(comp, map_src, map_tgt, fill), plane_src.shape[:2], plane_tgt.shape[:2])
     expected = reference.apply(plane_src, plane_tgt).reshape(*map_src.shape[:2], channels)

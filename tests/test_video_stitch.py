@@ -27,7 +27,7 @@ from sena_warp.video.maps import (PlaneMaps, chroma_positions, chroma_seam, lerp
                                  target_map)
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import YuvFrame
-from sena_warp.video.stitch import stitch_videos
+from sena_warp.video.stitch import SenaFrameCompositor, stitch_videos
 from sena_warp.video.writer import VideoWriter
 from helpers import decoded_frames, stream_spans
 
@@ -278,7 +278,7 @@ def synthetic_maps(shift_px: float, inliers: int, shape=(40, 60)) -> PlaneMaps:
     seam = np.full(shape[0], 30.0 + shift_px, np.float32)
     seam_luma = SeamLayout(seam, True, 10.0, 8.0, 1.5, 0.0)
     return PlaneMaps(map_src, map_tgt, alpha, chroma_positions(map_src), chroma_positions(map_tgt),
-                     alpha[::2, ::2].copy(), seam_luma, chroma_seam(seam_luma), seam, inliers)
+                     alpha[::2, ::2].copy(), seam_luma, chroma_seam(seam_luma), seam, inliers, None)
 
 
 def test_reestimates_with_few_inliers_or_a_large_map_change_are_rejected():
@@ -300,3 +300,44 @@ def test_blend_moves_maps_and_seam_linearly_and_takes_the_goal_where_the_start_h
     np.testing.assert_allclose(half.seam_luma.positions, 34.0)
     assert map_change_px(start, half, (40, 60), 99.0) == pytest.approx(4.0)
     assert half.inliers == 320
+
+
+def test_the_office_rig_gets_the_border_blend_on_its_y_plane(clips):
+    """The office estimate's target border lies between canvas rows 37 and 38 and 517 and 518 of the
+    fixed canvas (its target offset); the Y pass adds the estimate's border offsets there and nowhere
+    beyond their fade, and where the source goes on above the target's top border (the columns the
+    offsets reach) the first frame's Y step across it is smaller than without them."""
+    import av
+
+    def first_y(path: Path) -> np.ndarray:
+        with av.open(str(path)) as container:
+            frame = next(container.decode(video=0)).reformat(format="yuv420p")
+        return frame.to_ndarray()[:frame.height]  # yuv420p as one array: Y's rows first
+
+    y_l, y_r = first_y(clips / "office_cam1.mp4"), first_y(clips / "office_cam2.mp4")
+    uv = np.full(((y_l.shape[0] + 1) // 2, (y_l.shape[1] + 1) // 2), 128, np.uint8)
+    outs = {}
+    for on in (True, False):
+        comp = SenaFrameCompositor.from_videos(clips / "office_cam1.mp4", clips / "office_cam2.mp4", 0.0,
+                                               CFG.replace(video_estimate_pairs=1, border_blend=on), "auto")
+        try:
+            outs[on] = comp.composite_yuv(y_l, uv, uv, y_r, uv, uv)[0].astype(np.float64)
+            if on:
+                oy = int(comp._offset_tgt[1])
+                lines, border_src, border_tgt = comp._maps.border_luma
+                fade = comp._maps.seam_luma.lf_px
+                assert lines == (oy - 0.5, oy + y_r.shape[0] - 0.5)
+                assert np.abs(border_tgt).max() > 2 and np.allclose(border_src, -border_tgt)
+            else:
+                assert comp._maps.border_luma is None
+        finally:
+            comp.close()
+    changed_rows = np.flatnonzero(np.abs(outs[True] - outs[False]).max(axis=1) > 0)
+    near = np.minimum(np.abs(changed_rows - lines[0]), np.abs(changed_rows - lines[1]))
+    assert changed_rows.size and near.max() <= fade
+    cols = np.flatnonzero(np.abs(border_tgt[0, :, 0]) > 0.5)
+
+    def step(y: np.ndarray) -> float:
+        return float(y[oy - 3:oy, cols].mean() - y[oy:oy + 3, cols].mean())
+
+    assert abs(step(outs[True])) < abs(step(outs[False])) - 3  # measured: 52.4 -> 42.5 (content changes there too)

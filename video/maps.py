@@ -22,6 +22,7 @@ from ..stitch import StitchMaps
 # Output pixels no input covers: black in limited-range BT.601, the range H.264 decoders assume.
 BLACK_Y, BLACK_UV = 16, 128
 WHITE_Y = 235  # limited-range white: where the gains' highlight knee runs to on the Y plane
+Y_PER_GREY = 219 / 255  # limited-range Y levels per full-range grey level (a grey offset moves Y only)
 
 
 @dataclass(frozen=True)
@@ -33,6 +34,8 @@ class PlaneMaps:
     ``*_chroma``: the same at (H/2, W/2), positions in the U/V planes.
     ``seam_x_working``: (rows,) float32 seam x per row of the *working* frame (``rig.py``), NaN
     where the estimate's canvas does not reach. ``inliers``: global-affine inliers of the estimate.
+    ``border_luma``: the estimate's border blend on the Y plane (``partition.border_offsets``): (lines
+    (2,), source offsets (2, P, 1), target offsets (2, P, 1)) in the compositor's terms, or None.
     """
 
     map_src_luma: np.ndarray
@@ -45,6 +48,7 @@ class PlaneMaps:
     seam_chroma: SeamLayout
     seam_x_working: np.ndarray
     inliers: int
+    border_luma: tuple[tuple[float, float], np.ndarray, np.ndarray] | None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -122,7 +126,29 @@ def plane_maps(maps: StitchMaps, shape: tuple[int, int], offset_fixed: np.ndarra
         seam_luma=seam_luma, seam_chroma=chroma_seam(seam_luma),
         seam_x_working=seam_x,
         inliers=int(maps.warp.glob.n_inliers),
+        border_luma=border_on_canvas(maps, shift_xy, shape),
     )
+
+
+def border_on_canvas(maps: StitchMaps, shift_xy: np.ndarray, shape: tuple[int, int]
+                     ) -> tuple[tuple[float, float], np.ndarray, np.ndarray] | None:
+    """The estimate's border blend (grey levels per working column at two working rows) on the fixed
+    canvas's Y plane: lines ``L - dy``, offsets shifted by ``dx`` along them (0 beyond the estimate's
+    canvas) and scaled to Y levels; None when the estimate has none. ``shift_xy`` and ``shape`` as
+    :func:`seam_on_canvas`'s."""
+    border = maps.seam.border
+    if not border.on:
+        return None
+    dx, dy = shift_xy[::-1] if maps.rig.vertical else shift_xy
+    positions = shape[0] if maps.rig.vertical else shape[1]
+
+    def along(offsets: np.ndarray) -> np.ndarray:
+        grey = offsets[:, :, :1].transpose(1, 0, 2)[:, :, 0]  # (W, 2): the offsets are grey, one channel says all
+        shifted = shift_onto(grey.astype(np.float32)[:, :, None], np.array([0.0, dx]), (positions, 2), 0.0)[:, :, 0]
+        return (Y_PER_GREY * shifted.T)[:, :, None].astype(np.float32)
+
+    lines = tuple(float(line - round(dy)) for line in border.lines)
+    return lines, along(border.src), along(border.tgt)
 
 
 def filled(positions: np.ndarray) -> np.ndarray:
@@ -178,6 +204,7 @@ def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
         seam_chroma=replace(goal.seam_chroma, positions=lerp(start.seam_chroma.positions, goal.seam_chroma.positions)),
         seam_x_working=lerp(start.seam_x_working, goal.seam_x_working),
         inliers=goal.inliers,
+        border_luma=goal.border_luma,
     )
 
 

@@ -56,7 +56,7 @@ class PlanePass:
     plane, NaN where nothing may be sampled; ``alpha``: (Hc, Wc) float32 source weight where both are
     sampled; ``gains``: (gain_src, bias_src, gain_tgt, bias_tgt), each (C,), with ``knee`` (knee, white)
     grey levels of their highlight knee or None (``gains.tone_curve``); ``offsets_src`` /
-    ``offsets_tgt``: (Hc, Wc, C) float32 the seam blend's offsets per pixel; ``fill``: the output value
+    ``offsets_tgt``: (Hc, Wc, C) float32 the seam blend's offsets per pixel (along the seam and the borders); ``fill``: the output value
     per channel where neither plane is sampled. The luma pass samples the Y planes, the chroma pass
     the U and V planes stacked as two channels (``np.dstack((u, v))``), at half resolution.
     """
@@ -82,8 +82,9 @@ class PlanePass:
             lines = per_line[:, None, :] if rows else per_line[None, :, :]
             return (lf[:, :, None] * lines).astype(np.float32)
 
-        return PlanePass(map_src, map_tgt, alpha, compositor.gains(channels), compositor.knee(), spread(per_line_src),
-                         spread(per_line_tgt), fill)
+        border_src, border_tgt = compositor.border_offsets(channels)
+        return PlanePass(map_src, map_tgt, alpha, compositor.gains(channels), compositor.knee(),
+                         spread(per_line_src) + border_src, spread(per_line_tgt) + border_tgt, fill)
 
 
 @dataclass(frozen=True)
@@ -167,6 +168,7 @@ class SenaFrameCompositor:
         self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.seam_luma, cfg, WHITE_Y)
         self._chroma = Compositor(self._maps.map_src_chroma, self._maps.map_tgt_chroma, self._maps.seam_chroma, cfg,
                                   None)
+        self._set_border()
         self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, self._reestimate_s is None, cfg)
         self._fps = fps
         self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
@@ -186,6 +188,11 @@ class SenaFrameCompositor:
         self._seconds = {"reestimate": 0.0, "maps_upload": 0.0, "frame_seam": 0.0, "exposure": 0.0}
         if observer is not None:
             self._seconds["observer"] = 0.0
+
+    def _set_border(self) -> None:
+        """The current maps' border blend on the Y pass (grey offsets: U and V have none to carry)."""
+        if self._maps.border_luma is not None:
+            self._luma.set_border_offsets(*self._maps.border_luma)
 
     def _on_canvas(self, maps: StitchMaps, shape: tuple[int, int]) -> PlaneMaps:
         """An estimate on the fixed canvas, its plan band wide enough for the per-frame seam."""
@@ -297,6 +304,7 @@ class SenaFrameCompositor:
         # The target maps never change on the fixed canvas; only the source map and the seam move.
         self._luma.set_maps(self._maps.map_src_luma, self._maps.seam_luma.positions)
         self._chroma.set_maps(self._maps.map_src_chroma, self._maps.seam_chroma.positions)
+        self._set_border()
         self._seam.reset(self._maps.seam_luma.positions)
         if self._exposure is not None:
             self._exposure.set_maps(self._maps, *self._plane_shapes)
