@@ -198,9 +198,15 @@ def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, 
     if cfg.seam_blend_ratio <= 0:
         zeros = np.zeros((height, channels), np.float32)
         return SeamOffsets(zeros, zeros.copy(), 0.0)
-    cols = np.arange(width)[None, :]
-    strip = views.both & (np.abs(cols - np.asarray(seam_x_canvas, np.float64)[:, None]) <= cfg.seam_blend_strip_px)
-    diff = (views.src.astype(np.float32) - views.tgt.astype(np.float32)) * strip[:, :, None]
+    seam_x = np.asarray(seam_x_canvas, np.float64)
+    reach = cfg.seam_blend_strip_px
+    # Only the columns within reach of each row's seam: (H, 2 reach + 2) of them, not the whole canvas.
+    cols = np.ceil(np.nan_to_num(seam_x, nan=-2.0 * reach - 2) - reach).astype(np.int64)[:, None] + np.arange(2 * reach + 2)
+    inside = (cols >= 0) & (cols < width)
+    cols = np.clip(cols, 0, width - 1)
+    rows = np.arange(height)[:, None]
+    strip = inside & views.both[rows, cols] & (np.abs(cols - seam_x[:, None]) <= reach)
+    diff = (views.src[rows, cols].astype(np.float32) - views.tgt[rows, cols].astype(np.float32)) * strip[:, :, None]
     count = strip.sum(axis=1)
     per_row = diff.sum(axis=1) / np.maximum(count, 1)[:, None]
     delta = running_mean(per_row, count > 0, cfg.seam_blend_rows).astype(np.float32)

@@ -94,13 +94,14 @@ def separation_cost(shape: tuple[int, int], copies_src_canvas: np.ndarray, copie
     return np.cumsum(edges, axis=1)[:, :width]
 
 
-def hidden_structure_cost(grey_src: np.ndarray, grey_tgt: np.ndarray, both: np.ndarray, cfg: Config) -> np.ndarray:
+def hidden_structure_cost(grey_src: np.ndarray, grey_tgt: np.ndarray, both: np.ndarray, canvas_width: int,
+                          cfg: Config) -> np.ndarray:
     """(H, W) float32, per seam position x in a row: the structure that a seam there would hide.
 
     Where the views differ strongly (blurred |src - tgt| above ``seam_unique_diff``), the view with
     more edge energy there is taken to show an object the other lacks; a seam at x shows the source
     left of x and the target right of it, so it hides the target's extra structure left of x and the
-    source's right of x: prefix and suffix sums along the row.
+    source's right of x: prefix and suffix sums along the row, normalised by the canvas's width.
     """
     sigma = cfg.seam_unique_sigma_px
 
@@ -114,7 +115,7 @@ def hidden_structure_cost(grey_src: np.ndarray, grey_tgt: np.ndarray, both: np.n
     src_only = strong * np.maximum(energy_src - energy_tgt, 0.0)
     tgt_only = strong * np.maximum(energy_tgt - energy_src, 0.0)
     hidden = np.cumsum(tgt_only, axis=1) + np.cumsum(src_only[:, ::-1], axis=1)[:, ::-1]
-    return (hidden / np.float32(max(1.0, cfg.seam_unique_norm * grey_src.shape[1]))).astype(np.float32)
+    return (hidden / np.float32(max(1.0, cfg.seam_unique_norm * canvas_width))).astype(np.float32)
 
 
 def seam_cost_canvas(warped_src: np.ndarray, placed_tgt: np.ndarray, both: np.ndarray,
@@ -125,19 +126,27 @@ def seam_cost_canvas(warped_src: np.ndarray, placed_tgt: np.ndarray, both: np.nd
     both are valid; copies_*_canvas: (N, 2) float64 (x, y) canvas positions of every match's source
     and target copy (NaN where undefined), for ``separation_cost``.
     """
-    src = warped_src.astype(np.float32)
-    tgt = placed_tgt.astype(np.float32)
-    colour = np.abs(src - tgt).reshape(*both.shape, -1).mean(axis=2)
-    grey_src, grey_tgt = _grey(warped_src).astype(np.float32), _grey(placed_tgt).astype(np.float32)
+    out = np.full(both.shape, BLOCKED, np.float32)
+    rows, cols = np.flatnonzero(both.any(axis=1)), np.flatnonzero(both.any(axis=0))
+    if not rows.size:
+        return out
+    # The cost is only read inside the overlap: work on its bounding box, widened by the filters' reach
+    # so every value inside is the whole canvas's (the prefix sums gather nothing outside the overlap).
+    reach = int(np.ceil(4.0 * cfg.seam_unique_sigma_px)) + 2
+    box = (slice(max(rows[0] - reach, 0), rows[-1] + reach + 1), slice(max(cols[0] - reach, 0), cols[-1] + reach + 1))
+    src_box, tgt_box, both_box = warped_src[box], placed_tgt[box], both[box]
+    colour = np.abs(src_box.astype(np.float32) - tgt_box.astype(np.float32)).reshape(*both_box.shape, -1).mean(axis=2)
+    grey_src, grey_tgt = _grey(src_box).astype(np.float32), _grey(tgt_box).astype(np.float32)
     sx, sy = _gradient(grey_src)
     tx, ty = _gradient(grey_tgt)
     cost = colour + cfg.seam_gradient_weight * np.hypot(sx - tx, sy - ty)
     cost += cfg.seam_edge_weight * np.maximum(np.hypot(sx, sy), np.hypot(tx, ty))
     if cfg.seam_separation_weight > 0:
-        cost += separation_cost(both.shape, copies_src_canvas, copies_tgt_canvas, cfg)
+        cost += separation_cost(both.shape, copies_src_canvas, copies_tgt_canvas, cfg)[box]
     if cfg.seam_unique_weight > 0:
-        cost += cfg.seam_unique_weight * hidden_structure_cost(grey_src, grey_tgt, both, cfg)
-    return np.where(both, cost, BLOCKED).astype(np.float32)
+        cost += cfg.seam_unique_weight * hidden_structure_cost(grey_src, grey_tgt, both_box, both.shape[1], cfg)
+    out[box] = np.where(both_box, cost, BLOCKED)
+    return out
 
 
 class BandPath:

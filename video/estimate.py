@@ -8,6 +8,7 @@ common). Re-estimates of a moving rig are judged against the maps in use before 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from fractions import Fraction
 from operator import attrgetter
@@ -39,17 +40,20 @@ class Attempt:
 
 
 def first_pairs(left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config
-                ) -> list[tuple[int, YuvFrame, YuvFrame]]:
+                ) -> Iterator[tuple[int, YuvFrame, YuvFrame]]:
     """Pairs 0, s, 2s, ... (``cfg.video_estimate_pairs`` of them, s = ``cfg.video_estimate_spacing``).
 
-    Decoded and paired by time exactly as the main loop pairs them; returns (pair index, left, right).
+    Decoded and paired by time exactly as the main loop pairs them; yields (pair index, left, right)
+    as soon as a pair is there, so the caller works on one while the decoders go on to the next.
     """
     span = cfg.video_estimate_pairs * cfg.video_estimate_spacing
     right_period_s = 1 / probe_video(right).fps
     with FrameReader(left, Fraction(0), cfg.video_queue_frames, cfg.cpu_threads) as reader_l, \
             FrameReader(right, Fraction(str(offset_s)), cfg.video_queue_frames, cfg.cpu_threads) as reader_r:
         pairs = pair_by_time(reader_l, reader_r, right_period_s, attrgetter("time_s"))
-        return [(i, fl, fr) for i, (fl, fr) in zip(range(span), pairs) if i % cfg.video_estimate_spacing == 0]
+        for i, (frame_l, frame_r) in zip(range(span), pairs):
+            if i % cfg.video_estimate_spacing == 0:
+                yield i, frame_l, frame_r
 
 
 def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str,
@@ -78,8 +82,9 @@ def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offse
     attempts: list[Attempt] = []
     screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches]] = []
     last_error: StitchError | None = None
-    tried = first_pairs(left, right, offset_s, cfg)
-    for index, frame_l, frame_r in tried:
+    tried = []
+    for index, frame_l, frame_r in first_pairs(left, right, offset_s, cfg):  # screened while the next decodes
+        tried.append((index, frame_l, frame_r))
         try:
             matches, inliers = screen_pair(frame_l, frame_r, cfg, reference)
         except StitchError as exc:
