@@ -101,6 +101,9 @@ def summary(out: Path) -> None:
 
 
 if __name__ == "__main__":
+    if len(sys.argv) < 2 or sys.argv[1] in ("-h", "--help"):
+        print("usage:\n" + __doc__.split("\n\n")[2].rstrip())
+        sys.exit(0 if len(sys.argv) > 1 else 2)
     step, args = sys.argv[1], sys.argv[2:]
     if step == "facts":
         facts(Path(args[0]))

@@ -40,7 +40,8 @@ import numpy as np
 from sena_warp.config import Config
 from sena_warp.evaluation.video_figures import VideoFigures
 from sena_warp.kernels.runtime import resolve_config
-from sena_warp.video.loop import VideoOptions, write_report
+from sena_warp.report import write_json
+from sena_warp.video.loop import VideoOptions
 from sena_warp.video.reader import YuvFrame, probe_video
 from sena_warp.video.stitch import CompositedFrame, stitch_videos
 
@@ -177,7 +178,7 @@ def run_one(recording: str, mode: str, offset_s: float, videos: Path, out: Path,
     report["figures_code"] = code
     report["figures_mode"] = mode
     report["figures_settings"] = changes
-    write_report(report, out / f"{name}.json")
+    write_json(out / f"{name}.json", report)
     write_pictures(observer, name, out, not report["stitch"]["rig"]["vertical"])
     return report
 

@@ -45,3 +45,17 @@ def _lazy_modules(path) -> list[str]:
     """The modules the CLI names for ``_lazy`` (its subcommands imported only when run)."""
     return [node.args[0].value for node in ast.walk(ast.parse(path.read_text()))
             if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "_lazy"]
+
+
+def test_every_benchmark_script_imports_and_answers_help():
+    """benchmarks/ are commands a user runs, outside the package: an import that moved (video_figures.py
+    imported a ``write_report`` that had become ``report.write_json``) breaks them without any other
+    test noticing. Each answers ``--help`` (exit 0) without doing its work."""
+    import subprocess
+    import sys
+
+    scripts = sorted((REPO / "benchmarks").glob("*.py"))
+    assert len(scripts) >= 10
+    for script in scripts:
+        done = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0 and "usage" in done.stdout.lower(), (script.name, done.stderr[-500:])
