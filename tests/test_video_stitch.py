@@ -341,3 +341,37 @@ def test_the_office_rig_gets_the_border_blend_on_its_y_plane(clips):
         return float(y[oy - 3:oy, cols].mean() - y[oy:oy + 3, cols].mean())
 
     assert abs(step(outs[True])) < abs(step(outs[False])) - 3  # measured: 52.4 -> 42.5 (content changes there too)
+
+
+def test_the_frame_seam_stays_on_the_lines_where_nothing_moved(clips):
+    """The office rig's first frame twice, then once more with a bright square crossing the seam on a
+    few lines of the source: the lines the square changed (and a band's width around them) may move,
+    every other line is still and keeps the last frame's seam exactly."""
+    import av
+
+    def first_y(path: Path) -> np.ndarray:
+        with av.open(str(path)) as container:
+            frame = next(container.decode(video=0)).reformat(format="yuv420p")
+        return frame.to_ndarray()[:frame.height]  # yuv420p as one array: Y's rows first
+
+    comp = SenaFrameCompositor.from_videos(clips / "office_cam1.mp4", clips / "office_cam2.mp4", 0.0,
+                                           CFG.replace(video_estimate_pairs=1), "auto")
+    try:
+        y_l, y_r = first_y(clips / "office_cam1.mp4"), first_y(clips / "office_cam2.mp4")
+        uv = np.full(((y_l.shape[0] + 1) // 2, (y_l.shape[1] + 1) // 2), 128, np.uint8)
+        for _ in range(2):
+            comp.composite_yuv(y_l, uv, uv, y_r, uv, uv)
+        seam = comp._seam
+        before = seam.positions.copy()
+        assert seam.still.all()  # the same frame again: every line still
+        # cam2 is the source (left view): a bright square on its rows 200-240, where the seam is.
+        oy = int(comp._offset_tgt[1])
+        x = int(comp._maps.map_src_luma[oy + 220, int(before[oy + 220]), 0])  # the source column at the seam
+        square = y_r.copy()
+        square[200:240, max(x - 30, 0):x + 30] = 250
+        comp.composite_yuv(y_l, uv, uv, square, uv, uv)
+        still = seam.still
+        assert not still.all() and still.sum() > 0.5 * len(still)
+        np.testing.assert_array_equal(seam.positions[still], before[still])
+    finally:
+        comp.close()

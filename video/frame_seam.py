@@ -11,6 +11,10 @@ band, is taken instead when the gliding one would cost ``video_seam_jump_cost`` 
 something moved across the seam and the seam steps round it at once. (On a moving rig everything
 shifts a little every frame; there the seam only glides.) While nothing moves the costs only carry noise, and a new path
 replaces the last one only when it is cheaper by ``video_seam_margin`` per line: the seam stays put.
+And on a *still* line it stays put whatever the path elsewhere does: a line is still when no box of
+``video_seam_still_box_px`` cells of the band's difference changed by more than ``video_seam_noise``
+since the last frame on it or within a band's width of lines (room for the path to leave and come back);
+there every cell but the last frame's seam is blocked.
 Only the compositor's seam positions change per frame; its plan stays.
 
 Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig).
@@ -18,6 +22,7 @@ Positions are per seam line of the luma plane (canvas rows, or columns for a ver
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import warp as wp
 
@@ -47,6 +52,8 @@ class FrameSeam:
         self._segment = np.array([[0, len(home) - 1, -1, -1]])
         self._diff = wp.zeros((len(home), self.width), dtype=float, device=cfg.device)
         self.shown: np.ndarray | None = None  # the positions the last frame was composited with
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # the last frame's (difference, both)
+        self.still = np.zeros(len(home), bool)  # the lines the last frame found still (``still_lines``)
         self.reset(home)
 
     def reset(self, home: np.ndarray) -> None:
@@ -55,6 +62,7 @@ class FrameSeam:
         not add its own step to the seam's."""
         self.home = np.asarray(home, np.float32)
         self.band_x0 = (np.rint(self.home) - self.band).astype(np.int32)
+        self._last = None  # the band's cells moved: the last difference no longer lines up
         last = getattr(self, "positions", self.home)
         self.positions = np.clip(np.rint(last), self.band_x0, self.band_x0 + self.width - 1).astype(np.int32)
 
@@ -69,11 +77,15 @@ class FrameSeam:
         last = self.positions if self.shown is None else self.shown
         cost = (change + cfg.video_seam_stay_cost * np.abs(cells - last[:, None])
                 + cfg.video_seam_home_cost * np.abs(cells - self.home[:, None]))
+        block = np.float32(cfg.video_seam_blocked_cost * 10)
+        self.still = self.still_lines(diff, both)
+        pinned = self.still[:, None] & (cells != last[:, None])
+        self._last = (diff.copy(), both)
         # Where the band has moved past the last seam (rounding of a blend's step), its nearest cell is near enough.
         outside = np.maximum(np.maximum(self.band_x0 - last, last - (self.band_x0 + self.width - 1)), 0)
         far = np.abs(cells - last[:, None]) > np.maximum(cfg.video_seam_speed_px, outside)[:, None]
-        glide = self._solver.solve(cost + far * np.float32(cfg.video_seam_blocked_cost * 10), self.band_x0,
-                                   self._segment, cfg.seam_max_step_px, cfg.seam_step_cost)
+        glide = self._solver.solve(cost + (far | pinned) * block, self.band_x0, self._segment, cfg.seam_max_step_px,
+                                   cfg.seam_step_cost)
         lines = np.arange(len(self.home))
 
         def along(path: np.ndarray) -> float:
@@ -82,12 +94,24 @@ class FrameSeam:
         lines_n = len(lines)
         path = glide
         if self.jumps:
-            free = self._solver.solve(cost, self.band_x0, self._segment, cfg.seam_max_step_px, cfg.seam_step_cost)
+            free = self._solver.solve(cost + pinned * block, self.band_x0, self._segment, cfg.seam_max_step_px,
+                                      cfg.seam_step_cost)
             path = free if along(glide) - along(free) > cfg.video_seam_jump_cost * lines_n else glide
         if along(self.positions) - along(path) > cfg.video_seam_margin * lines_n:
             self.positions = path.astype(np.int32)
         self.shown = self.positions.copy()
         return self.positions, diff, both
+
+    def still_lines(self, diff: np.ndarray, both: np.ndarray) -> np.ndarray:
+        """(L,) bool: lines where nothing changed since the last frame (module docstring); none without one."""
+        if self._last is None:
+            return np.zeros(len(diff), bool)
+        last_diff, last_both = self._last
+        common = both & last_both
+        delta = np.where(common, np.abs(diff - last_diff), 0.0).astype(np.float32)
+        box = max(1, self.cfg.video_seam_still_box_px)
+        moved = (cv2.blur(delta, (box, box)) > self.cfg.video_seam_noise).any(axis=1)
+        return np.convolve(moved.astype(np.float64), np.ones(2 * self.width + 1), "same") == 0
 
 
 def band_offsets(positions: np.ndarray, band_x0: np.ndarray, diff: np.ndarray, both: np.ndarray,
