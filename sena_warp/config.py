@@ -36,6 +36,8 @@ class Config:
     ransac_confidence: float = 0.995  # RANSAC confidence
     ransac_max_iters: int = 2000  # RANSAC iterations (at least)
     min_inliers: int = 12  # fewer inliers than this: no stitch
+    global_model_choice: str = "support"  # "support": the model with more matches within fit_match_px; "inliers": more RANSAC inliers (paper)
+    global_model_margin: float = 0.02  # support: supports closer than this fraction are a tie, and the inliers decide
 
     # --- Step 2: overlap, canvas, cells c_j ---------------------------------------------------
     max_canvas_area_ratio: float = 4.0  # refuse a canvas larger than this x (area_src + area_tgt)
@@ -214,6 +216,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "gate_model": ("none", "paper"),
     "seam_model": ("path", "paper"),
     "gain_model": ("channels", "opencv", "none"),
+    "global_model_choice": ("inliers", "support"),
     "device": ("auto", "cpu", "cuda"),
 }
 OFFSET_AUTO = "auto"  # --offset, or a batch job's offset, that is estimated from the inputs (video/sync.py)

@@ -10,7 +10,7 @@ from sena_warp.affine import apply_affine
 from sena_warp.config import Config
 from sena_warp.errors import MatchError
 from sena_warp.features import match_images
-from sena_warp.global_affine import fit_global_affine
+from sena_warp.global_affine import fit_global_affine, near_model
 from helpers import read_pair
 
 CFG = Config()
@@ -103,3 +103,37 @@ def test_random_matches_are_a_match_error_naming_the_counts():
     pts_tgt = rng.uniform(0, 1000, size=(300, 2))
     with pytest.raises(MatchError, match=r"only \d+ of 300 matches agree.*overlap"):
         fit_global_affine(pts_src, pts_tgt, CFG)
+
+
+def _working_matches(img_a, img_b):
+    from sena_warp.rig import detect_rig, matches_to_working
+
+    matches = match_images(img_a, img_b, Config())
+    rig = detect_rig(matches.pts_a, matches.pts_b, "auto")
+    return matches_to_working(matches.pts_a, matches.pts_b, rig)
+
+
+def test_by_support_a_near_tie_is_decided_by_the_inliers(bundled_dir):
+    """The bundled pair: as many matches lie within fit_match_px of the similarity as of the full affine
+    (1917 vs 1918), a tie: the inliers decide, as in the paper (590 vs 516: the affine), on the image
+    and on a grey copy of it alike."""
+    img_a, img_b = read_pair(bundled_dir / "udisd_test_000001")
+    grey_a = cv2.cvtColor(cv2.cvtColor(img_a, cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR)
+    for first in (img_a, grey_a):
+        pts_src, pts_tgt = _working_matches(first, img_b)
+        assert fit_global_affine(pts_src, pts_tgt, Config()).model == "affine"
+        assert fit_global_affine(pts_src, pts_tgt, Config(global_model_choice="inliers")).model == "affine"
+
+
+@pytest.mark.shared
+def test_by_support_spw_2_keeps_the_model_most_of_the_scene_lies_near(shared_dir):
+    """spw_2 (parallax): the full affine fits one plane with 200 inliers but has 880 matches within
+    50 px; the similarity 156 and 1261. The lattice follows every match within fit_match_px, so the
+    similarity is the model it can correct: by support it is kept, by inliers the affine."""
+    cfg = Config()
+    pts_src, pts_tgt = _working_matches(*read_pair(shared_dir / "pairs" / "spw_2"))
+    by_inliers = fit_global_affine(pts_src, pts_tgt, cfg.replace(global_model_choice="inliers"))
+    by_support = fit_global_affine(pts_src, pts_tgt, cfg)
+    assert (by_inliers.model, by_support.model) == ("affine", "similarity")
+    near = [int(near_model(g.affine_src_to_tgt, pts_src, pts_tgt, cfg.fit_match_px).sum()) for g in (by_inliers, by_support)]
+    assert near[1] > 1.3 * near[0] and by_inliers.n_inliers > by_support.n_inliers

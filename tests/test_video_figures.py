@@ -142,11 +142,12 @@ def test_office_figures_static_rig(office):
     # the views disagree about the scene's own change are left out of the step, issue 13).
     assert 0.6 < fig["exposure_step_grey"]["mean"] < 1.2
     assert fig["exposure_step_change_grey"]["p99"] < 0.5
-    # Measured 5.6 px median, 12.3 px p95 at the textured seam cells of 24 sampled frames (near-field
-    # furniture the rig's two webcams see with parallax).
+    # Measured 3.5 px median, 27.0 px p95 at the textured seam cells of 24 sampled frames (near-field
+    # furniture the rig's two webcams see with parallax); 5.6 / 12.3 px when the global model was the
+    # one with more RANSAC inliers (global_model_choice = "inliers").
     mis = fig["misalignment_px"]
     assert mis["frames"] == 24 and mis["cells"] > 5000
-    assert 5.0 < mis["median"] < 9.0 and mis["median"] < mis["p95"] < 25.0
+    assert 2.5 < mis["median"] < 7.0 and mis["median"] < mis["p95"] < 35.0
     assert [s[0] for s in observer.strips] == [0, 10, 20, 30, 40] and sorted(observer.frames) == [0, 47]
     index, band, seam, x0 = observer.strips[0]
     assert band.dtype == np.uint8 and band.shape == (report["output"]["height"], 2 * fig["band_half_px"] + 1)
