@@ -67,13 +67,17 @@ def test_dp_kernel_segments_keep_their_fixed_ends(cfg):
     np.testing.assert_array_equal(path[4:], second)
 
 
-def test_separation_cost_covers_the_span_between_two_copies(cfg):
+def test_separation_cost_covers_the_span_between_two_copies_and_the_blend_s_reach(cfg):
+    """Copies 8 px apart at x 10 and 18: a seam between them, or within a quarter transition plus the
+    smoothing (2 + 1.5 px) of either, would show the point twice; beyond that it costs nothing."""
     copies_src = np.array([[10.0, 20.0], [40.0, 5.0], [70.0, 30.0]])
     copies_tgt = np.array([[18.0, 20.0], [41.0, 5.0], [70.0, 30.0]])  # 8 px apart, 1 px (one point), 0 px
     cost = separation_cost((40, 100), copies_src, copies_tgt, cfg)
     weight, reach = cfg.seam_separation_weight, cfg.seam_separation_rows
-    assert np.all(cost[20 - reach:20 + reach + 1, 10:18] == weight)
-    assert cost[20, 9] == 0 and cost[20, 18] == 0 and cost[20 + reach + 1, 12] == 0
+    blend = 0.25 * cfg.transition_px + cfg.seam_smooth_sigma_px
+    assert blend == 3.5
+    assert np.all(cost[20 - reach:20 + reach + 1, 6:22] == weight)
+    assert cost[20, 5] == 0 and cost[20, 22] == 0 and cost[20 + reach + 1, 12] == 0
     assert cost[5].sum() == 0 and cost[30].sum() == 0
 
 
