@@ -67,7 +67,7 @@ class Config:
 
     # --- Step 4: FFD field --------------------------------------------------------------------
     ffd_model: str = "fit"  # "fit": lattice fitted to the matches (ours, ffd.py); "blend": the paper's blend of T_j
-    lattice_nodes: float = 25.0  # fit: lattice nodes are image diagonal / this apart over the canvas
+    lattice_nodes: float = 30.0  # fit: lattice nodes are image diagonal / this apart over the canvas (sweep in evaluation.md)
     lambda_bend: float = 1e-6  # lambda_b, fit: thin-plate bending energy against the match residuals (scale-free)
     fit_match_px: float = 50.0  # fit: matches within this of A_glob take part (the IRLS drops wrong ones)
     fit_tukey_px: float = 4.0  # fit: Tukey biweight scale of the iteratively reweighted fit
