@@ -43,6 +43,12 @@ class SeamLayout:
 
 
 IDENTITY = (np.ones(MAX_CHANNELS), np.zeros(MAX_CHANNELS))
+
+
+def lf_weights(distance: np.ndarray, lf_px: float) -> np.ndarray:
+    """How much of a low-frequency offset a pixel at ``distance`` from its seam or border gets: the
+    frame kernel's ``lf_weight`` on the host (1 there, linearly 0 at ``lf_px`` > 0)."""
+    return np.maximum(0.0, 1.0 - np.abs(distance) / lf_px)
 GAIN_ONE = 1 << 12  # kernel gains in 1/4096
 LEVEL = 1 << 20  # kernel biases and offsets in 1/2**20 grey levels
 
@@ -216,7 +222,7 @@ class Compositor:
         rows = self.layout.lines_are_rows
         line = np.arange(height if rows else width, dtype=np.float32)
         lf_px = max(self.layout.lf_px, 1e-6)
-        weights = [np.maximum(0.0, 1.0 - np.abs(line - lines[k]) / lf_px) for k in range(2)]
+        weights = [lf_weights(line - lines[k], lf_px) for k in range(2)]
 
         def spread(values: wp.array) -> np.ndarray:
             along = values.numpy().reshape(2, -1, channels) / LEVEL

@@ -29,6 +29,7 @@ import numpy as np
 import warp as wp
 
 from sena_warp.canvas import Canvas
+from sena_warp.composite import lf_weights
 from sena_warp.config import Config
 from sena_warp.errors import InputError
 from sena_warp.ffd import cubic_weights
@@ -232,7 +233,7 @@ def with_seam_offsets(img: np.ndarray, rows: slice, seam_x_canvas: np.ndarray, p
     """(R, W, C) float32: rows ``rows`` of a canvas view with the seam blend's offsets ``per_row`` (H, C)
     added as the compositor adds them (full at the seam, fading linearly to 0 at ``fade_px`` > 0)."""
     cols = np.arange(img.shape[1], dtype=np.float32)[None, :]
-    weight = np.maximum(0.0, 1.0 - np.abs(cols - seam_x_canvas[rows, None]) / fade_px)
+    weight = lf_weights(cols - seam_x_canvas[rows, None], fade_px)
     return img[rows].astype(np.float32) + weight[:, :, None] * per_row[rows, None, :]
 
 

@@ -168,6 +168,7 @@ class SenaFrameCompositor:
         self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.seam_luma, cfg, WHITE_Y)
         self._chroma = Compositor(self._maps.map_src_chroma, self._maps.map_tgt_chroma, self._maps.seam_chroma, cfg,
                                   None)
+        self._border_set = None  # the border offsets last uploaded
         self._set_border()
         self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, self._reestimate_s is None, cfg)
         self._fps = fps
@@ -190,9 +191,12 @@ class SenaFrameCompositor:
             self._seconds["observer"] = 0.0
 
     def _set_border(self) -> None:
-        """The current maps' border blend on the Y pass (grey offsets: U and V have none to carry)."""
-        if self._maps.border_luma is not None:
-            self._luma.set_border_offsets(*self._maps.border_luma)
+        """The current maps' border blend on the Y pass (grey offsets: U and V have none to carry);
+        uploaded once per estimate, not on every frame of a blend (its steps share the goal's)."""
+        border = self._maps.border_luma
+        if border is not None and border is not self._border_set:
+            self._luma.set_border_offsets(*border)
+            self._border_set = border
 
     def _on_canvas(self, maps: StitchMaps, shape: tuple[int, int]) -> PlaneMaps:
         """An estimate on the fixed canvas, its plan band wide enough for the per-frame seam."""
