@@ -322,10 +322,12 @@ def band_difference_kernel(
     bias_tgt: wp.vec4i,
     tone: wp.vec2i,
     diff: wp.array2d(dtype=float),
+    total: wp.array2d(dtype=float),
 ):
     """Per seam line l = row0 + i and band cell j (position band_x0[l] + j): channel 0 of the source
-    minus the target there, both with their gains and knee (grey levels), or ``NOT_BOTH`` where the plan does
-    not hold both taps (outside the overlap or the band). The per-frame seam reads it."""
+    minus the target there (``diff``) and their sum (``total``), both with their gains and knee (grey
+    levels), or ``NOT_BOTH`` and 0 where the plan does not hold both taps (outside the overlap or the
+    band). The per-frame seam reads them."""
     i, j = wp.tid()
     line = row0 + i
     pos = band_x0[line] + j
@@ -335,6 +337,7 @@ def band_difference_kernel(
         x = line
         y = pos
     value = float(NOT_BOTH)
+    both_sum = float(0.0)
     if x >= 0 and y >= 0 and x < canvas_width and y < canvas_height:
         q = y * canvas_width + x
         word = plan[q]
@@ -345,7 +348,9 @@ def band_difference_kernel(
             vt = adjusted(sample_fixed(img_tgt, word_offset(word_t), word_fx(word_t), word_fy(word_t), steps[2],
                                        steps[3]), gain_tgt[0], bias_tgt[0], 0, tone)
             value = float(vs - vt) / float(ONE20)
+            both_sum = float(vs + vt) / float(ONE20)
     diff[line, j] = value
+    total[line, j] = both_sum
 
 
 @wp.kernel

@@ -163,15 +163,18 @@ class Config:
     video_estimate_workers: int = 1  # moving rig: re-estimates run on this many threads off the frame loop (0: on it)
     seam_prior_weight: float = 0.5  # moving rig: cost per px (per row) of a new seam's distance from the current one
     # --- Video over time: the per-frame seam and exposure (issue 14) ----------------------------
-    video_seam_band_ratio: float = 0.015  # per-frame seam: band half-width, x the canvas diagonal
+    video_seam_band_ratio: float = 0.05  # per-frame seam: band half-width, x the canvas diagonal (room to go round an object)
     video_seam_band_min_px: int = 8  # per-frame seam: band half-width at least this
     video_seam_noise: float = 6.0  # per-frame seam: differences below this (grey levels) are noise, not motion
     video_seam_still_box_px: int = 5  # per-frame seam: a line is still where no box this wide changed by video_seam_noise
     video_seam_stay_cost: float = 0.5  # per-frame seam: cost per px per line of leaving the last frame's seam
-    video_seam_home_cost: float = 0.05  # per-frame seam: cost per px per line of leaving the estimate's seam
+    video_seam_home_cost: float = 0.5  # per-frame seam: cost per px per line of leaving the estimate's seam
     video_seam_blocked_cost: float = 100.0  # per-frame seam: cost of a band cell outside the overlap
     video_seam_margin: float = 1.0  # per-frame seam: a new path must be cheaper by this per line to replace the last
     video_seam_jump_cost: float = 3.0  # per-frame seam: it jumps (faster than video_seam_speed_px) to save this per line
+    video_seam_motion_cost: float = 40.0  # per-frame seam, static rig: cost of a band cell where something is in front
+    # of the background (either view off the band's background model by 2 x video_seam_noise): the seam goes round it
+    video_seam_background_s: float = 2.0  # per-frame seam, static rig: time constant of the band's background model
     video_gain_period_s: float = 0.2  # exposure: gains re-measured on the frames every this many seconds
     video_gain_stride_px: int = 8  # exposure: the overlap sampled every this many canvas pixels
     video_gain_settle_s: float = 0.3  # exposure: time constant with which gains follow the measurement

@@ -149,18 +149,21 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     comp.set_gains(1, [1.2], [-5.0], [1.0], [0.0])
     comp.load(plane_src, plane_tgt)
     band_x0 = (np.rint(seam.positions) - 8).astype(np.int32)
-    diff = comp.band_difference(band_x0, 17, wp.zeros((len(band_x0), 17), dtype=float, device=warp_device))
+    diff, total = comp.band_difference(band_x0, 17, wp.zeros((len(band_x0), 17), dtype=float, device=warp_device),
+                                       wp.zeros((len(band_x0), 17), dtype=float, device=warp_device))
     v_src, ok_src = remap_reference(plane_src[:, :, None], map_src)
     v_tgt, ok_tgt = remap_reference(plane_tgt[:, :, None], map_tgt)
     rows = np.arange(len(band_x0))[:, None]
     cols = band_x0[:, None] + np.arange(17)[None, :]
     both = ok_src[rows, cols] & ok_tgt[rows, cols]
     knee, white = comp.knee()
-    expected = (tone_curve(v_src[rows, cols, 0], 1.2, -5.0, knee, white)
-                - tone_curve(v_tgt[rows, cols, 0], 1.0, 0.0, knee, white))
+    adjusted_src = tone_curve(v_src[rows, cols, 0], 1.2, -5.0, knee, white)
+    adjusted_tgt = tone_curve(v_tgt[rows, cols, 0], 1.0, 0.0, knee, white)
     np.testing.assert_array_equal(diff < 0.5 * NOT_BOTH, both)
     assert both.mean() > 0.5
-    assert np.abs(diff[both] - expected[both]).max() < 0.25  # taps in 1/1024 px
+    assert np.abs(diff[both] - (adjusted_src - adjusted_tgt)[both]).max() < 0.25  # taps in 1/1024 px
+    assert np.abs(total[both] - (adjusted_src + adjusted_tgt)[both]).max() < 0.25
+    assert np.all(total[~both] == 0.0)
 
 
 def test_compositor_rejects_mismatched_inputs(scene, warp_device):  # noqa: F811

@@ -15,6 +15,16 @@ And on a *still* line it stays put whatever the path elsewhere does: a line is s
 ``video_seam_still_box_px`` cells of the band's difference changed by more than ``video_seam_noise``
 since the last frame on it or within a band's width of lines (room for the path to leave and come back);
 there every cell but the last frame's seam is blocked.
+On a static rig the band also keeps a background model (each cell's source-plus-target luma, a running
+mean with time constant ``video_seam_background_s``, and its mean absolute deviation): a cell off it by
+more than twice the noise and three deviations (leaves in the wind, a drifting camera's edges keep
+changing), beyond the change a gain and offset over the whole band explain (a camera's exposure step or
+a flickering light moves every cell), in most of
+a box twice ``video_seam_still_box_px`` wide (an object, not the thin edges a camera's drift or the
+encoder's noise leave), holds something in front of the background in one view or both, and costs
+``video_seam_motion_cost`` more, so
+the seam goes round a moving object whole (both its copies), not only round where the views differ:
+inside a smooth object the two copies differ little, and a seam through it would lose a strip of it.
 Only the compositor's seam positions change per frame; its plan stays.
 
 Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig).
@@ -32,6 +42,9 @@ from ..partition import running_mean
 from ..seam_path import BandPath
 from sena_warp.kernels.composite import NOT_BOTH
 
+FIT_STRIDE = 4  # the whole band's gain and offset are fitted on every this-th line and cell
+SPREAD_FACTOR = 3.0  # a band cell is off its background beyond this x its mean absolute deviation there
+
 
 def band_half_width(shape: tuple[int, int], cfg: Config) -> int:
     """Band half-width in luma pixels for a canvas of ``shape`` (H, W)."""
@@ -41,16 +54,22 @@ def band_half_width(shape: tuple[int, int], cfg: Config) -> int:
 class FrameSeam:
     """The per-frame seam of one luma compositor whose plan keeps both views within ``band`` of the
     estimate's seam ``home`` (L,) float32 (positions per line); ``jumps``: whether it may leave its
-    gliding path (a static rig)."""
+    gliding path and keeps a background model (a static rig); ``fps``: the video's frame rate."""
 
-    def __init__(self, home: np.ndarray, band: int, jumps: bool, cfg: Config):
+    def __init__(self, home: np.ndarray, band: int, jumps: bool, fps: float, cfg: Config):
         self.cfg = cfg
         self.jumps = jumps
         self.band = band
         self.width = 2 * band + 1
         self._solver = BandPath(len(home), self.width, 1, cfg)
+        self._glide_width = min(self.width, 2 * int(np.ceil(cfg.video_seam_speed_px)) + 1)
+        self._glide_solver = BandPath(len(home), self._glide_width, 1, cfg)
         self._segment = np.array([[0, len(home) - 1, -1, -1]])
         self._diff = wp.zeros((len(home), self.width), dtype=float, device=cfg.device)
+        self._total = wp.zeros((len(home), self.width), dtype=float, device=cfg.device)
+        self._learn = 1.0 / max(1.0, fps * cfg.video_seam_background_s)  # the background's update per frame
+        self._background: np.ndarray | None = None  # (L, width) source-plus-target luma of the background
+        self._spread: np.ndarray | None = None  # (L, width) its mean absolute deviation
         self.shown: np.ndarray | None = None  # the positions the last frame was composited with
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # the last frame's (difference, both)
         self.still = np.zeros(len(home), bool)  # the lines the last frame found still (``still_lines``)
@@ -62,7 +81,10 @@ class FrameSeam:
         not add its own step to the seam's."""
         self.home = np.asarray(home, np.float32)
         self.band_x0 = (np.rint(self.home) - self.band).astype(np.int32)
+        self._cells = self.band_x0[:, None] + np.arange(self.width, dtype=np.int32)[None, :]
+        self._home_term = (self.cfg.video_seam_home_cost * np.abs(self._cells - self.home[:, None])).astype(np.float32)
         self._last = None  # the band's cells moved: the last difference no longer lines up
+        self._background = None
         last = getattr(self, "positions", self.home)
         self.positions = np.clip(np.rint(last), self.band_x0, self.band_x0 + self.width - 1).astype(np.int32)
 
@@ -70,22 +92,22 @@ class FrameSeam:
         """The seam of the frame loaded in ``luma``: (positions (L,) int32, difference (L, width) float32
         grey levels, both (L, width) bool where it is defined)."""
         cfg = self.cfg
-        diff = luma.band_difference(self.band_x0, self.width, self._diff)
+        diff, total = luma.band_difference(self.band_x0, self.width, self._diff, self._total)
         both = diff < 0.5 * NOT_BOTH
-        change = np.where(both, np.maximum(np.abs(diff) - cfg.video_seam_noise, 0.0), cfg.video_seam_blocked_cost)
-        cells = self.band_x0[:, None] + np.arange(self.width)[None, :]
-        last = self.positions if self.shown is None else self.shown
-        cost = (change + cfg.video_seam_stay_cost * np.abs(cells - last[:, None])
-                + cfg.video_seam_home_cost * np.abs(cells - self.home[:, None]))
-        block = np.float32(cfg.video_seam_blocked_cost * 10)
         self.still = self.still_lines(diff, both)
-        pinned = self.still[:, None] & (cells != last[:, None])
         self._last = (diff.copy(), both)
-        # Where the band has moved past the last seam (rounding of a blend's step), its nearest cell is near enough.
-        outside = np.maximum(np.maximum(self.band_x0 - last, last - (self.band_x0 + self.width - 1)), 0)
-        far = np.abs(cells - last[:, None]) > np.maximum(cfg.video_seam_speed_px, outside)[:, None]
-        glide = self._solver.solve(cost + (far | pinned) * block, self.band_x0, self._segment, cfg.seam_max_step_px,
-                                   cfg.seam_step_cost)
+        moving = self.foreground(total, both) if self.jumps else None
+        last = self.positions if self.shown is None else self.shown
+        if self.still.all():  # every line keeps its seam: nothing to solve
+            self.shown = self.positions.copy()
+            return self.positions, diff, both
+        change = np.maximum(np.abs(diff) - np.float32(cfg.video_seam_noise), np.float32(0.0))
+        if moving is not None:
+            change += np.float32(cfg.video_seam_motion_cost) * moving
+        change[~both] = cfg.video_seam_blocked_cost
+        cost = change + self._home_term
+        cost += np.float32(cfg.video_seam_stay_cost) * np.abs(self._cells - last[:, None]).astype(np.float32)
+        glide = self._glide(cost, last)
         lines = np.arange(len(self.home))
 
         def along(path: np.ndarray) -> float:
@@ -94,13 +116,49 @@ class FrameSeam:
         lines_n = len(lines)
         path = glide
         if self.jumps:
-            free = self._solver.solve(cost + pinned * block, self.band_x0, self._segment, cfg.seam_max_step_px,
-                                      cfg.seam_step_cost)
+            block = np.float32(cfg.video_seam_blocked_cost * 10)
+            cost[self.still[:, None] & (self._cells != last[:, None])] += block  # still lines keep their seam
+            free = self._solver.solve(cost, self.band_x0, self._segment, cfg.seam_max_step_px, cfg.seam_step_cost)
             path = free if along(glide) - along(free) > cfg.video_seam_jump_cost * lines_n else glide
         if along(self.positions) - along(path) > cfg.video_seam_margin * lines_n:
             self.positions = path.astype(np.int32)
         self.shown = self.positions.copy()
         return self.positions, diff, both
+
+    def _glide(self, cost: np.ndarray, last: np.ndarray) -> np.ndarray:
+        """The cheapest path through ``cost`` (L, width) that moves at most ``video_seam_speed_px`` per
+        line from ``last`` (L,) and not at all on still lines, solved on the few cells it may take."""
+        cfg = self.cfg
+        reach = self._glide_width // 2
+        glide_x0 = np.clip(last - reach, self.band_x0, self.band_x0 + self.width - self._glide_width).astype(np.int32)
+        taken = (glide_x0 - self.band_x0)[:, None] + np.arange(self._glide_width)[None, :]
+        cells = glide_x0[:, None] + np.arange(self._glide_width)[None, :]
+        # Where the band has moved past the last seam (rounding of a blend's step), its nearest cell is near enough.
+        outside = np.maximum(np.maximum(self.band_x0 - last, last - (self.band_x0 + self.width - 1)), 0)
+        far = np.abs(cells - last[:, None]) > np.maximum(cfg.video_seam_speed_px, outside)[:, None]
+        blocked = far | (self.still[:, None] & (cells != last[:, None]))
+        sub = np.take_along_axis(cost, taken, axis=1) + blocked * np.float32(cfg.video_seam_blocked_cost * 10)
+        return self._glide_solver.solve(sub, glide_x0, self._segment, cfg.seam_max_step_px, cfg.seam_step_cost)
+
+    def foreground(self, total: np.ndarray, both: np.ndarray) -> np.ndarray:
+        """(L, width) float32, 1 on band cells off the background model (module docstring), grown by
+        ``video_seam_still_box_px``; none on the first frame of an estimate. Updates the model."""
+        noise = np.float32(2.0 * self.cfg.video_seam_noise)
+        if self._background is None:
+            self._background = total.copy()
+            self._spread = np.full(total.shape, noise / SPREAD_FACTOR, np.float32)
+        change = total - self._background
+        change[~both] = 0.0
+        deviation = np.abs(change - whole_band_change(self._background, total, both))
+        off = both & (deviation > np.maximum(noise, np.float32(SPREAD_FACTOR) * self._spread))
+        learn = np.float32(self._learn)
+        self._background += learn * change
+        deviation -= self._spread
+        deviation[~both] = 0.0
+        self._spread += learn * deviation
+        box = 2 * max(1, self.cfg.video_seam_still_box_px) + 1
+        solid = (cv2.blur(off.view(np.uint8), (box, box)) > 0).view(np.uint8)
+        return cv2.dilate(solid, np.ones((box, box), np.uint8)).astype(np.float32)
 
     def still_lines(self, diff: np.ndarray, both: np.ndarray) -> np.ndarray:
         """(L,) bool: lines where nothing changed since the last frame (module docstring); none without one."""
@@ -111,7 +169,27 @@ class FrameSeam:
         delta = np.where(common, np.abs(diff - last_diff), 0.0).astype(np.float32)
         box = max(1, self.cfg.video_seam_still_box_px)
         moved = (cv2.blur(delta, (box, box)) > self.cfg.video_seam_noise).any(axis=1)
-        return np.convolve(moved.astype(np.float64), np.ones(2 * self.width + 1), "same") == 0
+        return ~lines_near(moved, self.width)
+
+
+def whole_band_change(background: np.ndarray, total: np.ndarray, both: np.ndarray) -> np.ndarray:
+    """(L, width) float32 the change of ``total`` from ``background`` that a gain and an offset over the
+    whole band explain (a camera's exposure step, a flickering light): their least-squares fit on the
+    cells in ``both``, every :data:`FIT_STRIDE`-th line and cell."""
+    fit = both[::FIT_STRIDE, ::FIT_STRIDE]
+    x = background[::FIT_STRIDE, ::FIT_STRIDE][fit].astype(np.float64)
+    y = total[::FIT_STRIDE, ::FIT_STRIDE][fit].astype(np.float64)
+    if x.size < 2 or x.var() <= 1e-6:
+        return np.full(total.shape, np.float32(y.mean() - x.mean()) if x.size else 0.0, np.float32)
+    gain = float(np.mean((x - x.mean()) * (y - y.mean())) / x.var())
+    return np.float32(gain - 1.0) * background + np.float32(y.mean() - gain * x.mean())
+
+
+def lines_near(flags: np.ndarray, reach: int) -> np.ndarray:
+    """(L,) bool: the lines within ``reach`` lines of a flagged one (``flags`` (L,) bool)."""
+    count = np.concatenate([[0], np.cumsum(flags, dtype=np.int64)])
+    lines = np.arange(len(flags))
+    return count[np.minimum(lines + reach + 1, len(flags))] > count[np.maximum(lines - reach, 0)]
 
 
 def band_offsets(positions: np.ndarray, band_x0: np.ndarray, diff: np.ndarray, both: np.ndarray,

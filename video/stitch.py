@@ -170,7 +170,7 @@ class SenaFrameCompositor:
                                   None)
         self._border_set = None  # the border offsets last uploaded
         self._set_border()
-        self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, self._reestimate_s is None, cfg)
+        self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, self._reestimate_s is None, fps, cfg)
         self._fps = fps
         self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
         self._plane_shapes: tuple[tuple[int, int], tuple[int, int]] | None = None

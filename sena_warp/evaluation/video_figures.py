@@ -16,7 +16,8 @@ rig), in a band of :data:`BAND_MARGIN_PX` beyond the per-frame seam's reach arou
   of the output, not of the views); its *frame-to-frame change*: the mean over lines of |change of
   the row-averaged signed step| (``naturalness.seam_steps``). "Settled": from :data:`SETTLED_S` on.
 * *Misalignment at the seam* (px): DIS optical flow (OpenCV, medium preset) from the target's band
-  to the source's, both with their gains, every :data:`FLOW_EVERY` frames; its magnitude (and its
+  to the source's (the band's cells within :data:`FLOW_MARGIN_PX` of the frame's seam), both with
+  their gains, every :data:`FLOW_EVERY` frames; its magnitude (and its
   component across the seam) at cells within T/2 of the frame's seam (T = ``cfg.transition_px``)
   where both views are valid and the target is textured (the square root of the structure tensor's
   smaller eigenvalue, 7x7, at least :data:`TEXTURE_GREY_PER_PX`): median and 95th percentile pooled
@@ -48,6 +49,7 @@ import numpy as np
 from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.gains import tone_curve
+from sena_warp.video.frame_seam import lines_near
 from sena_warp.video.maps import sampled_mask, target_offset
 from sena_warp.video.stitch import CompositedFrame
 from sena_warp.warp_map import forward_points
@@ -60,6 +62,8 @@ STILL_BOX_PX = 5
 STILL_LINES = 1.0  # lines within this x the band width of a changed line are not still either
 SETTLED_S = 1.0  # "once settled": frames from this time on (cameras settle in their first half second)
 FLOW_EVERY = 2  # the optical flow runs on every this-th frame
+FLOW_MARGIN_PX = 32  # ... on the band's cells within this of the frame's seam (not the whole band: DIS's
+# result at a cell depends on how far the image reaches, and the band's width is a setting)
 TEXTURE_GREY_PER_PX = 3.0  # misalignment is read where the target is this textured (sqrt of min eigenvalue)
 TEXTURE_BOX_PX = 7
 LATTICE_ROWS, LATTICE_COLS = 7, 9  # StabStitch's mesh: 6 x 8 cells, 7 x 9 vertices
@@ -297,16 +301,17 @@ class VideoFigures:
         for now, before, valid in ((src, last_src, band.valid_src), (tgt, last_tgt, band.valid_tgt)):
             diff = cv2.blur(np.abs(now - before), box)
             moved |= ((diff > STILL_GREY) & valid).any(axis=1)
-        reach = int(math.ceil(STILL_LINES * src.shape[1]))
-        kernel = np.ones(2 * reach + 1)
-        return np.convolve(moved.astype(np.float64), kernel, "same") == 0
+        return ~lines_near(moved, int(math.ceil(STILL_LINES * src.shape[1])))
 
     def _misalignment(self, src_g, tgt_g, band: SeamBand, seam_band: np.ndarray) -> float | None:
         """The frame's median flow magnitude at the seam's textured cells; their values are pooled."""
-        flow = band_flow(src_g, tgt_g, band.valid_src, band.valid_tgt)
-        cells = np.arange(src_g.shape[1])[None, :]
+        lo = max(0, int(np.floor(seam_band.min())) - FLOW_MARGIN_PX)
+        hi = min(src_g.shape[1], int(np.ceil(seam_band.max())) + FLOW_MARGIN_PX + 1)
+        src_g, tgt_g, valid_src, valid_tgt = (a[:, lo:hi] for a in (src_g, tgt_g, band.valid_src, band.valid_tgt))
+        flow = band_flow(src_g, tgt_g, valid_src, valid_tgt)
+        cells = np.arange(lo, hi)[None, :]
         near = np.abs(cells - seam_band[:, None]) <= 0.5 * self.cfg.transition_px
-        chosen = near & band.valid_src & band.valid_tgt & (texture(tgt_g) >= TEXTURE_GREY_PER_PX)
+        chosen = near & valid_src & valid_tgt & (texture(tgt_g) >= TEXTURE_GREY_PER_PX)
         if not chosen.any():
             return None
         magnitude = np.hypot(flow[..., 0], flow[..., 1])[chosen]

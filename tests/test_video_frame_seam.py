@@ -1,0 +1,79 @@
+"""``video/frame_seam.py`` on synthetic bands: the background model behind the static rig's motion
+cost, the whole band's exposure fit and the line dilation. The per-frame seam on real clips is tested
+in test_video_stitch.py (still lines) and test_crossing.py (an object crossing the seam)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sena_warp.config import Config
+from sena_warp.video.frame_seam import FrameSeam, lines_near, whole_band_change
+
+CFG = Config(device="cpu")
+LINES, BAND = 120, 30
+FPS = 30.0
+
+
+def static_band(seed: int) -> np.ndarray:
+    """A textured band's source-plus-target luma (L, 2 BAND + 1) float32, 40-400 grey levels."""
+    rng = np.random.default_rng(seed)
+    return rng.uniform(40.0, 400.0, (LINES, 2 * BAND + 1)).astype(np.float32)
+
+
+def seam() -> FrameSeam:
+    return FrameSeam(np.full(LINES, 100.0, np.float32), BAND, True, FPS, CFG)
+
+
+def test_lines_near_is_a_dilation_along_the_lines():
+    rng = np.random.default_rng(3)
+    for reach in (0, 1, 4, 200):
+        flags = rng.random(50) < 0.05
+        expected = np.array([flags[max(0, i - reach): i + reach + 1].any() for i in range(50)])
+        np.testing.assert_array_equal(lines_near(flags, reach), expected)
+
+
+def test_an_exposure_step_over_the_whole_band_is_explained_by_its_gain_and_offset():
+    background = static_band(1)
+    both = np.ones(background.shape, bool)
+    both[:, :5] = False  # cells outside the overlap do not enter the fit
+    total = np.where(both, 1.15 * background + 7.0, 900.0).astype(np.float32)
+    explained = whole_band_change(background, total, both)
+    assert np.abs((total - background - explained)[both]).max() < 0.01
+
+
+def test_an_object_is_foreground_and_an_exposure_step_or_noise_is_not():
+    band = seam()
+    background = static_band(2)
+    both = np.ones(background.shape, bool)
+    rng = np.random.default_rng(4)
+    noisy = [background + rng.normal(0.0, 2.0, background.shape).astype(np.float32) for _ in range(20)]
+    first = band.foreground(noisy[0], both)
+    assert not first.any()  # the first frame is the model
+    for frame in noisy[1:]:
+        assert not band.foreground(frame, both).any()  # encoder-like noise: nothing in front
+    # Both cameras' exposure steps by 12 % and 5 levels: still nothing in front.
+    assert not band.foreground(1.12 * noisy[-1] + 5.0, both).any()
+    # A 16 x 12 object brighter than the background by 60 levels in one view.
+    with_object = noisy[-1].copy()
+    with_object[50:66, 20:32] += 60.0
+    moving = band.foreground(with_object, both)
+    assert moving[50:66, 20:32].all()
+    box = 2 * CFG.video_seam_still_box_px + 1  # grown by this much at most
+    assert not moving[:50 - box].any() and not moving[66 + box:].any()
+    assert not moving[:, :20 - box].any() and not moving[:, 32 + box:].any()
+
+
+def test_cells_that_keep_changing_stop_being_foreground():
+    # Leaves in the wind: a patch of the band that changes by +-30 every frame stops counting as
+    # something in front once the model has learnt its spread (about the model's time constant).
+    band = seam()
+    background = static_band(5)
+    both = np.ones(background.shape, bool)
+    rng = np.random.default_rng(6)
+    frames = int(3 * FPS * CFG.video_seam_background_s)
+    found = []
+    for _ in range(frames):
+        frame = background.copy()
+        frame[10:40, 5:25] += rng.choice([-30.0, 30.0], (30, 20)).astype(np.float32)
+        found.append(bool(band.foreground(frame, both)[10:40, 5:25].any()))
+    assert found[1] and not any(found[-int(FPS):])
