@@ -315,6 +315,7 @@ def band_difference_kernel(
     canvas_width: int,
     canvas_height: int,
     lines_are_rows: int,
+    lines: wp.array(dtype=int),
     band_x0: wp.array(dtype=int),
     gain_src: wp.vec4i,
     bias_src: wp.vec4i,
@@ -324,13 +325,14 @@ def band_difference_kernel(
     diff: wp.array2d(dtype=float),
     total: wp.array2d(dtype=float),
 ):
-    """Per seam line l = row0 + i and band cell j (position band_x0[l] + j): channel 0 of the source
-    minus the target there (``diff``) and their sum (``total``), both with their gains and knee (grey
-    levels), or ``NOT_BOTH`` and 0 where the plan does not hold both taps (outside the overlap or the
-    band). The per-frame seam reads them."""
+    """Per solved line k = row0 + i (seam line lines[k]) and band cell j (position band_x0[k] + j):
+    channel 0 of the source minus the target there (``diff``) and their sum (``total``), both with
+    their gains and knee (grey levels), or ``NOT_BOTH`` and 0 where the plan does not hold both taps
+    (outside the overlap or the band). The per-frame seam reads them."""
     i, j = wp.tid()
-    line = row0 + i
-    pos = band_x0[line] + j
+    k = row0 + i
+    line = lines[k]
+    pos = band_x0[k] + j
     x = pos
     y = line
     if lines_are_rows == 0:
@@ -349,8 +351,8 @@ def band_difference_kernel(
                                        steps[3]), gain_tgt[0], bias_tgt[0], 0, tone)
             value = float(vs - vt) / float(ONE20)
             both_sum = float(vs + vt) / float(ONE20)
-    diff[line, j] = value
-    total[line, j] = both_sum
+    diff[k, j] = value
+    total[k, j] = both_sum
 
 
 @wp.kernel

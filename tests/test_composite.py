@@ -148,12 +148,14 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device))
     comp.set_gains(1, [1.2], [-5.0], [1.0], [0.0])
     comp.load(plane_src, plane_tgt)
-    band_x0 = (np.rint(seam.positions) - 8).astype(np.int32)
-    diff, total = comp.band_difference(band_x0, 17, wp.zeros((len(band_x0), 17), dtype=float, device=warp_device),
-                                       wp.zeros((len(band_x0), 17), dtype=float, device=warp_device))
+    lines = np.arange(1, len(seam.positions), 3, dtype=np.int32)  # every third line, as the frame seam solves
+    band_x0 = (np.rint(seam.positions[lines]) - 8).astype(np.int32)
+    diff, total = comp.band_difference(lines, band_x0, 17,
+                                       wp.zeros((len(lines), 17), dtype=float, device=warp_device),
+                                       wp.zeros((len(lines), 17), dtype=float, device=warp_device))
     v_src, ok_src = remap_reference(plane_src[:, :, None], map_src)
     v_tgt, ok_tgt = remap_reference(plane_tgt[:, :, None], map_tgt)
-    rows = np.arange(len(band_x0))[:, None]
+    rows = lines[:, None]
     cols = band_x0[:, None] + np.arange(17)[None, :]
     both = ok_src[rows, cols] & ok_tgt[rows, cols]
     knee, white = comp.knee()

@@ -27,7 +27,9 @@ the seam goes round a moving object whole (both its copies), not only round wher
 inside a smooth object the two copies differ little, and a seam through it would lose a strip of it.
 Only the compositor's seam positions change per frame; its plan stays.
 
-Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig).
+Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig). The seam is
+solved on every ``video_seam_line_step``-th line and interpolated between (half the work at 2; the
+seam blend's transition is wider than the interpolation's rounding).
 """
 
 from __future__ import annotations
@@ -54,25 +56,33 @@ def band_half_width(shape: tuple[int, int], cfg: Config) -> int:
 class FrameSeam:
     """The per-frame seam of one luma compositor whose plan keeps both views within ``band`` of the
     estimate's seam ``home`` (L,) float32 (positions per line); ``jumps``: whether it may leave its
-    gliding path and keeps a background model (a static rig); ``fps``: the video's frame rate."""
+    gliding path and keeps a background model (a static rig); ``fps``: the video's frame rate.
+
+    The seam is solved on every ``video_seam_line_step``-th line (and the last) and interpolated
+    between them; ``positions``, ``shown`` and ``still`` are per line."""
 
     def __init__(self, home: np.ndarray, band: int, jumps: bool, fps: float, cfg: Config):
         self.cfg = cfg
         self.jumps = jumps
         self.band = band
         self.width = 2 * band + 1
-        self._solver = BandPath(len(home), self.width, 1, cfg)
+        count = len(home)
+        step = max(1, cfg.video_seam_line_step)
+        self._lines = np.unique(np.append(np.arange(0, count, step), count - 1)).astype(np.int32)
+        solved = len(self._lines)
+        self._max_step = cfg.seam_max_step_px * step  # px between solved lines
+        self._solver = BandPath(solved, self.width, 1, cfg)
         self._glide_width = min(self.width, 2 * int(np.ceil(cfg.video_seam_speed_px)) + 1)
-        self._glide_solver = BandPath(len(home), self._glide_width, 1, cfg)
-        self._segment = np.array([[0, len(home) - 1, -1, -1]])
-        self._diff = wp.zeros((len(home), self.width), dtype=float, device=cfg.device)
-        self._total = wp.zeros((len(home), self.width), dtype=float, device=cfg.device)
+        self._glide_solver = BandPath(solved, self._glide_width, 1, cfg)
+        self._segment = np.array([[0, solved - 1, -1, -1]])
+        self._diff = wp.zeros((solved, self.width), dtype=float, device=cfg.device)
+        self._total = wp.zeros((solved, self.width), dtype=float, device=cfg.device)
         self._learn = 1.0 / max(1.0, fps * cfg.video_seam_background_s)  # the background's update per frame
-        self._background: np.ndarray | None = None  # (L, width) source-plus-target luma of the background
-        self._spread: np.ndarray | None = None  # (L, width) its mean absolute deviation
-        self.shown: np.ndarray | None = None  # the positions the last frame was composited with
+        self._background: np.ndarray | None = None  # (K, width) source-plus-target luma of the background
+        self._spread: np.ndarray | None = None  # (K, width) its mean absolute deviation
+        self._shown: np.ndarray | None = None  # (K,) the solved lines' seam the last frame was composited with
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # the last frame's (difference, both)
-        self.still = np.zeros(len(home), bool)  # the lines the last frame found still (``still_lines``)
+        self._still = np.zeros(solved, bool)  # the solved lines the last frame found still (``still_lines``)
         self.reset(home)
 
     def reset(self, home: np.ndarray) -> None:
@@ -81,26 +91,54 @@ class FrameSeam:
         not add its own step to the seam's."""
         self.home = np.asarray(home, np.float32)
         self.band_x0 = (np.rint(self.home) - self.band).astype(np.int32)
-        self._cells = self.band_x0[:, None] + np.arange(self.width, dtype=np.int32)[None, :]
-        self._home_term = (self.cfg.video_seam_home_cost * np.abs(self._cells - self.home[:, None])).astype(np.float32)
+        self._x0 = self.band_x0[self._lines]
+        self._cells = self._x0[:, None] + np.arange(self.width, dtype=np.int32)[None, :]
+        self._home_term = (self.cfg.video_seam_home_cost
+                           * np.abs(self._cells - self.home[self._lines, None])).astype(np.float32)
         self._last = None  # the band's cells moved: the last difference no longer lines up
         self._background = None
-        last = getattr(self, "positions", self.home)
-        self.positions = np.clip(np.rint(last), self.band_x0, self.band_x0 + self.width - 1).astype(np.int32)
+        last = getattr(self, "_path", self.home[self._lines])
+        self._path = np.clip(np.rint(last), self._x0, self._x0 + self.width - 1).astype(np.int32)
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(L,) int32 the seam per line (the solved lines' path, interpolated)."""
+        return self._per_line(self._path)
+
+    @property
+    def shown(self) -> np.ndarray | None:
+        """(L,) int32 the seam the last frame was composited with, or None before the first frame."""
+        return None if self._shown is None else self._per_line(self._shown)
+
+    @property
+    def still(self) -> np.ndarray:
+        """(L,) bool the lines the last frame found still (both solved lines around them still)."""
+        lines = np.arange(len(self.home))
+        return np.interp(lines, self._lines, self._still.astype(np.float64)) == 1.0
+
+    def _per_line(self, path: np.ndarray) -> np.ndarray:
+        return np.rint(np.interp(np.arange(len(self.home)), self._lines, path)).astype(np.int32)
 
     def next(self, luma: Compositor) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The seam of the frame loaded in ``luma``: (positions (L,) int32, difference (L, width) float32
-        grey levels, both (L, width) bool where it is defined)."""
+        """The seam of the frame loaded in ``luma`` and its seam blend's offsets (``band_offsets``):
+        (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32)."""
         cfg = self.cfg
-        diff, total = luma.band_difference(self.band_x0, self.width, self._diff, self._total)
+        diff, total = luma.band_difference(self._lines, self._x0, self.width, self._diff, self._total)
         both = diff < 0.5 * NOT_BOTH
-        self.still = self.still_lines(diff, both)
+        self._still = self.still_lines(diff, both)
         self._last = (diff.copy(), both)
         moving = self.foreground(total, both) if self.jumps else None
-        last = self.positions if self.shown is None else self.shown
-        if self.still.all():  # every line keeps its seam: nothing to solve
-            self.shown = self.positions.copy()
-            return self.positions, diff, both
+        last = self._path if self._shown is None else self._shown
+        if not self._still.all():  # else every line keeps its seam: nothing to solve
+            self._path = self._solve(diff, both, moving, last)
+        self._shown = self._path.copy()
+        positions = self.positions
+        offsets_src, offsets_tgt = band_offsets(self._path, self._x0, diff, both, self._lines, cfg)
+        return positions, offsets_src, offsets_tgt
+
+    def _solve(self, diff: np.ndarray, both: np.ndarray, moving: np.ndarray | None, last: np.ndarray) -> np.ndarray:
+        """The solved lines' new path (module docstring)."""
+        cfg = self.cfg
         change = np.maximum(np.abs(diff) - np.float32(cfg.video_seam_noise), np.float32(0.0))
         if moving is not None:
             change += np.float32(cfg.video_seam_motion_cost) * moving
@@ -108,37 +146,36 @@ class FrameSeam:
         cost = change + self._home_term
         cost += np.float32(cfg.video_seam_stay_cost) * np.abs(self._cells - last[:, None]).astype(np.float32)
         glide = self._glide(cost, last)
-        lines = np.arange(len(self.home))
+        lines = np.arange(len(self._lines))
 
         def along(path: np.ndarray) -> float:
-            return float(change[lines, path - self.band_x0].sum())
+            return float(change[lines, path - self._x0].sum())
 
-        lines_n = len(lines)
+        limit = len(lines)
         path = glide
-        if self.jumps:
+        if moving is not None and moving.any():  # something in front of the background: it may jump round it
             block = np.float32(cfg.video_seam_blocked_cost * 10)
-            cost[self.still[:, None] & (self._cells != last[:, None])] += block  # still lines keep their seam
-            free = self._solver.solve(cost, self.band_x0, self._segment, cfg.seam_max_step_px, cfg.seam_step_cost)
-            path = free if along(glide) - along(free) > cfg.video_seam_jump_cost * lines_n else glide
-        if along(self.positions) - along(path) > cfg.video_seam_margin * lines_n:
-            self.positions = path.astype(np.int32)
-        self.shown = self.positions.copy()
-        return self.positions, diff, both
+            cost[self._still[:, None] & (self._cells != last[:, None])] += block  # still lines keep their seam
+            free = self._solver.solve(cost, self._x0, self._segment, self._max_step, cfg.seam_step_cost)
+            path = free if along(glide) - along(free) > cfg.video_seam_jump_cost * limit else glide
+        if along(self._path) - along(path) > cfg.video_seam_margin * limit:
+            return path.astype(np.int32)
+        return self._path
 
     def _glide(self, cost: np.ndarray, last: np.ndarray) -> np.ndarray:
-        """The cheapest path through ``cost`` (L, width) that moves at most ``video_seam_speed_px`` per
-        line from ``last`` (L,) and not at all on still lines, solved on the few cells it may take."""
+        """The cheapest path through ``cost`` (K, width) that moves at most ``video_seam_speed_px`` per
+        solved line from ``last`` (K,) and not at all on still lines, solved on the few cells it may take."""
         cfg = self.cfg
         reach = self._glide_width // 2
-        glide_x0 = np.clip(last - reach, self.band_x0, self.band_x0 + self.width - self._glide_width).astype(np.int32)
-        taken = (glide_x0 - self.band_x0)[:, None] + np.arange(self._glide_width)[None, :]
+        glide_x0 = np.clip(last - reach, self._x0, self._x0 + self.width - self._glide_width).astype(np.int32)
+        taken = (glide_x0 - self._x0)[:, None] + np.arange(self._glide_width)[None, :]
         cells = glide_x0[:, None] + np.arange(self._glide_width)[None, :]
         # Where the band has moved past the last seam (rounding of a blend's step), its nearest cell is near enough.
-        outside = np.maximum(np.maximum(self.band_x0 - last, last - (self.band_x0 + self.width - 1)), 0)
+        outside = np.maximum(np.maximum(self._x0 - last, last - (self._x0 + self.width - 1)), 0)
         far = np.abs(cells - last[:, None]) > np.maximum(cfg.video_seam_speed_px, outside)[:, None]
-        blocked = far | (self.still[:, None] & (cells != last[:, None]))
+        blocked = far | (self._still[:, None] & (cells != last[:, None]))
         sub = np.take_along_axis(cost, taken, axis=1) + blocked * np.float32(cfg.video_seam_blocked_cost * 10)
-        return self._glide_solver.solve(sub, glide_x0, self._segment, cfg.seam_max_step_px, cfg.seam_step_cost)
+        return self._glide_solver.solve(sub, glide_x0, self._segment, self._max_step, cfg.seam_step_cost)
 
     def foreground(self, total: np.ndarray, both: np.ndarray) -> np.ndarray:
         """(L, width) float32, 1 on band cells off the background model (module docstring), grown by
@@ -169,7 +206,7 @@ class FrameSeam:
         delta = np.where(common, np.abs(diff - last_diff), 0.0).astype(np.float32)
         box = max(1, self.cfg.video_seam_still_box_px)
         moved = (cv2.blur(delta, (box, box)) > self.cfg.video_seam_noise).any(axis=1)
-        return ~lines_near(moved, self.width)
+        return ~lines_near(moved, int(np.ceil(self.width / max(1, self.cfg.video_seam_line_step))))
 
 
 def whole_band_change(background: np.ndarray, total: np.ndarray, both: np.ndarray) -> np.ndarray:
@@ -192,14 +229,18 @@ def lines_near(flags: np.ndarray, reach: int) -> np.ndarray:
     return count[np.minimum(lines + reach + 1, len(flags))] > count[np.maximum(lines - reach, 0)]
 
 
-def band_offsets(positions: np.ndarray, band_x0: np.ndarray, diff: np.ndarray, both: np.ndarray,
+def band_offsets(path: np.ndarray, band_x0: np.ndarray, diff: np.ndarray, both: np.ndarray, lines: np.ndarray,
                  cfg: Config) -> tuple[np.ndarray, np.ndarray]:
     """The seam blend's low-frequency offsets of one frame (``partition.seam_offsets`` on the band):
-    per line, half the mean difference within ``seam_blend_strip_px`` of the seam, averaged over
-    ``seam_blend_rows`` lines, off the source and onto the target: ((L, 1), (L, 1)) float32."""
+    per solved line (seam line ``lines`` (K,), ascending, the last line last), half the mean
+    difference within ``seam_blend_strip_px`` of the seam ``path`` (K,), averaged over
+    ``seam_blend_rows`` lines, off the source and onto the target, interpolated to every line:
+    ((L, 1), (L, 1)) float32."""
     cells = band_x0[:, None] + np.arange(diff.shape[1])[None, :]
-    strip = both & (np.abs(cells - positions[:, None]) <= cfg.seam_blend_strip_px)
+    strip = both & (np.abs(cells - path[:, None]) <= cfg.seam_blend_strip_px)
     count = strip.sum(axis=1)
     per_line = np.where(strip, diff, 0.0).sum(axis=1) / np.maximum(count, 1)
-    delta = running_mean(per_line[:, None], count > 0, cfg.seam_blend_rows).astype(np.float32)
+    step = max(1, cfg.video_seam_line_step)
+    solved = running_mean(per_line[:, None], count > 0, max(1, round(cfg.seam_blend_rows / step)))[:, 0]
+    delta = np.interp(np.arange(int(lines[-1]) + 1), lines, solved).astype(np.float32)[:, None]
     return -0.5 * delta, 0.5 * delta

@@ -34,7 +34,7 @@ from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
 from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
 from .exposure import ExposureTracker
-from .frame_seam import FrameSeam, band_half_width, band_offsets
+from .frame_seam import FrameSeam, band_half_width
 from .loop import VideoOptions, run_video
 from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, chroma_lines, lerp_maps, map_change_px, plane_maps, sampled_mask,
                    seam_change_px, target_offset)
@@ -335,11 +335,10 @@ class SenaFrameCompositor:
         t1 = time.perf_counter()
         self._luma.load(y_src, y_tgt)
         last = (self._seam.positions if self._seam.shown is None else self._seam.shown).copy()
-        positions, diff, both = self._seam.next(self._luma)
+        positions, offsets_src, offsets_tgt = self._seam.next(self._luma)
         self._seam_motion_px.append(float(np.abs(positions - last).max()))
         self._luma.set_seam(positions.astype(np.float32))
         self._chroma.set_seam(chroma_lines(positions.astype(np.float32)))
-        offsets_src, offsets_tgt = band_offsets(positions, self._seam.band_x0, diff, both, self._cfg)
         self._luma.set_offsets(offsets_src, offsets_tgt)
         t2 = time.perf_counter()
         self._seconds["exposure"] += t1 - t0
