@@ -142,6 +142,12 @@ def test_office_figures_static_rig(office):
     # the views disagree about the scene's own change are left out of the step, issue 13).
     assert 0.6 < fig["exposure_step_grey"]["mean"] < 1.2
     assert fig["exposure_step_change_grey"]["p99"] < 0.5
+    # Where along the seam the settled step is: 16 runs of lines covering every line once.
+    groups = fig["exposure_step_grey"]["settled_by_lines"]
+    assert len(groups) == 16 and groups[0]["lines"][0] == 0
+    assert all(a["lines"][1] + 1 == b["lines"][0] for a, b in zip(groups, groups[1:]))
+    means = [g["mean"] for g in groups if g["mean"] is not None]
+    assert len(means) >= 8 and min(means) <= fig["exposure_step_grey"]["settled_mean"] <= max(means)
     # Measured 3.5 px median, 27.0 px p95 at the textured seam cells of 24 sampled frames (near-field
     # furniture the rig's two webcams see with parallax); 5.6 / 12.3 px when the global model was the
     # one with more RANSAC inliers (global_model_choice = "inliers").

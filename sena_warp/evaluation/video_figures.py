@@ -15,6 +15,7 @@ rig), in a band of :data:`BAND_MARGIN_PX` beyond the per-frame seam's reach arou
   views as they enter the output: warped, with the frame's gains; the seam blend's offsets are part
   of the output, not of the views); its *frame-to-frame change*: the mean over lines of |change of
   the row-averaged signed step| (``naturalness.seam_steps``). "Settled": from :data:`SETTLED_S` on.
+  The settled step is also given per run of seam lines (where along the seam it is).
 * *Misalignment at the seam* (px): DIS optical flow (OpenCV, medium preset) from the target's band
   to the source's (the band's cells within :data:`FLOW_MARGIN_PX` of the frame's seam), both with
   their gains, every :data:`FLOW_EVERY` frames; its magnitude (and its
@@ -61,6 +62,7 @@ STILL_GREY = 6.0  # a view changed at a band cell when its 5x5 box-blurred frame
 STILL_BOX_PX = 5
 STILL_LINES = 1.0  # lines within this x the band width of a changed line are not still either
 SETTLED_S = 1.0  # "once settled": frames from this time on (cameras settle in their first half second)
+STEP_LINE_GROUPS = 16  # the settled exposure step is also given per this many runs of seam lines
 FLOW_EVERY = 2  # the optical flow runs on every this-th frame
 FLOW_MARGIN_PX = 32  # ... on the band's cells within this of the frame's seam (not the whole band: DIS's
 # result at a cell depends on how far the image reaches, and the band's width is a setting)
@@ -233,6 +235,7 @@ class VideoFigures:
         self.paths: list[np.ndarray] = []
         self._flow_cells: list[np.ndarray] = []
         self._flow_cross: list[np.ndarray] = []
+        self._steps: list[np.ndarray] = []  # every frame's signed step per seam line (NaN where undefined)
         self.copies: list[dict] = []
 
     def __call__(self, frame: CompositedFrame) -> None:
@@ -268,6 +271,7 @@ class VideoFigures:
         record["still_lines_pct"].append(still_pct)
         known = np.isfinite(steps)
         record["exposure_step"].append(float(np.mean(np.abs(steps[known]))) if known.any() else None)
+        self._steps.append(steps.astype(np.float32))
         record["exposure_step_change"].append(change)
         record["misalignment_px"].append(
             self._misalignment(src_g, tgt_g, band, seam_band) if frame.index % self.flow_every == 0 else None)
@@ -318,6 +322,21 @@ class VideoFigures:
         self._flow_cells.append(magnitude)
         self._flow_cross.append(np.abs(flow[..., 0][chosen]))
         return float(np.median(magnitude))
+
+    def _steps_by_lines(self, settled: list[bool]) -> list[dict]:
+        """Where along the seam the settled exposure step is: the mean |step| over the settled frames in
+        :data:`STEP_LINE_GROUPS` runs of seam lines, with the share of (line, frame) where it is defined."""
+        steps = np.array([s for s, keep in zip(self._steps, settled) if keep and len(s) == len(self._steps[-1])])
+        if steps.size == 0:
+            return []
+        groups = []
+        for lines in np.array_split(np.arange(steps.shape[1]), STEP_LINE_GROUPS):
+            part = steps[:, lines]
+            known = np.isfinite(part)
+            groups.append({"lines": [int(lines[0]), int(lines[-1])],
+                           "mean": round(float(np.abs(part[known]).mean()), 4) if known.any() else None,
+                           "known_pct": round(100.0 * float(known.mean()), 1)})
+        return groups
 
     def _copies(self, frame: CompositedFrame) -> None:
         points = self.truth(frame.index, frame.source)
@@ -380,6 +399,7 @@ class VideoFigures:
                 "mean": _stats(record["exposure_step"]), "p99": _stats(record["exposure_step"], 99),
                 "settled_mean": _stats(only("exposure_step", settled)),
                 "settled_p99": _stats(only("exposure_step", settled), 99),
+                "settled_by_lines": self._steps_by_lines(settled),
             },
             "exposure_step_change_grey": {
                 "p99": _stats(record["exposure_step_change"], 99),
