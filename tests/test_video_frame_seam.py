@@ -37,8 +37,14 @@ def test_an_exposure_step_over_the_whole_band_is_explained_by_its_gain_and_offse
     both = np.ones(background.shape, bool)
     both[:, :5] = False  # cells outside the overlap do not enter the fit
     total = np.where(both, 1.15 * background + 7.0, 900.0).astype(np.float32)
-    explained = whole_band_change(background, total, both)
+    explained = whole_band_change(background, total, both, 12.0)
     assert np.abs((total - background - explained)[both]).max() < 0.01
+    # An object over 15 % of the band does not enter the fit: the rest stays explained.
+    total[40:80, 18:46] += 160.0
+    explained = whole_band_change(background, total, both, 12.0)
+    outside = both.copy()
+    outside[40:80, 18:46] = False
+    assert np.abs((total - background - explained)[outside]).max() < 0.5
 
 
 def test_an_object_is_foreground_and_an_exposure_step_or_noise_is_not():
@@ -77,3 +83,61 @@ def test_cells_that_keep_changing_stop_being_foreground():
         frame[10:40, 5:25] += rng.choice([-30.0, 30.0], (30, 20)).astype(np.float32)
         found.append(bool(band.foreground(frame, both)[10:40, 5:25].any()))
     assert found[1] and not any(found[-int(FPS):])
+
+
+class BandFrames:
+    """A stand-in for the luma compositor: the band's difference and sum of the current frame, (L, width)
+    in band cells, as ``Compositor.band_difference`` gives them for the solved lines."""
+
+    def __init__(self, diff: np.ndarray, total: np.ndarray):
+        self.diff, self.total = diff, total
+
+    def band_difference(self, lines, band_x0, width, out, out_total):
+        return self.diff[lines].astype(np.float32), self.total[lines].astype(np.float32)
+
+
+def valley_band(column: int) -> np.ndarray:
+    """A band difference falling by 3 grey levels a cell to 0 at ``column``."""
+    cells = np.arange(2 * BAND + 1, dtype=np.float32)
+    return np.broadcast_to(3.0 * np.abs(cells - column), (LINES, 2 * BAND + 1)).copy()
+
+
+def test_without_anything_in_front_the_seam_glides_and_then_stays():
+    # The difference's valley moves 20 px away at once (nothing in front of the background): the seam
+    # may follow at video_seam_speed_px a frame, not jump; once nothing changes it keeps its place
+    # (still lines), though the valley is still 18 px away.
+    band = seam()
+    total = static_band(7)
+    frames = BandFrames(valley_band(BAND), total)
+    first, _, _ = band.next(frames)
+    np.testing.assert_array_equal(first, np.full(LINES, 100))  # home: the valley
+    band.next(frames)
+    frames.diff = valley_band(BAND + 20)
+    moved, _, _ = band.next(frames)
+    step = np.abs(moved - first)
+    assert step.max() <= CFG.video_seam_speed_px and step.max() > 0
+    for _ in range(3):  # the same frame again: every line still, the seam stays
+        again, _, _ = band.next(frames)
+        np.testing.assert_array_equal(again, moved)
+        assert band.still.all()
+
+
+def test_the_seam_steps_round_an_object_in_front_of_the_background():
+    band = seam()
+    background = static_band(8)
+    frames = BandFrames(valley_band(BAND), background)
+    for _ in range(5):
+        home, _, _ = band.next(frames)
+    # A 40-line object over band cells 18-45 (the seam at cell 30 runs through it), 80 levels brighter
+    # in both views; its two copies differ little inside (a smooth object), at its edges a lot. The
+    # background around it differs by 8 levels.
+    frames.total = background.copy()
+    frames.total[40:80, 18:46] += 160.0
+    frames.diff = np.full((LINES, 2 * BAND + 1), 8.0, np.float32)
+    frames.diff[40:80, 18:46] = 2.0
+    frames.diff[40:80, [18, 19, 44, 45]] = 60.0
+    positions, offsets_src, offsets_tgt = band.next(frames)
+    cells = positions - band.band_x0
+    assert np.all((cells[40:80] < 18) | (cells[40:80] > 45))  # round the object, not through it
+    assert np.abs(positions - home).max() > CFG.video_seam_speed_px  # a jump, not a glide
+    assert offsets_src.shape == (LINES, 1) and np.allclose(offsets_src, -offsets_tgt)

@@ -186,7 +186,7 @@ class FrameSeam:
             self._spread = np.full(total.shape, noise / SPREAD_FACTOR, np.float32)
         change = total - self._background
         change[~both] = 0.0
-        deviation = np.abs(change - whole_band_change(self._background, total, both))
+        deviation = np.abs(change - whole_band_change(self._background, total, both, float(noise)))
         off = both & (deviation > np.maximum(noise, np.float32(SPREAD_FACTOR) * self._spread))
         learn = np.float32(self._learn)
         self._background += learn * change
@@ -209,17 +209,29 @@ class FrameSeam:
         return ~lines_near(moved, int(np.ceil(self.width / max(1, self.cfg.video_seam_line_step))))
 
 
-def whole_band_change(background: np.ndarray, total: np.ndarray, both: np.ndarray) -> np.ndarray:
+def whole_band_change(background: np.ndarray, total: np.ndarray, both: np.ndarray, noise: float) -> np.ndarray:
     """(L, width) float32 the change of ``total`` from ``background`` that a gain and an offset over the
     whole band explain (a camera's exposure step, a flickering light): their least-squares fit on the
-    cells in ``both``, every :data:`FIT_STRIDE`-th line and cell."""
+    cells in ``both``, every :data:`FIT_STRIDE`-th line and cell, fitted again without the cells more
+    than ``noise`` (and twice the median residual) off the first fit (an object in front)."""
     fit = both[::FIT_STRIDE, ::FIT_STRIDE]
     x = background[::FIT_STRIDE, ::FIT_STRIDE][fit].astype(np.float64)
     y = total[::FIT_STRIDE, ::FIT_STRIDE][fit].astype(np.float64)
+    gain, offset = _gain_offset(x, y)
+    residual = np.abs(y - gain * x - offset)
+    kept = residual <= max(noise, 2.0 * float(np.median(residual))) if residual.size else residual > 0
+    gain, offset = _gain_offset(x[kept], y[kept])
+    return np.float32(gain - 1.0) * background + np.float32(offset)
+
+
+def _gain_offset(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Least squares y = gain x + offset; gain 1 where x does not vary, (1, 0) without points."""
+    if x.size == 0:
+        return 1.0, 0.0
     if x.size < 2 or x.var() <= 1e-6:
-        return np.full(total.shape, np.float32(y.mean() - x.mean()) if x.size else 0.0, np.float32)
+        return 1.0, float(y.mean() - x.mean())
     gain = float(np.mean((x - x.mean()) * (y - y.mean())) / x.var())
-    return np.float32(gain - 1.0) * background + np.float32(y.mean() - gain * x.mean())
+    return gain, float(y.mean() - gain * x.mean())
 
 
 def lines_near(flags: np.ndarray, reach: int) -> np.ndarray:
