@@ -127,14 +127,15 @@ class FrameSeam:
         both = diff < 0.5 * NOT_BOTH
         self._still = self.still_lines(diff, both)
         self._last = (diff.copy(), both)
-        moving = self.foreground(total, both) if self.jumps else None
         last = self._path if self._shown is None else self._shown
-        if not self._still.all():  # else every line keeps its seam: nothing to solve
-            self._path = self._solve(diff, both, moving, last)
+        if not (self._still.all() and self._shown is not None):
+            # Else nothing changed on any line: the seam and the background model stay as they are.
+            moving = self.foreground(total, both) if self.jumps else None
+            if not self._still.all():
+                self._path = self._solve(diff, both, moving, last)
         self._shown = self._path.copy()
-        positions = self.positions
         offsets_src, offsets_tgt = band_offsets(self._path, self._x0, diff, both, self._lines, cfg)
-        return positions, offsets_src, offsets_tgt
+        return self.positions, offsets_src, offsets_tgt
 
     def _solve(self, diff: np.ndarray, both: np.ndarray, moving: np.ndarray | None, last: np.ndarray) -> np.ndarray:
         """The solved lines' new path (module docstring)."""
