@@ -1,32 +1,35 @@
 """The seam of every video frame (issue 14): "cached warps, per-frame seam slicing".
 
 The estimate fixes the maps and a seam; each frame the seam is re-optimised inside a band around it
-(``band`` cells each side, ``video_seam_band_ratio`` x the canvas diagonal) on that frame's luma
-difference (the compositor's ``band_difference``: source minus target, gains applied), by the
-dynamic programming of ``seam_path`` with a temporal term: a cell costs its difference beyond the
-noise floor, plus ``video_seam_stay_cost`` per pixel away from the last frame's seam and
-``video_seam_home_cost`` per pixel away from the estimate's. The seam glides: it moves at most
-``video_seam_speed_px`` per line from the last frame's. On a static rig a second path, free in the
-band, is taken instead when the gliding one would cost ``video_seam_jump_cost`` per line more:
-something moved across the seam and the seam steps round it at once. (On a moving rig everything
-shifts a little every frame; there the seam only glides.) While nothing moves the costs only carry noise, and a new path
-replaces the last one only when it is cheaper by ``video_seam_margin`` per line: the seam stays put.
-And on a *still* line it stays put whatever the path elsewhere does: a line is still when no box of
-``video_seam_still_box_px`` cells of the band's difference changed by more than ``video_seam_noise``
-since the last frame on it or within a band's width of lines (room for the path to leave and come back);
-there every cell but the last frame's seam is blocked.
-On a static rig the band also keeps a background model (each cell's source-plus-target luma, a running
-mean with time constant ``video_seam_background_s``, and its mean absolute deviation): a cell off it by
-more than twice the noise and three deviations (leaves in the wind, a drifting camera's edges keep
-changing), beyond the change a gain and offset over the whole band explain (a camera's exposure step or
-a flickering light moves every cell), in most of
-a box twice ``video_seam_still_box_px`` wide (an object, not the thin edges a camera's drift or the
-encoder's noise leave), holds something in front of the background in one view or both, and costs
-``video_seam_motion_cost`` more, so
-the seam goes round a moving object whole (both its copies), not only round where the views differ:
-inside a smooth object the two copies differ little, and a seam through it would lose a strip of it.
-Only the compositor's seam positions change per frame; its plan stays.
+(``band`` cells each side, ``video_seam_band_ratio`` x the canvas diagonal: room to go round an
+object and its second copy) on that frame's luma difference (the compositor's ``band_difference``:
+source minus target, gains applied), by the dynamic programming of ``seam_path`` with a temporal term:
+a cell costs its difference beyond the noise floor, plus ``video_seam_stay_cost`` per pixel away from
+the last frame's seam and ``video_seam_home_cost`` per pixel away from the estimate's.
 
+*Glide and jump.* The seam glides: it moves at most ``video_seam_speed_px`` per line from the last
+frame's. On a static rig, while something is in front of the background (below), a second path, free
+in the band, is taken instead when the gliding one would cost ``video_seam_jump_cost`` per line more:
+something moved across the seam and the seam steps round it at once. (On a moving rig everything
+shifts a little every frame; there the seam only glides.) A new path replaces the last one only when
+it is cheaper by ``video_seam_margin`` per line: while nothing moves the costs only carry noise.
+
+*Still lines.* A line is still when no box of ``video_seam_still_box_px`` cells of the band's
+difference changed by more than ``video_seam_noise`` since the last frame on it or within a band's
+width of lines (room for the path to leave and come back); there every cell but the last frame's
+seam is blocked, and a frame whose lines are all still solves nothing.
+
+*In front of the background* (static rigs). The band keeps a background model: each cell's
+source-plus-target luma as a running mean with time constant ``video_seam_background_s``, and its
+mean absolute deviation. A cell is in front when it is off the model by more than twice the noise and
+three deviations (leaves in the wind and a drifting camera's edges keep changing), beyond what one
+gain and offset over the whole band explain (a camera's exposure step, a flickering light), in most
+of a box twice ``video_seam_still_box_px`` wide (an object, not thin edges). Such cells cost
+``video_seam_motion_cost`` more, so the seam goes round a moving object whole (both its copies), not
+only round where the views differ: inside a smooth object its two copies differ little, and a seam
+through it would lose a strip of it.
+
+Only the compositor's seam positions and the seam blend's offsets change per frame; its plan stays.
 Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig). The seam is
 solved on every ``video_seam_line_step``-th line and interpolated between (half the work at 2; the
 seam blend's transition is wider than the interpolation's rounding).
@@ -128,11 +131,9 @@ class FrameSeam:
         self._still = self.still_lines(diff, both)
         self._last = (diff.copy(), both)
         last = self._path if self._shown is None else self._shown
-        if not (self._still.all() and self._shown is not None):
-            # Else nothing changed on any line: the seam and the background model stay as they are.
+        if not self._still.all():  # else nothing changed on any line: the seam and the background model stay
             moving = self.foreground(total, both) if self.jumps else None
-            if not self._still.all():
-                self._path = self._solve(diff, both, moving, last)
+            self._path = self._solve(diff, both, moving, last)
         self._shown = self._path.copy()
         offsets_src, offsets_tgt = band_offsets(self._path, self._x0, diff, both, self._lines, cfg)
         return self.positions, offsets_src, offsets_tgt
@@ -179,8 +180,9 @@ class FrameSeam:
         return self._glide_solver.solve(sub, glide_x0, self._segment, self._max_step, cfg.seam_step_cost)
 
     def foreground(self, total: np.ndarray, both: np.ndarray) -> np.ndarray:
-        """(L, width) float32, 1 on band cells off the background model (module docstring), grown by
-        ``video_seam_still_box_px``; none on the first frame of an estimate. Updates the model."""
+        """(K, width) float32 over the solved lines' band ``total`` (source plus target), 1 on cells off
+        the background model (module docstring), grown by ``video_seam_still_box_px``; none on the first
+        frame of an estimate. Updates the model."""
         noise = np.float32(2.0 * self.cfg.video_seam_noise)
         if self._background is None:
             self._background = total.copy()
@@ -199,7 +201,8 @@ class FrameSeam:
         return cv2.dilate(solid, np.ones((box, box), np.uint8)).astype(np.float32)
 
     def still_lines(self, diff: np.ndarray, both: np.ndarray) -> np.ndarray:
-        """(L,) bool: lines where nothing changed since the last frame (module docstring); none without one."""
+        """(K,) bool: solved lines where nothing changed since the last frame (module docstring); none
+        without one."""
         if self._last is None:
             return np.zeros(len(diff), bool)
         last_diff, last_both = self._last
