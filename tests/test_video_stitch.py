@@ -375,3 +375,27 @@ def test_the_frame_seam_stays_on_the_lines_where_nothing_moved(clips):
         np.testing.assert_array_equal(seam.positions[still], before[still])
     finally:
         comp.close()
+
+
+def test_a_vertical_rig_gets_its_per_frame_seam_along_columns(clips, tmp_path):
+    """The rooftop clips turned by 90 degrees (the left camera on top): the rig is found vertical, the
+    canvas grows downwards, and the per-frame seam (one position per canvas column, solved on every
+    second column) stays in its band on every frame."""
+    paths = []
+    for name in ("rooftop_left", "rooftop_right"):
+        frames = decoded_frames(clips / f"{name}.mp4")
+        height, width = frames[0].y.shape
+        path = tmp_path / f"{name}_turned.mp4"
+        with VideoWriter(path, height, width, Fraction(30), "libx264", 12, "veryfast") as writer:
+            for index, frame in enumerate(frames):
+                writer.write(*(np.ascontiguousarray(plane.T) for plane in (frame.y, frame.u, frame.v)), index)
+        paths.append(path)
+    seams = []
+    report = stitch_videos(paths[0], paths[1], tmp_path / "out.mp4", FAST, VideoOptions.from_config(FAST),
+                           observer=lambda frame: seams.append((frame.seam.copy(), frame.seam_home.copy(),
+                                                                frame.seam_reach_px)))
+    stitch = report["stitch"]
+    assert report["frames_out"] == 60 and stitch["rig"]["vertical"] is True
+    assert stitch["canvas"]["height"] > 1.2 * width  # the turned frames are `width` rows tall
+    assert all(np.abs(seam - home).max() <= reach for seam, home, reach in seams)
+    assert len(seams[0][0]) == stitch["canvas"]["width"]  # one position per column
