@@ -158,9 +158,11 @@ class Config:
     video_crop: bool = False  # crop the output to the largest rectangle the first estimate covers, for the whole video
     video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly (at least)
     video_seam_speed_px: float = 2.0  # the seam moves at most this per frame (a blend lasts long enough), but for jumps
-    video_warp_follow: float = 0.5  # moving rig: an accepted estimate moves the maps this share of the way (causal
+    video_warp_follow: float = 0.65  # moving rig: an accepted estimate moves the maps this share of the way (causal
     # exponential smoothing of the warp across estimates: estimation noise averages out; 1: all the way)
     video_estimate_workers: int = 1  # moving rig: re-estimates run on this many threads off the frame loop (0: on it)
+    video_estimate_lookahead_s: float = 1.0  # moving rig, worker: a re-estimate starts on the frame this far ahead of
+    # the one composited (those decoded frames are held), so it is ready when the loop reaches its frame; 0: none
     seam_prior_weight: float = 0.5  # moving rig: cost per px (per row) of a new seam's distance from the current one
     # --- Video over time: the per-frame seam and exposure (issue 14) ----------------------------
     video_seam_band_ratio: float = 0.05  # per-frame seam: band half-width, x the canvas diagonal (room to go round an object)

@@ -399,3 +399,36 @@ def test_a_vertical_rig_gets_its_per_frame_seam_along_columns(clips, tmp_path):
     assert stitch["canvas"]["height"] > 1.2 * width  # the turned frames are `width` rows tall
     assert all(np.abs(seam - home).max() <= reach for seam, home, reach in seams)
     assert len(seams[0][0]) == stitch["canvas"]["width"]  # one position per column
+
+
+def test_with_a_look_ahead_a_re_estimate_starts_on_a_later_frame_and_lands_on_it(clips, tmp_path, monkeypatch):
+    """The loop holds video_estimate_lookahead_s of pairs: a due re-estimate starts on the newest one
+    and is blended in when the loop reaches that frame, not before. The worker here answers at once
+    (the first frames' maps, made beforehand), so the first lands exactly on its own frame; without the
+    look-ahead's wait it would be blended in 12 frames before the frame it was made on."""
+    from sena_warp.video import stitch as video_stitch
+
+    first_l, first_r = decoded_frames(clips / "rooftop_left.mp4")[0], decoded_frames(clips / "rooftop_right.mp4")[0]
+    maps = estimate.estimate_pair(first_l, first_r, FAST, "auto")
+    monkeypatch.setattr(video_stitch, "estimate_pair", lambda *args, **kwargs: maps)
+    cfg = FAST.replace(video_rig="moving", video_reestimate_s=0.5, video_estimate_workers=1,
+                       video_estimate_lookahead_s=0.4)
+    report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "la.mp4", cfg,
+                           VideoOptions.from_config(cfg))
+    applied = report["stitch"]["reestimations"]["applied"]
+    assert report["frames_out"] == 60 and len(applied) >= 2
+    assert applied[0]["at_s"] == applied[0]["made_on_s"], applied
+    # Never before its frame; a later one may wait for the last blend to end (measured: 1 frame).
+    assert all(0 <= a["at_s"] - a["made_on_s"] <= 3 / 30 + 1e-3 for a in applied), applied
+
+
+def test_looked_ahead_pairs_keep_their_order_and_are_seen_that_many_pairs_early():
+    from sena_warp.video.loop import looked_ahead
+
+    seen: list[int] = []
+    out = []
+    for pair in looked_ahead(((i, -i) for i in range(7)), lambda a, b: seen.append(a), 3):
+        out.append(pair[0])
+        assert seen[-1] == min(pair[0] + 3, 6)  # the newest pair seen is 3 ahead (or the last)
+    assert out == list(range(7)) and seen == list(range(7))
+    assert [p[0] for p in looked_ahead(((i, i) for i in range(4)), lambda a, b: None, 0)] == [0, 1, 2, 3]

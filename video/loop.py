@@ -13,6 +13,7 @@ import os
 import queue
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from fractions import Fraction
 from itertools import chain
@@ -45,6 +46,8 @@ class FrameCompositor(Protocol):
 
     Optionally it has ``update(frame_l, frame_r)``, called on the main thread before each pair is
     composited (e.g. to re-estimate its maps between frames); its time is reported as ``maps_update``.
+    And optionally ``look_ahead(frame_l, frame_r)`` with ``lookahead_frames``: each pair is shown to
+    it that many pairs before it is composited (the pairs in between are held).
     """
 
     output_size: tuple[int, int]
@@ -323,6 +326,9 @@ def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progr
     update = getattr(compositor, "update", None)
     if update is not None:
         timing["maps_update"] = 0.0
+    look_ahead = getattr(compositor, "look_ahead", None)
+    if look_ahead is not None:
+        pairs = looked_ahead(pairs, look_ahead, compositor.lookahead_frames)
     encoder = EncodeThread(writer, queue_frames)
     try:
         for frame_l, frame_r in pairs:
@@ -345,6 +351,17 @@ def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progr
     finally:
         timing["encode"] += encoder.seconds
     progress.close(writer.frames)
+
+
+def looked_ahead(pairs, look_ahead, depth: int):
+    """``pairs`` in order, each shown to ``look_ahead`` ``depth`` pairs before it is yielded."""
+    held: deque = deque()
+    for pair in pairs:
+        look_ahead(*pair)
+        held.append(pair)
+        if len(held) > depth:
+            yield held.popleft()
+    yield from held
 
 
 def _report(infos, readers, writer: VideoWriter, stats: PairingStats, timing: dict, notes: list[str],

@@ -180,9 +180,13 @@ class SenaFrameCompositor:
         self._blend: tuple[PlaneMaps, PlaneMaps, int, int] | None = None  # (start, goal, frames done, frames)
         self._workers = ThreadPoolExecutor(cfg.video_estimate_workers, thread_name_prefix="estimate") \
             if self._reestimate_s is not None and cfg.video_estimate_workers > 0 else None
+        # With a worker, re-estimates start this many frames ahead (``look_ahead``) and land on their frame.
+        self.lookahead_frames = int(math.ceil(cfg.video_estimate_lookahead_s * fps)) if self._workers else 0
         self._pending: tuple[float, Future] | None = None
         self._last_estimate_s: float | None = None
-        self._reestimations = {"attempted": 0, "accepted": 0, "rejected": 0, "rejections": []}
+        # "applied": per accepted estimate, the time of the frame it was made on and of the frame whose
+        # compositing it started to blend into (the same with a timely look-ahead).
+        self._reestimations = {"attempted": 0, "accepted": 0, "rejected": 0, "rejections": [], "applied": []}
         self._seam_jitter_px: list[float] = []
         self._map_change_px: list[float] = []
         self._seam_motion_px: list[float] = []
@@ -226,15 +230,24 @@ class SenaFrameCompositor:
         return (PlanePass.of(self._luma, maps.map_src_luma, maps.map_tgt_luma, LUMA_FILL),
                 PlanePass.of(self._chroma, maps.map_src_chroma, maps.map_tgt_chroma, CHROMA_FILL))
 
+    def look_ahead(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
+        """A pair ``lookahead_frames`` before it is composited: a re-estimate that is due starts on it,
+        so that it is ready when the loop reaches that frame (the maps of a frame still come from that
+        frame and earlier ones only)."""
+        if self.lookahead_frames and self._pending is None and self._due(float(frame_l.time_s)):
+            self._submit(frame_l, frame_r)
+
     def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
-        """Before compositing a pair: start, collect or blend in a re-estimate, and record the maps' change."""
+        """Before compositing a pair: start, collect or blend in a re-estimate, and record the maps' change.
+        A re-estimate made on a later frame (``look_ahead``) waits for the loop to reach that frame."""
         self._time_s = float(frame_l.time_s)
         before = self._maps
         if self._blend is not None:
             self._advance_blend()
-        elif self._pending is not None and self._pending[1].done():
+        elif (self._pending is not None and self._pending[1].done()
+              and self._pending[0] <= float(frame_l.time_s) + 1e-6):
             self._collect(frame_l, frame_r)
-        elif self._pending is None and self._due(float(frame_l.time_s)):
+        elif not self.lookahead_frames and self._pending is None and self._due(float(frame_l.time_s)):
             self._submit(frame_l, frame_r)
         changed = self._maps is not before
         self._seam_jitter_px.append(seam_change_px(before, self._maps) if changed else 0.0)
@@ -291,6 +304,7 @@ class SenaFrameCompositor:
             self._reestimations["rejections"].append({"time_s": round(time_s, 4), "reason": reason})
             return
         self._reestimations["accepted"] += 1
+        self._reestimations["applied"].append({"made_on_s": round(time_s, 4), "at_s": round(float(frame_l.time_s), 4)})
         # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
         # estimation noise, which an exponential average over the accepted estimates takes out.
         goal = lerp_maps(self._maps, candidate, self._cfg.video_warp_follow)
