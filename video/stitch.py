@@ -181,7 +181,9 @@ class SenaFrameCompositor:
         self._workers = ThreadPoolExecutor(cfg.video_estimate_workers, thread_name_prefix="estimate") \
             if self._reestimate_s is not None and cfg.video_estimate_workers > 0 else None
         # With a worker, re-estimates start this many frames ahead (``look_ahead``) and land on their frame.
-        self.lookahead_frames = int(math.ceil(cfg.video_estimate_lookahead_s * fps)) if self._workers else 0
+        pair_mib = sum(rows * cols * 1.5 for rows, cols in frame_shapes) / 2**20  # YUV 4:2:0, both views
+        self.lookahead_frames = min(int(math.ceil(cfg.video_estimate_lookahead_s * fps)),
+                                    int(cfg.video_estimate_lookahead_mib / pair_mib)) if self._workers else 0
         self._pending: tuple[float, Future] | None = None
         self._last_estimate_s: float | None = None
         # "applied": per accepted estimate, the time of the frame it was made on and of the frame whose
