@@ -150,7 +150,8 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     comp.load(plane_src, plane_tgt)
     lines = np.arange(1, len(seam.positions), 3, dtype=np.int32)  # every third line, as the frame seam solves
     band_x0 = (np.rint(seam.positions[lines]) - 8).astype(np.int32)
-    diff, total = comp.band_difference(lines, band_x0, 17,
+    diff, total = comp.band_difference(wp.array(lines, dtype=int, device=warp_device),
+                                       wp.array(band_x0, dtype=int, device=warp_device), 17,
                                        wp.zeros((len(lines), 17), dtype=float, device=warp_device),
                                        wp.zeros((len(lines), 17), dtype=float, device=warp_device))
     v_src, ok_src = remap_reference(plane_src[:, :, None], map_src)

@@ -93,7 +93,8 @@ class BandFrames:
         self.diff, self.total = diff, total
 
     def band_difference(self, lines, band_x0, width, out, out_total):
-        return self.diff[lines].astype(np.float32), self.total[lines].astype(np.float32)
+        solved = lines.numpy()  # a Warp array, as the compositor takes it
+        return self.diff[solved].astype(np.float32), self.total[solved].astype(np.float32)
 
 
 def valley_band(column: int) -> np.ndarray:

@@ -78,6 +78,8 @@ class FrameSeam:
         self._glide_width = min(self.width, 2 * int(np.ceil(cfg.video_seam_speed_px)) + 1)
         self._glide_solver = BandPath(solved, self._glide_width, 1, cfg)
         self._segment = np.array([[0, solved - 1, -1, -1]])
+        self._lines_wp = wp.array(self._lines, dtype=int, device=cfg.device)
+        self._x0_wp = wp.zeros(solved, dtype=int, device=cfg.device)  # the band's first cells, per reset
         self._diff = wp.zeros((solved, self.width), dtype=float, device=cfg.device)
         self._total = wp.zeros((solved, self.width), dtype=float, device=cfg.device)
         self._learn = 1.0 / max(1.0, fps * cfg.video_seam_background_s)  # the background's update per frame
@@ -95,6 +97,7 @@ class FrameSeam:
         self.home = np.asarray(home, np.float32)
         self.band_x0 = (np.rint(self.home) - self.band).astype(np.int32)
         self._x0 = self.band_x0[self._lines]
+        self._x0_wp.assign(self._x0)
         self._cells = self._x0[:, None] + np.arange(self.width, dtype=np.int32)[None, :]
         self._home_term = (self.cfg.video_seam_home_cost
                            * np.abs(self._cells - self.home[self._lines, None])).astype(np.float32)
@@ -126,7 +129,7 @@ class FrameSeam:
         """The seam of the frame loaded in ``luma`` and its seam blend's offsets (``band_offsets``):
         (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32)."""
         cfg = self.cfg
-        diff, total = luma.band_difference(self._lines, self._x0, self.width, self._diff, self._total)
+        diff, total = luma.band_difference(self._lines_wp, self._x0_wp, self.width, self._diff, self._total)
         both = diff < 0.5 * NOT_BOTH
         self._still = self.still_lines(diff, both)
         self._last = (diff.copy(), both)
