@@ -253,18 +253,37 @@ class Compositor:
         """Upload one pair of uint8 images (H, W, C) or planes (H, W), same C on both sides, for
         :meth:`band_difference` and :meth:`composite`."""
         src3, tgt3 = as_channels(img_src), as_channels(img_tgt)
-        if src3.shape[2] != tgt3.shape[2]:
-            raise ValueError(f"source has {src3.shape[2]} channels, target {tgt3.shape[2]}")
-        if src3.shape[2] > MAX_CHANNELS:
-            raise ValueError(f"images have {src3.shape[2]} channels; at most {MAX_CHANNELS} are supported")
-        buf = self._buffers_for(src3.shape, tgt3.shape)
-        np.copyto(buf.src_host.numpy(), src3)
-        np.copyto(buf.tgt_host.numpy(), tgt3)
+        self._upload(src3.shape, tgt3.shape, (src3,), (tgt3,), np.ndim(img_src) == 2)
+
+    def load_planes(self, planes_src: Sequence[np.ndarray], planes_tgt: Sequence[np.ndarray]) -> None:
+        """As :meth:`load` for images given as C uint8 planes (H, W) per side (e.g. a frame's U and V),
+        each copied straight into its channel: no interleaved (H, W, C) copy is made first."""
+        def shape(planes: Sequence[np.ndarray]) -> tuple[int, int, int]:
+            if any(p.dtype != np.uint8 or p.shape != planes[0].shape for p in planes):
+                raise ValueError("expected uint8 planes of one (H, W) per side")
+            return (*planes[0].shape, len(planes))
+        self._upload(shape(planes_src), shape(planes_tgt), planes_src, planes_tgt, False)
+
+    def _upload(self, shape_src: tuple, shape_tgt: tuple, parts_src: Sequence[np.ndarray],
+                parts_tgt: Sequence[np.ndarray], planes: bool) -> None:
+        """Copy a pair into the host buffers for its (H, W, C) shapes: ``parts_*`` one (H, W, C) image
+        or C (H, W) planes per side; ``planes``: :meth:`composite` gives (Hc, Wc), not (Hc, Wc, 1)."""
+        if shape_src[2] != shape_tgt[2]:
+            raise ValueError(f"source has {shape_src[2]} channels, target {shape_tgt[2]}")
+        if shape_src[2] > MAX_CHANNELS:
+            raise ValueError(f"images have {shape_src[2]} channels; at most {MAX_CHANNELS} are supported")
+        buf = self._buffers_for(tuple(shape_src), tuple(shape_tgt))
+        for host, parts in ((buf.src_host.numpy(), parts_src), (buf.tgt_host.numpy(), parts_tgt)):
+            if len(parts) == 1 and np.ndim(parts[0]) == 3:
+                np.copyto(host, parts[0])
+            else:
+                for channel, plane in enumerate(parts):
+                    host[:, :, channel] = plane
         if buf.src_host is not buf.src:
             wp.copy(buf.src, buf.src_host)
             wp.copy(buf.tgt, buf.tgt_host)
-        self._loaded = (buf, src3.shape[2], np.ndim(img_src) == 2)
-        self._ensure_defaults(src3.shape[2])
+        self._loaded = (buf, shape_src[2], planes)
+        self._ensure_defaults(shape_src[2])
 
     def _ensure_defaults(self, channels: int) -> None:
         if channels not in self._gains:

@@ -179,3 +179,20 @@ def test_compositor_rejects_mismatched_inputs(scene, warp_device):  # noqa: F811
     comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device))
     with pytest.raises(ValueError, match="channels"):
         comp.apply(img_src, np.ascontiguousarray(img_tgt[:, :, 0]))
+
+
+def test_planes_load_as_their_interleaved_image(scene, warp_device):  # noqa: F811
+    # A frame's U and V planes go straight into the compositor's channels: the same output as the
+    # interleaved (H, W, 2) image, without making it.
+    img_src, img_tgt, map_src, map_tgt, _ = scene
+    seam = layout(scene)
+    planes_src = [np.ascontiguousarray(img_src[:, :, c]) for c in (0, 1)]
+    planes_tgt = [np.ascontiguousarray(img_tgt[:, :, c]) for c in (0, 1)]
+    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device))
+    comp.load(np.dstack(planes_src), np.dstack(planes_tgt))
+    interleaved = comp.composite().copy()
+    comp.load_planes(planes_src, planes_tgt)
+    np.testing.assert_array_equal(comp.composite(), interleaved)
+    assert interleaved.shape[2] == 2 and interleaved.std() > 10
+    with pytest.raises(ValueError, match="planes"):
+        comp.load_planes(planes_src, [planes_tgt[0], planes_tgt[1][:-1]])

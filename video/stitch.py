@@ -360,7 +360,7 @@ class SenaFrameCompositor:
         self._seconds["exposure"] += t1 - t0
         self._seconds["frame_seam"] += t2 - t1
         y = self._luma.composite(LUMA_FILL).copy()
-        self._chroma.load(np.dstack((u_src, v_src)), np.dstack((u_tgt, v_tgt)))
+        self._chroma.load_planes((u_src, v_src), (u_tgt, v_tgt))
         uv = self._chroma.composite(CHROMA_FILL)
         out = (y, uv[:, :, 0].copy(), uv[:, :, 1].copy())
         if self.observer is not None:
