@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Callable
@@ -184,7 +185,7 @@ class SenaFrameCompositor:
         pair_mib = sum(rows * cols * 1.5 for rows, cols in frame_shapes) / 2**20  # YUV 4:2:0, both views
         self.lookahead_frames = min(int(math.ceil(cfg.video_estimate_lookahead_s * fps)),
                                     int(cfg.video_estimate_lookahead_mib / pair_mib)) if self._workers else 0
-        self._pending: tuple[float, Future] | None = None
+        self._pending: deque[tuple[float, Future]] = deque()  # started re-estimates (frame time, job), oldest first
         self._last_estimate_s: float | None = None
         # "applied": per accepted estimate, the time of the frame it was made on and of the frame whose
         # compositing it started to blend into (the same with a timely look-ahead).
@@ -236,8 +237,12 @@ class SenaFrameCompositor:
         """A pair ``lookahead_frames`` before it is composited: a re-estimate that is due starts on it,
         so that it is ready when the loop reaches that frame (the maps of a frame still come from that
         frame and earlier ones only)."""
-        if self.lookahead_frames and self._pending is None and self._due(float(frame_l.time_s)):
+        if self.lookahead_frames and self._worker_idle() and self._due(float(frame_l.time_s)):
             self._submit(frame_l, frame_r)
+
+    def _worker_idle(self) -> bool:
+        """No re-estimate is running (those done may still wait for their frame)."""
+        return all(job.done() for _, job in self._pending)
 
     def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         """Before compositing a pair: start, collect or blend in a re-estimate, and record the maps' change.
@@ -246,10 +251,9 @@ class SenaFrameCompositor:
         before = self._maps
         if self._blend is not None:
             self._advance_blend()
-        elif (self._pending is not None and self._pending[1].done()
-              and self._pending[0] <= float(frame_l.time_s) + 1e-6):
+        elif self._pending and self._pending[0][1].done() and self._pending[0][0] <= float(frame_l.time_s) + 1e-6:
             self._collect(frame_l, frame_r)
-        elif not self.lookahead_frames and self._pending is None and self._due(float(frame_l.time_s)):
+        elif not self.lookahead_frames and not self._pending and self._due(float(frame_l.time_s)):
             self._submit(frame_l, frame_r)
         changed = self._maps is not before
         self._seam_jitter_px.append(seam_change_px(before, self._maps) if changed else 0.0)
@@ -279,7 +283,7 @@ class SenaFrameCompositor:
         else:  # no worker: on the loop's thread, a frame waits for it (reproducible, for tests and batch runs)
             job = Future()
             job.set_result(self._estimate(frame_l, frame_r, self._prior_seam_tgt()))
-        self._pending = (self._last_estimate_s, job)
+        self._pending.append((self._last_estimate_s, job))
 
     def _estimate(self, frame_l: YuvFrame, frame_r: YuvFrame, prior: np.ndarray) -> tuple[PlaneMaps | None, str | None]:
         """On a worker thread: a re-estimate on the fixed canvas, or why it is rejected."""
@@ -298,8 +302,7 @@ class SenaFrameCompositor:
             self._seconds["reestimate"] += time.perf_counter() - t0
 
     def _collect(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
-        time_s, job = self._pending
-        self._pending = None
+        time_s, job = self._pending.popleft()
         candidate, reason = job.result()
         if reason is not None:
             self._reestimations["rejected"] += 1
