@@ -138,7 +138,7 @@ class FrameSeam:
             moving = self.foreground(total, both) if self.jumps else None
             self._path = self._solve(diff, both, moving, last)
         self._shown = self._path.copy()
-        offsets_src, offsets_tgt = band_offsets(self._path, self._x0, diff, both, self._lines, cfg)
+        offsets_src, offsets_tgt = band_offsets(self._path, self._cells, diff, both, self._lines, cfg)
         return self.positions, offsets_src, offsets_tgt
 
     def _solve(self, diff: np.ndarray, both: np.ndarray, moving: np.ndarray | None, last: np.ndarray) -> np.ndarray:
@@ -248,14 +248,13 @@ def lines_near(flags: np.ndarray, reach: int) -> np.ndarray:
     return count[np.minimum(lines + reach + 1, len(flags))] > count[np.maximum(lines - reach, 0)]
 
 
-def band_offsets(path: np.ndarray, band_x0: np.ndarray, diff: np.ndarray, both: np.ndarray, lines: np.ndarray,
+def band_offsets(path: np.ndarray, cells: np.ndarray, diff: np.ndarray, both: np.ndarray, lines: np.ndarray,
                  cfg: Config) -> tuple[np.ndarray, np.ndarray]:
     """The seam blend's low-frequency offsets of one frame (``partition.seam_offsets`` on the band):
     per solved line (seam line ``lines`` (K,), ascending, the last line last), half the mean
-    difference within ``seam_blend_strip_px`` of the seam ``path`` (K,), averaged over
-    ``seam_blend_rows`` lines, off the source and onto the target, interpolated to every line:
-    ((L, 1), (L, 1)) float32."""
-    cells = band_x0[:, None] + np.arange(diff.shape[1])[None, :]
+    difference ``diff`` (K, width) within ``seam_blend_strip_px`` of the seam ``path`` (K,) (the band
+    cells' positions ``cells`` (K, width)), averaged over ``seam_blend_rows`` lines, off the source and
+    onto the target, interpolated to every line: ((L, 1), (L, 1)) float32."""
     strip = both & (np.abs(cells - path[:, None]) <= cfg.seam_blend_strip_px)
     count = strip.sum(axis=1)
     per_line = np.where(strip, diff, 0.0).sum(axis=1) / np.maximum(count, 1)

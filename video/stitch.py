@@ -353,7 +353,7 @@ class SenaFrameCompositor:
         self._chroma.set_gains(2, cgain_src, cbias_src, cgain_tgt, cbias_tgt)
         t1 = time.perf_counter()
         self._luma.load(y_src, y_tgt)
-        last = (self._seam.positions if self._seam.shown is None else self._seam.shown).copy()
+        last = self._seam.positions if self._seam.shown is None else self._seam.shown  # a new array either way
         positions, offsets_src, offsets_tgt = self._seam.next(self._luma)
         self._seam_motion_px.append(float(np.abs(positions - last).max()))
         self._luma.set_seam(positions.astype(np.float32))
