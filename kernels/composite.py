@@ -317,6 +317,7 @@ def band_difference_kernel(
     lines_are_rows: int,
     lines: wp.array(dtype=int),
     band_x0: wp.array(dtype=int),
+    cell: int,
     gain_src: wp.vec4i,
     bias_src: wp.vec4i,
     gain_tgt: wp.vec4i,
@@ -325,14 +326,14 @@ def band_difference_kernel(
     diff: wp.array2d(dtype=float),
     total: wp.array2d(dtype=float),
 ):
-    """Per solved line k = row0 + i (seam line lines[k]) and band cell j (position band_x0[k] + j):
+    """Per solved line k = row0 + i (seam line lines[k]) and band cell j (position band_x0[k] + j cell):
     channel 0 of the source minus the target there (``diff``) and their sum (``total``), both with
     their gains and knee (grey levels), or ``NOT_BOTH`` and 0 where the plan does not hold both taps
     (outside the overlap or the band). The per-frame seam reads them."""
     i, j = wp.tid()
     k = row0 + i
     line = lines[k]
-    pos = band_x0[k] + j
+    pos = band_x0[k] + j * cell
     x = pos
     y = line
     if lines_are_rows == 0:

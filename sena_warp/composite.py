@@ -296,17 +296,17 @@ class Compositor:
             self._border[channels] = (0, wp.vec2(0.0, 0.0), 0, none, none)
 
     def band_difference(self, lines: wp.array, band_x0: wp.array, width: int, out: wp.array,
-                        out_total: wp.array) -> tuple[np.ndarray, np.ndarray]:
+                        out_total: wp.array, cell: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """Source minus target and source plus target (channel 0, with gains; grey levels) of the
-        loaded pair on seam lines ``lines`` (K,) int, ``width`` cells each from ``band_x0`` (K,) int
-        (Warp arrays on this device, uploaded once by the caller): two (K, width) float32, ``NOT_BOTH``
+        loaded pair on seam lines ``lines`` (K,) int, ``width`` cells each from ``band_x0`` (K,) int, one
+        every ``cell`` positions (Warp arrays on this device, uploaded once by the caller): two (K, width) float32, ``NOT_BOTH``
         and 0 where a cell does not hold both views. ``out``, ``out_total``: (K, width) float Warp
         arrays to fill."""
         buf, channels, _ = self._loaded
         gains = self._gains[channels]
         inputs = [buf.src.flatten(), buf.tgt.flatten(), buf.frame_inputs[2], buf.plan, buf.plan_tgt,
                   self.canvas_shape[1], self.canvas_shape[0], int(self.layout.lines_are_rows), lines, band_x0,
-                  *gains, self.tone, out, out_total]
+                  int(cell), *gains, self.tone, out, out_total]
         runtime.launch_rows(band_difference_kernel, lines.shape[0], width, inputs, self.device, self.threads)
         return out.numpy(), out_total.numpy()
 

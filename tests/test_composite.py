@@ -139,7 +139,8 @@ def test_the_frame_seam_moves_within_its_band_without_a_new_plan(scene, device, 
     assert np.all(alpha[rows, edge - 12] > 0.99) and np.all(alpha[rows, edge + 12] < 0.01)
 
 
-def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_device):  # noqa: F811
+@pytest.mark.parametrize("cell", [1, 2])
+def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_device, cell):  # noqa: F811
     import warp as wp
 
     img_src, img_tgt, map_src, map_tgt, _ = scene
@@ -149,15 +150,16 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     comp.set_gains(1, [1.2], [-5.0], [1.0], [0.0])
     comp.load(plane_src, plane_tgt)
     lines = np.arange(1, len(seam.positions), 3, dtype=np.int32)  # every third line, as the frame seam solves
+    count = 2 * (8 // cell) + 1  # cells of ``cell`` px 8 px each side of the seam, inside the plan's band
     band_x0 = (np.rint(seam.positions[lines]) - 8).astype(np.int32)
     diff, total = comp.band_difference(wp.array(lines, dtype=int, device=warp_device),
-                                       wp.array(band_x0, dtype=int, device=warp_device), 17,
-                                       wp.zeros((len(lines), 17), dtype=float, device=warp_device),
-                                       wp.zeros((len(lines), 17), dtype=float, device=warp_device))
+                                       wp.array(band_x0, dtype=int, device=warp_device), count,
+                                       wp.zeros((len(lines), count), dtype=float, device=warp_device),
+                                       wp.zeros((len(lines), count), dtype=float, device=warp_device), cell)
     v_src, ok_src = remap_reference(plane_src[:, :, None], map_src)
     v_tgt, ok_tgt = remap_reference(plane_tgt[:, :, None], map_tgt)
     rows = lines[:, None]
-    cols = band_x0[:, None] + np.arange(17)[None, :]
+    cols = band_x0[:, None] + cell * np.arange(count)[None, :]
     both = ok_src[rows, cols] & ok_tgt[rows, cols]
     knee, white = comp.knee()
     adjusted_src = tone_curve(v_src[rows, cols, 0], 1.2, -5.0, knee, white)

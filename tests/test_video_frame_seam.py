@@ -5,6 +5,7 @@ in test_video_stitch.py (still lines) and test_crossing.py (an object crossing t
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from sena_warp.config import Config
 from sena_warp.video.frame_seam import FrameSeam, lines_near, whole_band_change
@@ -20,8 +21,16 @@ def static_band(seed: int) -> np.ndarray:
     return rng.uniform(40.0, 400.0, (LINES, 2 * BAND + 1)).astype(np.float32)
 
 
-def seam() -> FrameSeam:
-    return FrameSeam(np.full(LINES, 100.0, np.float32), BAND, True, FPS, CFG)
+HOME = 100  # the estimate's seam on every line; the bands below start at HOME - BAND
+
+
+def seam(cfg: Config = CFG) -> FrameSeam:
+    return FrameSeam(np.full(LINES, float(HOME), np.float32), BAND, True, FPS, cfg)
+
+
+def with_cell(cell: int) -> Config:
+    """The settings with a per-frame seam cell of ``cell`` px for a band of BAND px."""
+    return CFG.replace(video_seam_band_cells=BAND // cell)
 
 
 def test_lines_near_is_a_dilation_along_the_lines():
@@ -86,15 +95,21 @@ def test_cells_that_keep_changing_stop_being_foreground():
 
 
 class BandFrames:
-    """A stand-in for the luma compositor: the band's difference and sum of the current frame, (L, width)
-    in band cells, as ``Compositor.band_difference`` gives them for the solved lines."""
+    """A stand-in for the luma compositor: the band's difference and sum of the current frame, given
+    (L, 2 BAND + 1) per px from HOME - BAND, sampled on the solved lines' cells as
+    ``Compositor.band_difference`` gives them."""
 
     def __init__(self, diff: np.ndarray, total: np.ndarray):
         self.diff, self.total = diff, total
 
-    def band_difference(self, lines, band_x0, width, out, out_total):
-        solved = lines.numpy()  # a Warp array, as the compositor takes it
-        return self.diff[solved].astype(np.float32), self.total[solved].astype(np.float32)
+    def band_difference(self, lines, band_x0, width, out, out_total, cell=1):
+        solved = lines.numpy()  # Warp arrays, as the compositor takes them
+        taken = band_x0.numpy()[:, None] + cell * np.arange(width)[None, :] - (HOME - BAND)
+        inside = (taken >= 0) & (taken <= 2 * BAND)
+        taken = np.clip(taken, 0, 2 * BAND)
+        diff = np.where(inside, np.take_along_axis(self.diff[solved], taken, axis=1), 1e9)
+        total = np.where(inside, np.take_along_axis(self.total[solved], taken, axis=1), 0.0)
+        return diff.astype(np.float32), total.astype(np.float32)
 
 
 def valley_band(column: int) -> np.ndarray:
@@ -103,15 +118,17 @@ def valley_band(column: int) -> np.ndarray:
     return np.broadcast_to(3.0 * np.abs(cells - column), (LINES, 2 * BAND + 1)).copy()
 
 
-def test_without_anything_in_front_the_seam_glides_and_then_stays():
+@pytest.mark.parametrize("cell", [1, 2])
+def test_without_anything_in_front_the_seam_glides_and_then_stays(cell):
     # The difference's valley moves 20 px away at once (nothing in front of the background): the seam
     # may follow at video_seam_speed_px a frame, not jump; once nothing changes it keeps its place
     # (still lines), though the valley is still 18 px away.
-    band = seam()
+    band = seam(with_cell(cell))
+    assert band.cell == cell
     total = static_band(7)
     frames = BandFrames(valley_band(BAND), total)
     first, _, _ = band.next(frames)
-    np.testing.assert_array_equal(first, np.full(LINES, 100))  # home: the valley
+    np.testing.assert_array_equal(first, np.full(LINES, HOME))  # home: the valley
     band.next(frames)
     frames.diff = valley_band(BAND + 20)
     moved, _, _ = band.next(frames)
@@ -123,8 +140,10 @@ def test_without_anything_in_front_the_seam_glides_and_then_stays():
         assert band.still.all()
 
 
-def test_the_seam_steps_round_an_object_in_front_of_the_background():
-    band = seam()
+@pytest.mark.parametrize("cell", [1, 2])
+def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
+    band = seam(with_cell(cell))
+    assert band.cell == cell
     background = static_band(8)
     frames = BandFrames(valley_band(BAND), background)
     for _ in range(5):
@@ -138,7 +157,7 @@ def test_the_seam_steps_round_an_object_in_front_of_the_background():
     frames.diff[40:80, 18:46] = 2.0
     frames.diff[40:80, [18, 19, 44, 45]] = 60.0
     positions, offsets_src, offsets_tgt = band.next(frames)
-    cells = positions - band.band_x0
+    cells = positions - (HOME - BAND)
     assert np.all((cells[40:80] < 18) | (cells[40:80] > 45))  # round the object, not through it
     assert np.abs(positions - home).max() > CFG.video_seam_speed_px  # a jump, not a glide
     assert offsets_src.shape == (LINES, 1) and np.allclose(offsets_src, -offsets_tgt)

@@ -32,7 +32,9 @@ through it would lose a strip of it.
 Only the compositor's seam positions and the seam blend's offsets change per frame; its plan stays.
 Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig). The seam is
 solved on every ``video_seam_line_step``-th line and interpolated between (half the work at 2; the
-seam blend's transition is wider than the interpolation's rounding).
+seam blend's transition is wider than the interpolation's rounding), and along a line on a grid of
+cells ``cell`` px apart (:func:`cell_px`: 1 px on a 640-px pair's canvas, 2 px on a 720p pair's or a
+1080p one's), so the work per frame grows less with the size; the boxes above are counted in cells.
 """
 
 from __future__ import annotations
@@ -56,6 +58,12 @@ def band_half_width(shape: tuple[int, int], cfg: Config) -> int:
     return max(cfg.video_seam_band_min_px, int(round(cfg.video_seam_band_ratio * float(np.hypot(*shape)))))
 
 
+def cell_px(band: int, cfg: Config) -> int:
+    """The per-frame seam's cell width in px for a band half-width of ``band`` px: about
+    ``video_seam_band_cells`` cells each side of the seam."""
+    return max(1, int(round(band / max(1, cfg.video_seam_band_cells))))
+
+
 class FrameSeam:
     """The per-frame seam of one luma compositor whose plan keeps both views within ``band`` of the
     estimate's seam ``home`` (L,) float32 (positions per line); ``jumps``: whether it may leave its
@@ -68,14 +76,16 @@ class FrameSeam:
         self.cfg = cfg
         self.jumps = jumps
         self.band = band
-        self.width = 2 * band + 1
+        self.cell = cell_px(band, cfg)
+        self.width = 2 * int(np.ceil(band / self.cell)) + 1  # cells
         count = len(home)
         step = max(1, cfg.video_seam_line_step)
         self._lines = np.unique(np.append(np.arange(0, count, step), count - 1)).astype(np.int32)
         solved = len(self._lines)
-        self._max_step = cfg.seam_max_step_px * step  # px between solved lines
+        self._max_step = int(np.ceil(cfg.seam_max_step_px * step / self.cell))  # cells between solved lines
+        self._step_cost = cfg.seam_step_cost * self.cell  # per cell of sideways step
         self._solver = BandPath(solved, self.width, 1, cfg)
-        self._glide_width = min(self.width, 2 * int(np.ceil(cfg.video_seam_speed_px)) + 1)
+        self._glide_width = min(self.width, 2 * int(np.ceil(cfg.video_seam_speed_px / self.cell)) + 1)
         self._glide_solver = BandPath(solved, self._glide_width, 1, cfg)
         self._segment = np.array([[0, solved - 1, -1, -1]])
         self._lines_wp = wp.array(self._lines, dtype=int, device=cfg.device)
@@ -95,16 +105,28 @@ class FrameSeam:
         glide still starts from the seam last shown (``shown``), so a band that moves with a blend does
         not add its own step to the seam's."""
         self.home = np.asarray(home, np.float32)
-        self.band_x0 = (np.rint(self.home) - self.band).astype(np.int32)
-        self._x0 = self.band_x0[self._lines]
+        half = self.width // 2
+        self._x0 = ((np.floor_divide(np.rint(self.home[self._lines]).astype(np.int32), self.cell) - half)
+                    * self.cell).astype(np.int32)  # on the grid of cells, so cells line up from line to line
         self._x0_wp.assign(self._x0)
-        self._cells = self._x0[:, None] + np.arange(self.width, dtype=np.int32)[None, :]
+        self._cells = self._x0[:, None] + self.cell * np.arange(self.width, dtype=np.int32)[None, :]
         self._home_term = (self.cfg.video_seam_home_cost
                            * np.abs(self._cells - self.home[self._lines, None])).astype(np.float32)
         self._last = None  # the band's cells moved: the last difference no longer lines up
         self._background = None
         last = getattr(self, "_path", self.home[self._lines])
-        self._path = np.clip(np.rint(last), self._x0, self._x0 + self.width - 1).astype(np.int32)
+        self._path = self._on_grid(last)
+
+    def _on_grid(self, path: np.ndarray) -> np.ndarray:
+        """(K,) int32 the band cells' positions nearest to ``path`` (K,) px on the solved lines."""
+        nearest = self._x0 + self.cell * np.rint((np.asarray(path, np.float64) - self._x0) / self.cell)
+        return np.clip(nearest, self._x0, self._cells[:, -1]).astype(np.int32)
+
+    def _solve_band(self, solver: BandPath, cost: np.ndarray, x0: np.ndarray) -> np.ndarray:
+        """(K,) int32 positions (px) of the cheapest path through ``cost`` (K, cells) whose cells start
+        at ``x0`` (K,) px on the grid of cells."""
+        first = x0 // self.cell
+        return (solver.solve(cost, first, self._segment, self._max_step, self._step_cost) * self.cell).astype(np.int32)
 
     @property
     def positions(self) -> np.ndarray:
@@ -129,7 +151,8 @@ class FrameSeam:
         """The seam of the frame loaded in ``luma`` and its seam blend's offsets (``band_offsets``):
         (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32)."""
         cfg = self.cfg
-        diff, total = luma.band_difference(self._lines_wp, self._x0_wp, self.width, self._diff, self._total)
+        diff, total = luma.band_difference(self._lines_wp, self._x0_wp, self.width, self._diff, self._total,
+                                           self.cell)
         both = diff < 0.5 * NOT_BOTH
         self._still = self.still_lines(diff, both)
         self._last = (diff.copy(), both)
@@ -154,15 +177,18 @@ class FrameSeam:
         lines = np.arange(len(self._lines))
 
         def along(path: np.ndarray) -> float:
-            return float(change[lines, path - self._x0].sum())
+            return float(change[lines, (path - self._x0) // self.cell].sum())
 
         limit = len(lines)
         path = glide
-        if moving is not None and moving.any():  # something in front of the background: it may jump round it
+        jump = cfg.video_seam_jump_cost * limit
+        # Something in front of the background, and a path cheaper than the glide's by a jump may exist
+        # (no path costs less than each line's cheapest cell): it may jump round it.
+        if moving is not None and moving.any() and along(glide) - float(change.min(axis=1).sum()) > jump:
             block = np.float32(cfg.video_seam_blocked_cost * 10)
             cost[self._still[:, None] & (self._cells != last[:, None])] += block  # still lines keep their seam
-            free = self._solver.solve(cost, self._x0, self._segment, self._max_step, cfg.seam_step_cost)
-            path = free if along(glide) - along(free) > cfg.video_seam_jump_cost * limit else glide
+            free = self._solve_band(self._solver, cost, self._x0)
+            path = free if along(glide) - along(free) > jump else glide
         if along(self._path) - along(path) > cfg.video_seam_margin * limit:
             return path.astype(np.int32)
         return self._path
@@ -172,15 +198,16 @@ class FrameSeam:
         solved line from ``last`` (K,) and not at all on still lines, solved on the few cells it may take."""
         cfg = self.cfg
         reach = self._glide_width // 2
-        glide_x0 = np.clip(last - reach, self._x0, self._x0 + self.width - self._glide_width).astype(np.int32)
-        taken = (glide_x0 - self._x0)[:, None] + np.arange(self._glide_width)[None, :]
-        cells = glide_x0[:, None] + np.arange(self._glide_width)[None, :]
+        first = np.clip((last - self._x0) // self.cell - reach, 0, self.width - self._glide_width)
+        taken = first[:, None] + np.arange(self._glide_width)[None, :]
+        glide_x0 = (self._x0 + self.cell * first).astype(np.int32)
+        cells = np.take_along_axis(self._cells, taken, axis=1)
         # Where the band has moved past the last seam (rounding of a blend's step), its nearest cell is near enough.
-        outside = np.maximum(np.maximum(self._x0 - last, last - (self._x0 + self.width - 1)), 0)
+        outside = np.maximum(np.maximum(self._x0 - last, last - self._cells[:, -1]), 0)
         far = np.abs(cells - last[:, None]) > np.maximum(cfg.video_seam_speed_px, outside)[:, None]
         blocked = far | (self._still[:, None] & (cells != last[:, None]))
         sub = np.take_along_axis(cost, taken, axis=1) + blocked * np.float32(cfg.video_seam_blocked_cost * 10)
-        return self._glide_solver.solve(sub, glide_x0, self._segment, self._max_step, cfg.seam_step_cost)
+        return self._solve_band(self._glide_solver, sub, glide_x0)
 
     def foreground(self, total: np.ndarray, both: np.ndarray) -> np.ndarray:
         """(K, width) float32 over the solved lines' band ``total`` (source plus target), 1 on cells off
@@ -213,7 +240,7 @@ class FrameSeam:
         delta = np.where(common, np.abs(diff - last_diff), 0.0).astype(np.float32)
         box = max(1, self.cfg.video_seam_still_box_px)
         moved = (cv2.blur(delta, (box, box)) > self.cfg.video_seam_noise).any(axis=1)
-        return ~lines_near(moved, int(np.ceil(self.width / max(1, self.cfg.video_seam_line_step))))
+        return ~lines_near(moved, int(np.ceil(self.width * self.cell / max(1, self.cfg.video_seam_line_step))))
 
 
 def whole_band_change(background: np.ndarray, total: np.ndarray, both: np.ndarray, noise: float) -> np.ndarray:
