@@ -34,6 +34,7 @@ from ..report import run_info
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
 from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
+from .drift import DriftWatch
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width
 from .loop import VideoOptions, run_video
@@ -159,6 +160,8 @@ class SenaFrameCompositor:
         self._time_s: float | None = None
         self._rig = first.rig
         self._reestimate_s = cfg.video_reestimate_s if cfg.video_rig == "moving" else None
+        # A static rig's views are checked for drift this often (``drift.py``); None: not checked.
+        self._drift_s = cfg.video_drift_check_s if cfg.video_rig == "static" and cfg.video_drift_check_s > 0 else None
         x0, y0, width, height = fixed_canvas(first, self._rig.pick(*frame_shapes), cfg.video_crop)
         shape = (height, width)
         self.crop_xywh = (x0, y0, width, height) if cfg.video_crop else None
@@ -179,12 +182,22 @@ class SenaFrameCompositor:
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": self._first_inliers, "seconds": round(sum(first.seconds.values()), 4)}
         self._blend: tuple[PlaneMaps, PlaneMaps, int, int] | None = None  # (start, goal, frames done, frames)
+        reestimates = self._reestimate_s is not None or self._drift_s is not None
         self._workers = ThreadPoolExecutor(cfg.video_estimate_workers, thread_name_prefix="estimate") \
-            if self._reestimate_s is not None and cfg.video_estimate_workers > 0 else None
-        # With a worker, re-estimates start this many frames ahead (``look_ahead``) and land on their frame.
+            if reestimates and cfg.video_estimate_workers > 0 else None
+        # With a worker, a moving rig's re-estimates start this many frames ahead (``look_ahead``) and
+        # land on their frame (a drifting static rig's may land a little late: it creeps slowly).
         pair_mib = sum(rows * cols * 1.5 for rows, cols in frame_shapes) / 2**20  # YUV 4:2:0, both views
         self.lookahead_frames = min(int(math.ceil(cfg.video_estimate_lookahead_s * fps)),
-                                    int(cfg.video_estimate_lookahead_mib / pair_mib)) if self._workers else 0
+                                    int(cfg.video_estimate_lookahead_mib / pair_mib)) \
+            if self._workers and self._reestimate_s is not None else 0
+        # The views the maps in use were made on (taken on the first estimate's pair), the time of the
+        # last drift check, the views a pending drift re-estimate is made on, and what the checks found.
+        self._drift: DriftWatch | None = None
+        self._drift_from_s = next(a.time_s for a in first_attempts if a.pair == first_pair)
+        self._drift_checked_s = 0.0
+        self._drift_pending: DriftWatch | None = None
+        self._drift_log = {"check_s": self._drift_s, "threshold_px": cfg.video_drift_px, "checks": 0, "moved": []}
         self._pending: deque[tuple[float, Future]] = deque()  # started re-estimates (frame time, job), oldest first
         self._last_estimate_s: float | None = None
         # "applied": per accepted estimate, the time of the frame it was made on and of the frame whose
@@ -253,7 +266,8 @@ class SenaFrameCompositor:
             self._advance_blend()
         elif self._pending and self._pending[0][1].done() and self._pending[0][0] <= float(frame_l.time_s) + 1e-6:
             self._collect(frame_l, frame_r)
-        elif not self.lookahead_frames and not self._pending and self._due(float(frame_l.time_s)):
+        elif not self.lookahead_frames and not self._pending and (self._due(float(frame_l.time_s))
+                                                                  or self._drifted(frame_l, frame_r)):
             self._submit(frame_l, frame_r)
         changed = self._maps is not before
         self._seam_jitter_px.append(seam_change_px(before, self._maps) if changed else 0.0)
@@ -267,6 +281,28 @@ class SenaFrameCompositor:
         if self._last_estimate_s is None:  # the first estimate was made on the video's first pairs
             self._last_estimate_s = time_s
         return time_s - self._last_estimate_s >= self._reestimate_s
+
+    def _drifted(self, frame_l: YuvFrame, frame_r: YuvFrame) -> bool:
+        """A static rig's drift check, every ``video_drift_check_s`` from the first estimate's pair on:
+        whether a camera's view moved by more than ``video_drift_px`` since the maps in use were made."""
+        if self._drift_s is None:
+            return False
+        time_s = float(frame_l.time_s)
+        y_src, y_tgt = (frame.y for frame in self.source_target(frame_l, frame_r))
+        if self._drift is None:
+            if time_s + 1e-6 >= self._drift_from_s:
+                self._drift, self._drift_checked_s = DriftWatch(y_src, y_tgt), time_s
+            return False
+        if time_s - self._drift_checked_s < self._drift_s - 1e-6:
+            return False
+        self._drift_checked_s = time_s
+        self._drift_log["checks"] += 1
+        shift_px = self._drift.shift_px(y_src, y_tgt)
+        if shift_px <= self._cfg.video_drift_px:
+            return False
+        self._drift_log["moved"].append({"time_s": round(time_s, 4), "shift_px": round(shift_px, 2)})
+        self._drift_pending = DriftWatch(y_src, y_tgt)
+        return True
 
     def _prior_seam_tgt(self) -> np.ndarray:
         """The current seam per working-frame target row, in target pixels: where a re-estimate's seam
@@ -304,15 +340,20 @@ class SenaFrameCompositor:
     def _collect(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         time_s, job = self._pending.popleft()
         candidate, reason = job.result()
+        drift, self._drift_pending = self._drift_pending, None
         if reason is not None:
             self._reestimations["rejected"] += 1
             self._reestimations["rejections"].append({"time_s": round(time_s, 4), "reason": reason})
             return
+        if drift is not None:  # the new maps are made on these views
+            self._drift = drift
         self._reestimations["accepted"] += 1
         self._reestimations["applied"].append({"made_on_s": round(time_s, 4), "at_s": round(float(frame_l.time_s), 4)})
-        # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
-        # estimation noise, which an exponential average over the accepted estimates takes out.
-        goal = lerp_maps(self._maps, candidate, self._cfg.video_warp_follow)
+        # A moving rig's own geometry changes slowly; what differs from one estimate to the next is
+        # mostly estimation noise, which an exponential average over the accepted estimates takes out.
+        # A static rig re-estimates only once a camera moved: its new maps replace the old.
+        follow = self._cfg.video_warp_follow if self._reestimate_s is not None else 1.0
+        goal = lerp_maps(self._maps, candidate, follow)
         seam_move = float(np.nanmax(np.abs(goal.seam_luma.positions - self._maps.seam_luma.positions)))
         frames = max(self._cfg.video_blend_frames, int(np.ceil(seam_move / self._cfg.video_seam_speed_px)), 1)
         self._blend = (self._maps, goal, 0, frames)
@@ -403,6 +444,7 @@ class SenaFrameCompositor:
                        "seam_x_working": [None if np.isnan(x) else round(float(x), 2)
                                           for x in self._maps.seam_x_working]},
             "reestimations": self._reestimations,
+            "drift": self._drift_log,
             "jitter": {
                 "seam_jitter_px_mean": round(float(seam.mean()), 4),
                 "seam_jitter_px_max": round(float(seam.max()), 4),

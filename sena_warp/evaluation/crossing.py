@@ -14,6 +14,8 @@ duplicated / lost figure.
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Iterable
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -89,6 +91,18 @@ def paste(frame: np.ndarray, patch: np.ndarray, centre: np.ndarray) -> np.ndarra
     return np.clip(np.rint(mixed), 0, 255).astype(np.uint8)
 
 
+def write_clip(path: Path, frames_bgr: Iterable[np.ndarray], fps: int = FPS) -> None:
+    """A near-lossless H.264 clip (:data:`CLIP_CRF`) of BGR frames (H, W, 3) uint8 with even sides."""
+    frames_bgr = iter(frames_bgr)
+    first = next(frames_bgr)
+    height, width = first.shape[:2]
+    with VideoWriter(path, width, height, Fraction(fps), "libx264", CLIP_CRF, "veryfast") as writer:
+        for index, frame in enumerate(itertools.chain([first], frames_bgr)):
+            i420 = cv2.cvtColor(frame, cv2.COLOR_BGR2YUV_I420)
+            chroma = i420[height:].reshape(2, height // 2, width // 2)
+            writer.write(i420[:height], chroma[0], chroma[1], index)
+
+
 def make_crossing_clip(img_left: np.ndarray, img_right: np.ndarray, texture_img: np.ndarray, folder: Path,
                        size_px: int = OBJECT_PX, extra_disparity_px: float = EXTRA_DISPARITY_PX,
                        frames: int = FRAMES, row: float | None = None) -> CrossingClip:
@@ -121,11 +135,6 @@ def make_crossing_clip(img_left: np.ndarray, img_right: np.ndarray, texture_img:
     folder.mkdir(parents=True, exist_ok=True)
     paths = {"left": folder / "left.mp4", "right": folder / "right.mp4"}
     for side, background, centres in (("left", img_left, centres_left), ("right", img_right, centres_right)):
-        with VideoWriter(paths[side], width, height, Fraction(FPS), "libx264", CLIP_CRF, "veryfast") as writer:
-            for index, centre in enumerate(centres):
-                i420 = cv2.cvtColor(paste(background, patch, centre), cv2.COLOR_BGR2YUV_I420)
-                y = i420[:height]
-                chroma = i420[height:].reshape(2, height // 2, width // 2)
-                writer.write(y, chroma[0], chroma[1], index)
+        write_clip(paths[side], (paste(background, patch, centre) for centre in centres))
     return CrossingClip(paths["left"], paths["right"], centres_left, centres_right, offsets, size_px,
                         extra_disparity_px)
