@@ -11,9 +11,10 @@ from sena_warp.config import Config
 from sena_warp.evaluation.crossing import write_clip
 from sena_warp.evaluation.video_figures import VideoFigures
 from sena_warp.video.drift import DriftWatch, thumbnail, view_shift_px
+from sena_warp.video.estimate import estimate_pair
 from sena_warp.video.loop import VideoOptions
 from sena_warp.video.stitch import stitch_videos
-from helpers import read_pair
+from helpers import decoded_frames, read_pair
 
 # The static rig's defaults, re-estimates on the loop's thread: the same frames every run.
 CFG = Config(device="cpu", video_estimate_workers=0)
@@ -80,6 +81,26 @@ def test_a_creeping_static_rig_gets_new_maps_and_stays_aligned(bundled_dir, tmp_
     # Maps made before the move leave the views about the drift apart at the seam; new ones align them.
     assert np.median(late_fixed) > 8.0
     assert np.median(late) < 0.5 * np.median(late_fixed)
+
+
+def test_with_a_worker_the_new_maps_land_on_the_frame_the_drift_was_seen_on(bundled_dir, tmp_path, monkeypatch):
+    # The loop holds video_estimate_lookahead_s of pairs: the drift check sees the newest, and the
+    # estimate made on it is blended in when the loop reaches that frame. The worker here answers at
+    # once, with maps made beforehand on the views after the move.
+    from sena_warp.video import stitch as video_stitch
+
+    left, right = creeping_clip(bundled_dir, tmp_path, DRIFT_PX)
+    after = STILL + MOVING + 5
+    maps = estimate_pair(decoded_frames(left)[after], decoded_frames(right)[after], CFG, "auto")
+    monkeypatch.setattr(video_stitch, "estimate_pair", lambda *args, **kwargs: maps)
+    cfg = CFG.replace(video_estimate_workers=1, video_estimate_lookahead_s=1.0)
+    report, late = stitched(left, right, tmp_path / "out.mp4", cfg)
+    moved = [m["time_s"] for m in report["stitch"]["drift"]["moved"]]
+    applied = report["stitch"]["reestimations"]["applied"]
+    assert moved and [a["made_on_s"] for a in applied] == moved
+    assert all(a["at_s"] == a["made_on_s"] for a in applied), applied
+    # The blend then takes the maps there at most video_seam_speed_px a frame (measured: 12 -> 2 px).
+    assert late[-1] < 0.25 * late[0]
 
 
 def test_a_fixed_rig_keeps_its_maps(bundled_dir, tmp_path):

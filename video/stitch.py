@@ -185,20 +185,20 @@ class SenaFrameCompositor:
         reestimates = self._reestimate_s is not None or self._drift_s is not None
         self._workers = ThreadPoolExecutor(cfg.video_estimate_workers, thread_name_prefix="estimate") \
             if reestimates and cfg.video_estimate_workers > 0 else None
-        # With a worker, a moving rig's re-estimates start this many frames ahead (``look_ahead``) and
-        # land on their frame (a drifting static rig's may land a little late: it creeps slowly).
+        # With a worker, re-estimates start this many frames ahead (``look_ahead``) and land on their frame.
         pair_mib = sum(rows * cols * 1.5 for rows, cols in frame_shapes) / 2**20  # YUV 4:2:0, both views
         self.lookahead_frames = min(int(math.ceil(cfg.video_estimate_lookahead_s * fps)),
-                                    int(cfg.video_estimate_lookahead_mib / pair_mib)) \
-            if self._workers and self._reestimate_s is not None else 0
-        # The views the maps in use were made on (taken on the first estimate's pair), the time of the
-        # last drift check, the views a pending drift re-estimate is made on, and what the checks found.
+                                    int(cfg.video_estimate_lookahead_mib / pair_mib)) if self._workers else 0
+        # The views the newest maps were made on (those asked for, or else those in use; the first taken
+        # on the first estimate's pair) and those of the maps in use, the time of the last drift check,
+        # and what the checks found.
         self._drift: DriftWatch | None = None
+        self._drift_in_use: DriftWatch | None = None
         self._drift_from_s = next(a.time_s for a in first_attempts if a.pair == first_pair)
         self._drift_checked_s = 0.0
-        self._drift_pending: DriftWatch | None = None
         self._drift_log = {"check_s": self._drift_s, "threshold_px": cfg.video_drift_px, "checks": 0, "moved": []}
-        self._pending: deque[tuple[float, Future]] = deque()  # started re-estimates (frame time, job), oldest first
+        # Started re-estimates, oldest first: (frame time, job, the views of a drift re-estimate or None).
+        self._pending: deque[tuple[float, Future, DriftWatch | None]] = deque()
         self._last_estimate_s: float | None = None
         # "applied": per accepted estimate, the time of the frame it was made on and of the frame whose
         # compositing it started to blend into (the same with a timely look-ahead).
@@ -250,12 +250,14 @@ class SenaFrameCompositor:
         """A pair ``lookahead_frames`` before it is composited: a re-estimate that is due starts on it,
         so that it is ready when the loop reaches that frame (the maps of a frame still come from that
         frame and earlier ones only)."""
-        if self.lookahead_frames and self._worker_idle() and self._due(float(frame_l.time_s)):
-            self._submit(frame_l, frame_r)
+        if self.lookahead_frames and self._worker_idle():
+            drift = self._drifted(frame_l, frame_r)
+            if drift is not None or self._due(float(frame_l.time_s)):
+                self._submit(frame_l, frame_r, drift)
 
     def _worker_idle(self) -> bool:
         """No re-estimate is running (those done may still wait for their frame)."""
-        return all(job.done() for _, job in self._pending)
+        return all(job.done() for _, job, _ in self._pending)
 
     def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         """Before compositing a pair: start, collect or blend in a re-estimate, and record the maps' change.
@@ -266,9 +268,10 @@ class SenaFrameCompositor:
             self._advance_blend()
         elif self._pending and self._pending[0][1].done() and self._pending[0][0] <= float(frame_l.time_s) + 1e-6:
             self._collect(frame_l, frame_r)
-        elif not self.lookahead_frames and not self._pending and (self._due(float(frame_l.time_s))
-                                                                  or self._drifted(frame_l, frame_r)):
-            self._submit(frame_l, frame_r)
+        elif not self.lookahead_frames and not self._pending:
+            drift = self._drifted(frame_l, frame_r)
+            if drift is not None or self._due(float(frame_l.time_s)):
+                self._submit(frame_l, frame_r, drift)
         changed = self._maps is not before
         self._seam_jitter_px.append(seam_change_px(before, self._maps) if changed else 0.0)
         self._map_change_px.append(
@@ -282,27 +285,29 @@ class SenaFrameCompositor:
             self._last_estimate_s = time_s
         return time_s - self._last_estimate_s >= self._reestimate_s
 
-    def _drifted(self, frame_l: YuvFrame, frame_r: YuvFrame) -> bool:
+    def _drifted(self, frame_l: YuvFrame, frame_r: YuvFrame) -> DriftWatch | None:
         """A static rig's drift check, every ``video_drift_check_s`` from the first estimate's pair on:
-        whether a camera's view moved by more than ``video_drift_px`` since the maps in use were made."""
+        if a camera's view moved by more than ``video_drift_px`` since the maps in use were made, these
+        views (for new maps), else None."""
         if self._drift_s is None:
-            return False
+            return None
         time_s = float(frame_l.time_s)
         y_src, y_tgt = (frame.y for frame in self.source_target(frame_l, frame_r))
         if self._drift is None:
             if time_s + 1e-6 >= self._drift_from_s:
-                self._drift, self._drift_checked_s = DriftWatch(y_src, y_tgt), time_s
-            return False
+                self._drift = self._drift_in_use = DriftWatch(y_src, y_tgt)
+                self._drift_checked_s = time_s
+            return None
         if time_s - self._drift_checked_s < self._drift_s - 1e-6:
-            return False
+            return None
         self._drift_checked_s = time_s
         self._drift_log["checks"] += 1
         shift_px = self._drift.shift_px(y_src, y_tgt)
         if shift_px <= self._cfg.video_drift_px:
-            return False
+            return None
         self._drift_log["moved"].append({"time_s": round(time_s, 4), "shift_px": round(shift_px, 2)})
-        self._drift_pending = DriftWatch(y_src, y_tgt)
-        return True
+        self._drift = DriftWatch(y_src, y_tgt)  # later checks ask whether the views moved from these
+        return self._drift
 
     def _prior_seam_tgt(self) -> np.ndarray:
         """The current seam per working-frame target row, in target pixels: where a re-estimate's seam
@@ -310,7 +315,7 @@ class SenaFrameCompositor:
         ox, oy = self._offset_tgt[::-1] if self._rig.vertical else self._offset_tgt
         return self._seam.positions[int(round(oy)):].astype(np.float64) - ox
 
-    def _submit(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
+    def _submit(self, frame_l: YuvFrame, frame_r: YuvFrame, drift: DriftWatch | None = None) -> None:
         self._last_estimate_s = float(frame_l.time_s)
         self._reestimations["attempted"] += 1
         # Same roles as the first estimate: the target stays the unwarped view on the fixed canvas.
@@ -319,7 +324,7 @@ class SenaFrameCompositor:
         else:  # no worker: on the loop's thread, a frame waits for it (reproducible, for tests and batch runs)
             job = Future()
             job.set_result(self._estimate(frame_l, frame_r, self._prior_seam_tgt()))
-        self._pending.append((self._last_estimate_s, job))
+        self._pending.append((self._last_estimate_s, job, drift))
 
     def _estimate(self, frame_l: YuvFrame, frame_r: YuvFrame, prior: np.ndarray) -> tuple[PlaneMaps | None, str | None]:
         """On a worker thread: a re-estimate on the fixed canvas, or why it is rejected."""
@@ -338,15 +343,16 @@ class SenaFrameCompositor:
             self._seconds["reestimate"] += time.perf_counter() - t0
 
     def _collect(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
-        time_s, job = self._pending.popleft()
+        time_s, job, drift = self._pending.popleft()
         candidate, reason = job.result()
-        drift, self._drift_pending = self._drift_pending, None
         if reason is not None:
             self._reestimations["rejected"] += 1
             self._reestimations["rejections"].append({"time_s": round(time_s, 4), "reason": reason})
+            if drift is not None and not self._pending:  # the views of the maps in use again
+                self._drift = self._drift_in_use
             return
         if drift is not None:  # the new maps are made on these views
-            self._drift = drift
+            self._drift_in_use = drift
         self._reestimations["accepted"] += 1
         self._reestimations["applied"].append({"made_on_s": round(time_s, 4), "at_s": round(float(frame_l.time_s), 4)})
         # A moving rig's own geometry changes slowly; what differs from one estimate to the next is

@@ -1,0 +1,91 @@
+"""Time of the per-frame seam (issue 14's budget: <= 3 ms CPU per 1080p frame), frame by frame.
+
+Usage (from the repository root)::
+
+    .venv/bin/python benchmarks/frame_seam_time.py [--left L --right R] [--frames N] [--work DIR]
+        [--set video_seam_band_cells=64 ...]
+
+Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p clip pair in ``--work``:
+a slow pan over a real pair, so every line of the band changes every frame (the worst case: no line
+is still, the free path is solved every frame). The first N frame pairs are decoded into memory, a
+:class:`~sena_warp.video.stitch.SenaFrameCompositor` is made as ``sena-warp video`` makes it (static
+rig, one estimate pair), and each frame is composited in order; the per-frame seam's call
+(``FrameSeam.next``: the band's difference, still lines, background model, paths, seam blend offsets)
+is timed in wall and process CPU time (nothing else of the process runs meanwhile). Prints median,
+mean and p95 over the frames after the first five, and the band's size.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import time
+from pathlib import Path
+
+import av
+import numpy as np
+
+from sena_warp.config import Config
+from sena_warp.evaluation.bench import DATA_DIR, make_clip_pair, pair_paths
+from sena_warp.kernels.runtime import resolve_config
+from sena_warp.video.stitch import SenaFrameCompositor
+
+WARMUP = 5  # frames not counted: the first estimate's band, the background model's start
+
+
+def yuv_planes(path: Path, count: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The first ``count`` frames of a video as contiguous (y, u, v) 4:2:0 planes."""
+    frames = []
+    with av.open(str(path)) as container:
+        for frame in container.decode(video=0):
+            if len(frames) == count:
+                break
+            planes = frame.reformat(format="yuv420p").to_ndarray()
+            height, width = frame.height, frame.width
+            chroma = planes[height:].reshape(2, height // 2, width // 2)
+            frames.append((np.ascontiguousarray(planes[:height]), chroma[0].copy(), chroma[1].copy()))
+    return frames
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--left", type=Path)
+    parser.add_argument("--right", type=Path)
+    parser.add_argument("--frames", type=int, default=60)
+    parser.add_argument("--work", type=Path, default=Path("out/frame_seam_time"))
+    parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE")
+    args = parser.parse_args()
+    changes = {k: ast.literal_eval(v) for k, v in (item.split("=", 1) for item in args.set)}
+    cfg = resolve_config(Config(device="cpu", **changes))
+    if args.left is None:
+        args.work.mkdir(parents=True, exist_ok=True)
+        args.left, args.right = make_clip_pair(pair_paths(DATA_DIR), args.work, (1920, 1080), 5.0)
+    left, right = yuv_planes(args.left, args.frames), yuv_planes(args.right, args.frames)
+    compositor = SenaFrameCompositor.from_videos(args.left, args.right, 0.0, cfg.replace(video_estimate_pairs=1),
+                                                 "auto")
+    seam = compositor._seam  # the compositor's own FrameSeam, timed where the loop calls it
+    solve = seam.next
+    wall, cpu = [], []
+
+    def timed(luma):
+        t0, c0 = time.perf_counter(), time.process_time()
+        result = solve(luma)
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+        return result
+
+    seam.next = timed
+    for planes_l, planes_r in zip(left, right):
+        compositor.composite_yuv(*planes_l, *planes_r)
+    compositor.close()
+    width, height = compositor.output_size
+    print(f"{args.left.name}: canvas {width}x{height}, band {seam.band} px each side, cells of {seam.cell} px, "
+          f"{len(seam.home)} lines (solved: every {max(1, cfg.video_seam_line_step)}), {len(wall) - WARMUP} frames timed")
+    for name, values in (("wall", wall), ("CPU", cpu)):
+        ms = np.array(values[WARMUP:]) * 1e3
+        print(f"  {name}: median {np.median(ms):.2f} ms, mean {ms.mean():.2f} ms, p95 {np.percentile(ms, 95):.2f} ms")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
