@@ -261,17 +261,19 @@ class SenaFrameCompositor:
 
     def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         """Before compositing a pair: start, collect or blend in a re-estimate, and record the maps' change.
-        A re-estimate made on a later frame (``look_ahead``) waits for the loop to reach that frame."""
+        A re-estimate made on a later frame (``look_ahead``) waits for the loop to reach that frame; one
+        that is reached while the last is still being blended in takes over from the maps of the moment
+        (else a rig that keeps moving falls further behind with every long blend)."""
         self._time_s = float(frame_l.time_s)
         before = self._maps
-        if self._blend is not None:
-            self._advance_blend()
-        elif self._pending and self._pending[0][1].done() and self._pending[0][0] <= float(frame_l.time_s) + 1e-6:
-            self._collect(frame_l, frame_r)
-        elif not self.lookahead_frames and not self._pending:
-            drift = self._drifted(frame_l, frame_r)
-            if drift is not None or self._due(float(frame_l.time_s)):
-                self._submit(frame_l, frame_r, drift)
+        reached = bool(self._pending) and self._pending[0][1].done() and self._pending[0][0] <= self._time_s + 1e-6
+        if not (reached and self._collect(frame_l, frame_r)):  # an accepted one starts its blend on this frame
+            if self._blend is not None:
+                self._advance_blend()
+            elif not self.lookahead_frames and not self._pending:
+                drift = self._drifted(frame_l, frame_r)
+                if drift is not None or self._due(self._time_s):
+                    self._submit(frame_l, frame_r, drift)
         changed = self._maps is not before
         self._seam_jitter_px.append(seam_change_px(before, self._maps) if changed else 0.0)
         self._map_change_px.append(
@@ -342,7 +344,8 @@ class SenaFrameCompositor:
         finally:
             self._seconds["reestimate"] += time.perf_counter() - t0
 
-    def _collect(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
+    def _collect(self, frame_l: YuvFrame, frame_r: YuvFrame) -> bool:
+        """The oldest re-estimate, whose frame is reached: blended in from this frame on (True) or rejected."""
         time_s, job, drift = self._pending.popleft()
         candidate, reason = job.result()
         if reason is not None:
