@@ -220,8 +220,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seconds the right video started after the left one, or auto: estimated from the "
                         "audio of both (else their motion), refused when unclear (default: 0)")
     p.add_argument("--rig", choices=CHOICES["video_rig"],
-                   help=f"static: maps estimated once, again only if a camera drifts; moving: re-estimated now "
-                        f"and then (default: {Config.video_rig})")
+                   help=f"static: maps estimated once (and moved with a camera that drifts); moving: "
+                        f"re-estimated now and then (default: {Config.video_rig})")
     p.add_argument("--crop", action="store_true",
                    help="crop to the largest rectangle the first estimate covers, fixed for the whole video")
     p.add_argument("--reestimate", type=float, metavar="S",

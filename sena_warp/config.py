@@ -151,15 +151,16 @@ class Config:
     video_audio: str = "left"  # audio copied into the output: "left", "right" or "none"
     video_estimate_pairs: int = 5  # first frame pairs tried for the first estimate; most inliers wins
     video_estimate_spacing: int = 5  # frame pairs between two of those tries
-    video_rig: str = "static"  # "static": maps estimated once, again only if a camera drifts; "moving": re-estimated
-    # every video_reestimate_s
+    video_rig: str = "static"  # "static": maps estimated once (and moved with a camera that drifts); "moving":
+    # re-estimated every video_reestimate_s
     video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
     video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's
     video_max_median_change_px: float = 40.0  # reject a re-estimate moving M_s by more (median over the overlap)
     video_crop: bool = False  # crop the output to the largest rectangle the first estimate covers, for the whole video
     video_drift_check_s: float = 0.5  # static rig: each camera's view is compared with its view when the maps were
     # made this often (phase correlation; 0: never) ...
-    video_drift_px: float = 6.0  # ... and a view moved by more (input px) asks for new maps (the rig drifted)
+    video_drift_px: float = 2.0  # ... and where a view's move differs from the one the maps follow by more (input
+    # px), the maps are moved by the views' moves (the rig drifted)
     video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly (at least)
     video_seam_speed_px: float = 2.0  # the seam moves at most this per frame (a blend lasts long enough), but for jumps
     video_warp_follow: float = 0.65  # moving rig: an accepted estimate moves the maps this share of the way (causal

@@ -269,10 +269,12 @@ def test_cli_writes_video_report_and_summary(clips, tmp_path, capsys):
     assert report["frames_out"] == 60 and report["output"]["audio_mode"] is None
     stitch = report["stitch"]
     assert stitch["rig"]["mode"] == "static"
-    # The bundled rooftop clip is hand-held: its views move, so the static rig's drift check asks for
-    # new maps; the maps (and with them the seam) change only when one is accepted.
-    assert stitch["drift"]["moved"] and stitch["reestimations"]["attempted"] == len(stitch["drift"]["moved"])
-    assert (stitch["jitter"]["seam_jitter_px_max"] > 0.0) == (stitch["reestimations"]["accepted"] > 0)
+    # The bundled rooftop clip is hand-held: its views move, so the static rig's drift check moves the
+    # maps (where it can still compare the views); they change only then, and nothing is re-estimated.
+    drift = stitch["drift"]
+    assert drift["checks"] >= 3 and len(drift["applied"]) + drift["unclear"] > 0
+    assert (stitch["jitter"]["seam_jitter_px_max"] > 0.0) == bool(drift["applied"])
+    assert stitch["reestimations"]["attempted"] == 0
     assert set(stream_spans(out)) == {"video"}
     summary = capsys.readouterr().out.strip().splitlines()
     assert len(summary) == 1 and "60 frames at 30 fps" in summary[0]

@@ -1,17 +1,25 @@
-"""Static rig: has a camera moved since its maps were made? (issue 14: "a floodlit pitch ... slight drift").
+"""Static rig: how far has each camera's view moved since its maps were made? (issue 14: "a floodlit
+pitch ... slight drift").
 
 A static rig's maps are estimated once, but a camera on a pole or a loose mount creeps: on the shared
 pitch one camera's view moves up by 25 px and the other's sideways by 10 px in 8 s, and maps made in
-the first second leave the curb stepped by 15-25 px at the seam. Re-estimating on a schedule would
-cost an estimate every period and move a truly fixed rig's seam with estimation noise (the map change
-between two estimates of the fixed office and lecture-hall rigs is 2.4-4.5 px median); so each
-camera's view is compared with its view when the maps were made instead, now and then, and only a
-camera that moved by more than ``video_drift_px`` asks for a new estimate.
+the first second leave the curb stepped by 15-25 px at the seam. A small turn of a camera moves its
+whole view by about one shift, so each view is compared with its view when the maps were made, now
+and then, and the maps are moved by what the two views moved (``maps.drifted_maps``). A new estimate
+would cost seconds and its noise: two estimates of the fixed office or lecture-hall rig differ by
+2.4-4.5 px (median map change), and where the source view is extrapolated far from the overlap they
+move its far side by tens of pixels.
 
 The comparison is a phase correlation (OpenCV) of small greyscale copies (:data:`THUMB_WIDTH_PX`
-wide, a Hann window against the borders): it finds the one shift of the whole view, and people
+wide, a Hann window against the borders) of the part of each view that the overlap shows
+(:func:`overlap_boxes`, with a margin): where the seam is, a turn's shift is what matters (on the
+pitch the whole views' shifts left the curb stepped by 4-5 grey levels at the seam). It finds one
+shift of that part, and people
 walking through a fixed view barely move its peak (the fixed rigs measure 0.5-3.3 px over their
-recordings).
+recordings). Its peak's response says how alike the views still are: below :data:`MIN_RESPONSE` (a
+hand-held camera that went elsewhere, the scene changed) the shift is not trusted and the maps stay;
+so do they for a move larger than a drift (:data:`MAX_SHARE` of the width: a rig that moves needs
+``--rig moving``, whose re-estimates follow turns and parallax, not just a shift).
 """
 
 from __future__ import annotations
@@ -19,32 +27,67 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-THUMB_WIDTH_PX = 320  # views are compared at this width (a 1080p frame: 1/6)
+from .maps import PlaneMaps, sampled_mask
+
+THUMB_WIDTH_PX = 320  # views are compared at this width at most (a 1080p frame: 1/6)
+BOX_MARGIN = 0.1  # the overlap's box in each view, widened by this x its size each side
+MIN_RESPONSE = 0.15  # phase correlation peaks below this are not trusted (the pitch's views, 8 s on: 0.26)
+MAX_SHARE = 0.05  # a move beyond this x the view's width is not a drift but a moving rig (the pitch: 0.023)
+
+
+def overlap_boxes(maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[int, int]
+                  ) -> tuple[tuple[int, int, int, int], tuple[int, int, int, int]]:
+    """(x0, y0, x1, y1) of the part of the source's and of the target's Y plane (``shape_*`` = (rows,
+    cols)) that the maps' overlap samples, widened by :data:`BOX_MARGIN`; whole views without one."""
+    both = sampled_mask(maps.map_src_luma, shape_src) & sampled_mask(maps.map_tgt_luma, shape_tgt)
+    boxes = []
+    for map_canvas, (rows, cols) in ((maps.map_src_luma, shape_src), (maps.map_tgt_luma, shape_tgt)):
+        if not both.any():
+            boxes.append((0, 0, cols, rows))
+            continue
+        x, y = map_canvas[both, 0], map_canvas[both, 1]
+        margin_x, margin_y = BOX_MARGIN * (x.max() - x.min()), BOX_MARGIN * (y.max() - y.min())
+        boxes.append((int(max(0, x.min() - margin_x)), int(max(0, y.min() - margin_y)),
+                      int(min(cols, np.ceil(x.max() + margin_x) + 1)), int(min(rows, np.ceil(y.max() + margin_y) + 1))))
+    return boxes[0], boxes[1]
 
 
 def thumbnail(y: np.ndarray) -> tuple[np.ndarray, float]:
-    """A view's luma (H, W) uint8 as a small float32 copy :data:`THUMB_WIDTH_PX` wide, and the input px
-    per thumbnail px."""
+    """A view's luma (H, W) uint8 as a small float32 copy at most :data:`THUMB_WIDTH_PX` wide, and the
+    input px per thumbnail px."""
     height, width = y.shape
-    scale = width / THUMB_WIDTH_PX
-    size = (THUMB_WIDTH_PX, max(1, int(round(height / scale))))
+    scale = max(1.0, width / THUMB_WIDTH_PX)
+    size = (max(1, int(round(width / scale))), max(1, int(round(height / scale))))
     return cv2.resize(y, size, interpolation=cv2.INTER_AREA).astype(np.float32), scale
 
 
-def view_shift_px(reference: np.ndarray, now: np.ndarray, scale: float) -> float:
-    """How far a view moved (input px) between two :func:`thumbnail` copies of it (phase correlation)."""
+def view_shift(reference: np.ndarray, now: np.ndarray, scale: float) -> tuple[np.ndarray, float]:
+    """How far a view's content moved (x, y input px) between two :func:`thumbnail` copies of it, and the
+    phase correlation's peak response (1: the same picture moved; near 0: nothing in common)."""
     window = cv2.createHanningWindow((reference.shape[1], reference.shape[0]), cv2.CV_32F)
-    (dx, dy), _ = cv2.phaseCorrelate(reference, now, window)
-    return float(np.hypot(dx, dy) * scale)
+    (dx, dy), response = cv2.phaseCorrelate(reference, now, window)
+    return np.array([dx, dy]) * scale, float(response)
 
 
 class DriftWatch:
-    """Each camera's view as it was when the maps in use were made, and how far it has moved since."""
+    """Each camera's view (its part ``boxes``: (x0, y0, x1, y1) in the source's and the target's Y
+    plane, :func:`overlap_boxes`) as it was when the maps were made, and how far each has moved since."""
 
-    def __init__(self, y_src: np.ndarray, y_tgt: np.ndarray):
-        self._references = [thumbnail(y) for y in (y_src, y_tgt)]
+    def __init__(self, y_src: np.ndarray, y_tgt: np.ndarray, boxes: tuple[tuple[int, int, int, int], ...]):
+        self._boxes = boxes
+        self._references = [thumbnail(part) for part in self._parts(y_src, y_tgt)]
 
-    def shift_px(self, y_src: np.ndarray, y_tgt: np.ndarray) -> float:
-        """The larger of the two cameras' moves (input px) from their reference views to these."""
-        return max(view_shift_px(reference, thumbnail(y)[0], scale)
-                   for (reference, scale), y in zip(self._references, (y_src, y_tgt)))
+    def _parts(self, y_src: np.ndarray, y_tgt: np.ndarray) -> list[np.ndarray]:
+        return [y[y0:y1, x0:x1] for y, (x0, y0, x1, y1) in zip((y_src, y_tgt), self._boxes)]
+
+    def shifts(self, y_src: np.ndarray, y_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """(source's, target's) content moves (x, y) in input px from the reference views to these, or
+        None where either comparison is not trusted (:data:`MIN_RESPONSE`) or either move is too large
+        for a drift (:data:`MAX_SHARE`)."""
+        moves = [view_shift(reference, thumbnail(part)[0], scale)
+                 for (reference, scale), part in zip(self._references, self._parts(y_src, y_tgt))]
+        widths = [y.shape[1] for y in (y_src, y_tgt)]
+        if any(response < MIN_RESPONSE or np.abs(move).max() > MAX_SHARE * width
+               for (move, response), width in zip(moves, widths)):
+            return None
+        return moves[0][0], moves[1][0]

@@ -187,6 +187,21 @@ def seam_on_canvas(seam_x_working: np.ndarray, rig: Rig, shift_xy: np.ndarray, s
     return seam[:, 0] - np.float32(round(dx))
 
 
+def drifted_maps(maps: PlaneMaps, shift_src: np.ndarray, shift_tgt: np.ndarray) -> PlaneMaps:
+    """``maps`` after the source camera's content moved by ``shift_src`` (x, y) in its Y plane and the
+    target's by ``shift_tgt`` (``drift.py``): the target is never warped, so its content moves by
+    ``shift_tgt`` on the canvas, and what canvas pixel q shows came from ``q - shift_tgt`` before, whose
+    source position moved by ``shift_src``: ``map_src'(q) = map_src(q - shift_tgt) + shift_src``. The
+    canvas shift is taken in whole pixels and its fraction added to the positions (the source map's
+    scale is about 1 px per px). The seam stays where it is on the canvas (inside the overlap, which
+    the fixed target frame bounds; the per-frame seam finds its way in its band), and so do the
+    target map and the border blend."""
+    whole = np.round(shift_tgt)
+    map_src = (shift_onto(maps.map_src_luma, -whole, maps.shape, np.nan)
+               + (np.asarray(shift_src) - (shift_tgt - whole)).astype(np.float32)).astype(np.float32)
+    return replace(maps, map_src_luma=map_src, map_src_chroma=chroma_positions(map_src))
+
+
 def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
     """``start + weight * (goal - start)`` for every map; where either side is NaN, ``goal``'s value."""
     def lerp(a: np.ndarray, b: np.ndarray) -> np.ndarray:

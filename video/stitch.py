@@ -34,12 +34,12 @@ from ..report import run_info
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
 from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
-from .drift import DriftWatch
+from .drift import DriftWatch, overlap_boxes
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width
 from .loop import VideoOptions, run_video
-from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, chroma_lines, lerp_maps, map_change_px, plane_maps, sampled_mask,
-                   seam_change_px, target_offset)
+from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, chroma_lines, drifted_maps, lerp_maps, map_change_px,
+                   plane_maps, sampled_mask, seam_change_px, target_offset)
 from .reader import YuvFrame, probe_video
 from .writer import even_size
 
@@ -182,23 +182,23 @@ class SenaFrameCompositor:
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": self._first_inliers, "seconds": round(sum(first.seconds.values()), 4)}
         self._blend: tuple[PlaneMaps, PlaneMaps, int, int] | None = None  # (start, goal, frames done, frames)
-        reestimates = self._reestimate_s is not None or self._drift_s is not None
         self._workers = ThreadPoolExecutor(cfg.video_estimate_workers, thread_name_prefix="estimate") \
-            if reestimates and cfg.video_estimate_workers > 0 else None
+            if self._reestimate_s is not None and cfg.video_estimate_workers > 0 else None
         # With a worker, re-estimates start this many frames ahead (``look_ahead``) and land on their frame.
         pair_mib = sum(rows * cols * 1.5 for rows, cols in frame_shapes) / 2**20  # YUV 4:2:0, both views
         self.lookahead_frames = min(int(math.ceil(cfg.video_estimate_lookahead_s * fps)),
                                     int(cfg.video_estimate_lookahead_mib / pair_mib)) if self._workers else 0
-        # The views the newest maps were made on (those asked for, or else those in use; the first taken
-        # on the first estimate's pair) and those of the maps in use, the time of the last drift check,
-        # and what the checks found.
+        # A static rig's drift: the camera views its maps were made on (taken on the first estimate's
+        # pair), those maps, the views' moves (source, target) they were last moved by, the time of the
+        # last check, and what the checks found.
         self._drift: DriftWatch | None = None
-        self._drift_in_use: DriftWatch | None = None
+        self._drift_base = self._maps
+        self._drift_applied = (np.zeros(2), np.zeros(2))
         self._drift_from_s = next(a.time_s for a in first_attempts if a.pair == first_pair)
         self._drift_checked_s = 0.0
-        self._drift_log = {"check_s": self._drift_s, "threshold_px": cfg.video_drift_px, "checks": 0, "moved": []}
-        # Started re-estimates, oldest first: (frame time, job, the views of a drift re-estimate or None).
-        self._pending: deque[tuple[float, Future, DriftWatch | None]] = deque()
+        self._drift_log = {"check_s": self._drift_s, "threshold_px": cfg.video_drift_px, "checks": 0, "unclear": 0,
+                           "applied": []}
+        self._pending: deque[tuple[float, Future]] = deque()  # started re-estimates (frame time, job), oldest first
         self._last_estimate_s: float | None = None
         # "applied": per accepted estimate, the time of the frame it was made on and of the frame whose
         # compositing it started to blend into (the same with a timely look-ahead).
@@ -250,14 +250,12 @@ class SenaFrameCompositor:
         """A pair ``lookahead_frames`` before it is composited: a re-estimate that is due starts on it,
         so that it is ready when the loop reaches that frame (the maps of a frame still come from that
         frame and earlier ones only)."""
-        if self.lookahead_frames and self._worker_idle():
-            drift = self._drifted(frame_l, frame_r)
-            if drift is not None or self._due(float(frame_l.time_s)):
-                self._submit(frame_l, frame_r, drift)
+        if self.lookahead_frames and self._worker_idle() and self._due(float(frame_l.time_s)):
+            self._submit(frame_l, frame_r)
 
     def _worker_idle(self) -> bool:
         """No re-estimate is running (those done may still wait for their frame)."""
-        return all(job.done() for _, job, _ in self._pending)
+        return all(job.done() for _, job in self._pending)
 
     def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         """Before compositing a pair: start, collect or blend in a re-estimate, and record the maps' change.
@@ -270,10 +268,10 @@ class SenaFrameCompositor:
         if not (reached and self._collect(frame_l, frame_r)):  # an accepted one starts its blend on this frame
             if self._blend is not None:
                 self._advance_blend()
-            elif not self.lookahead_frames and not self._pending:
-                drift = self._drifted(frame_l, frame_r)
-                if drift is not None or self._due(self._time_s):
-                    self._submit(frame_l, frame_r, drift)
+            elif (drifted := self._drifted(frame_l, frame_r)) is not None:
+                self._blend_to(drifted)
+            elif not self.lookahead_frames and not self._pending and self._due(self._time_s):
+                self._submit(frame_l, frame_r)
         changed = self._maps is not before
         self._seam_jitter_px.append(seam_change_px(before, self._maps) if changed else 0.0)
         self._map_change_px.append(
@@ -287,29 +285,34 @@ class SenaFrameCompositor:
             self._last_estimate_s = time_s
         return time_s - self._last_estimate_s >= self._reestimate_s
 
-    def _drifted(self, frame_l: YuvFrame, frame_r: YuvFrame) -> DriftWatch | None:
+    def _drifted(self, frame_l: YuvFrame, frame_r: YuvFrame) -> PlaneMaps | None:
         """A static rig's drift check, every ``video_drift_check_s`` from the first estimate's pair on:
-        if a camera's view moved by more than ``video_drift_px`` since the maps in use were made, these
-        views (for new maps), else None."""
+        the first estimate's maps moved by how far the views moved (``drifted_maps``) where that
+        differs from the last move by more than ``video_drift_px``, else None."""
         if self._drift_s is None:
             return None
         time_s = float(frame_l.time_s)
         y_src, y_tgt = (frame.y for frame in self.source_target(frame_l, frame_r))
         if self._drift is None:
             if time_s + 1e-6 >= self._drift_from_s:
-                self._drift = self._drift_in_use = DriftWatch(y_src, y_tgt)
-                self._drift_checked_s = time_s
+                boxes = overlap_boxes(self._drift_base, y_src.shape, y_tgt.shape)
+                self._drift, self._drift_checked_s = DriftWatch(y_src, y_tgt, boxes), time_s
             return None
         if time_s - self._drift_checked_s < self._drift_s - 1e-6:
             return None
         self._drift_checked_s = time_s
         self._drift_log["checks"] += 1
-        shift_px = self._drift.shift_px(y_src, y_tgt)
-        if shift_px <= self._cfg.video_drift_px:
+        shifts = self._drift.shifts(y_src, y_tgt)
+        if shifts is None:
+            self._drift_log["unclear"] += 1
             return None
-        self._drift_log["moved"].append({"time_s": round(time_s, 4), "shift_px": round(shift_px, 2)})
-        self._drift = DriftWatch(y_src, y_tgt)  # later checks ask whether the views moved from these
-        return self._drift
+        change = max(float(np.hypot(*(now - last))) for now, last in zip(shifts, self._drift_applied))
+        if change <= self._cfg.video_drift_px:
+            return None
+        self._drift_applied = shifts
+        self._drift_log["applied"].append({"time_s": round(time_s, 4), "source_px": np.round(shifts[0], 2).tolist(),
+                                           "target_px": np.round(shifts[1], 2).tolist()})
+        return drifted_maps(self._drift_base, *shifts)
 
     def _prior_seam_tgt(self) -> np.ndarray:
         """The current seam per working-frame target row, in target pixels: where a re-estimate's seam
@@ -317,7 +320,7 @@ class SenaFrameCompositor:
         ox, oy = self._offset_tgt[::-1] if self._rig.vertical else self._offset_tgt
         return self._seam.positions[int(round(oy)):].astype(np.float64) - ox
 
-    def _submit(self, frame_l: YuvFrame, frame_r: YuvFrame, drift: DriftWatch | None = None) -> None:
+    def _submit(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         self._last_estimate_s = float(frame_l.time_s)
         self._reestimations["attempted"] += 1
         # Same roles as the first estimate: the target stays the unwarped view on the fixed canvas.
@@ -326,7 +329,7 @@ class SenaFrameCompositor:
         else:  # no worker: on the loop's thread, a frame waits for it (reproducible, for tests and batch runs)
             job = Future()
             job.set_result(self._estimate(frame_l, frame_r, self._prior_seam_tgt()))
-        self._pending.append((self._last_estimate_s, job, drift))
+        self._pending.append((self._last_estimate_s, job))
 
     def _estimate(self, frame_l: YuvFrame, frame_r: YuvFrame, prior: np.ndarray) -> tuple[PlaneMaps | None, str | None]:
         """On a worker thread: a re-estimate on the fixed canvas, or why it is rejected."""
@@ -346,23 +349,22 @@ class SenaFrameCompositor:
 
     def _collect(self, frame_l: YuvFrame, frame_r: YuvFrame) -> bool:
         """The oldest re-estimate, whose frame is reached: blended in from this frame on (True) or rejected."""
-        time_s, job, drift = self._pending.popleft()
+        time_s, job = self._pending.popleft()
         candidate, reason = job.result()
         if reason is not None:
             self._reestimations["rejected"] += 1
             self._reestimations["rejections"].append({"time_s": round(time_s, 4), "reason": reason})
-            if drift is not None and not self._pending:  # the views of the maps in use again
-                self._drift = self._drift_in_use
-            return
-        if drift is not None:  # the new maps are made on these views
-            self._drift_in_use = drift
+            return False
         self._reestimations["accepted"] += 1
         self._reestimations["applied"].append({"made_on_s": round(time_s, 4), "at_s": round(float(frame_l.time_s), 4)})
-        # A moving rig's own geometry changes slowly; what differs from one estimate to the next is
-        # mostly estimation noise, which an exponential average over the accepted estimates takes out.
-        # A static rig re-estimates only once a camera moved: its new maps replace the old.
-        follow = self._cfg.video_warp_follow if self._reestimate_s is not None else 1.0
-        goal = lerp_maps(self._maps, candidate, follow)
+        # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
+        # estimation noise, which an exponential average over the accepted estimates takes out.
+        self._blend_to(lerp_maps(self._maps, candidate, self._cfg.video_warp_follow))
+        return True
+
+    def _blend_to(self, goal: PlaneMaps) -> None:
+        """Start blending from the maps of the moment to ``goal``: over ``video_blend_frames`` frames at
+        least, and slowly enough that the seam moves at most ``video_seam_speed_px`` a frame."""
         seam_move = float(np.nanmax(np.abs(goal.seam_luma.positions - self._maps.seam_luma.positions)))
         frames = max(self._cfg.video_blend_frames, int(np.ceil(seam_move / self._cfg.video_seam_speed_px)), 1)
         self._blend = (self._maps, goal, 0, frames)
