@@ -18,8 +18,9 @@ shift of that part, and people
 walking through a fixed view barely move its peak (the fixed rigs measure 0.5-3.3 px over their
 recordings). Its peak's response says how alike the views still are: below :data:`MIN_RESPONSE` (a
 hand-held camera that went elsewhere, the scene changed) the shift is not trusted and the maps stay;
-so do they for a move larger than a drift (:data:`MAX_SHARE` of the width: a rig that moves needs
-``--rig moving``, whose re-estimates follow turns and parallax, not just a shift).
+so do they for a move larger or faster than a drift (:data:`MAX_SHARE`, :data:`MAX_STEP_SHARE` of the
+width: a rig that moves needs ``--rig moving``, whose re-estimates follow turns and parallax, not
+just a shift).
 """
 
 from __future__ import annotations
@@ -32,7 +33,8 @@ from .maps import PlaneMaps, sampled_mask
 THUMB_WIDTH_PX = 320  # views are compared at this width at most (a 1080p frame: 1/6)
 BOX_MARGIN = 0.1  # the overlap's box in each view, widened by this x its size each side
 MIN_RESPONSE = 0.15  # phase correlation peaks below this are not trusted (the pitch's views, 8 s on: 0.26)
-MAX_SHARE = 0.05  # a move beyond this x the view's width is not a drift but a moving rig (the pitch: 0.023)
+MAX_SHARE = 0.05  # a move beyond this x the view's width is not a drift but a moving rig (the pitch: 0.023) ...
+MAX_STEP_SHARE = 0.01  # ... nor one that changed by more since the last check (a pan; the pitch: 0.004)
 
 
 def overlap_boxes(maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[int, int]
@@ -76,6 +78,7 @@ class DriftWatch:
     def __init__(self, y_src: np.ndarray, y_tgt: np.ndarray, boxes: tuple[tuple[int, int, int, int], ...]):
         self._boxes = boxes
         self._references = [thumbnail(part) for part in self._parts(y_src, y_tgt)]
+        self._last = [np.zeros(2), np.zeros(2)]  # the moves the last comparable check found
 
     def _parts(self, y_src: np.ndarray, y_tgt: np.ndarray) -> list[np.ndarray]:
         return [y[y0:y1, x0:x1] for y, (x0, y0, x1, y1) in zip((y_src, y_tgt), self._boxes)]
@@ -83,11 +86,16 @@ class DriftWatch:
     def shifts(self, y_src: np.ndarray, y_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """(source's, target's) content moves (x, y) in input px from the reference views to these, or
         None where either comparison is not trusted (:data:`MIN_RESPONSE`) or either move is too large
-        for a drift (:data:`MAX_SHARE`)."""
+        or too fast for a drift (:data:`MAX_SHARE`, :data:`MAX_STEP_SHARE`: a rig that moved on and
+        stays is followed from the next check on)."""
         moves = [view_shift(reference, thumbnail(part)[0], scale)
                  for (reference, scale), part in zip(self._references, self._parts(y_src, y_tgt))]
+        if min(response for _, response in moves) < MIN_RESPONSE:
+            return None
         widths = [y.shape[1] for y in (y_src, y_tgt)]
-        if any(response < MIN_RESPONSE or np.abs(move).max() > MAX_SHARE * width
-               for (move, response), width in zip(moves, widths)):
+        steps = [float(np.abs(move - last).max()) for (move, _), last in zip(moves, self._last)]
+        self._last = [move for move, _ in moves]
+        if any(np.abs(move).max() > MAX_SHARE * width or step > MAX_STEP_SHARE * width
+               for (move, _), step, width in zip(moves, steps, widths)):
             return None
         return moves[0][0], moves[1][0]

@@ -98,13 +98,19 @@ class FrameSeam:
         self._shown: np.ndarray | None = None  # (K,) the solved lines' seam the last frame was composited with
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # the last frame's (difference, both)
         self._still = np.zeros(solved, bool)  # the solved lines the last frame found still (``still_lines``)
+        self.home: np.ndarray | None = None  # (L,) the estimate's seam, the band's centre (``reset``)
         self.reset(home)
 
     def reset(self, home: np.ndarray) -> None:
         """A new estimate's seam: the band follows it; the last path is kept where it still fits. The
         glide still starts from the seam last shown (``shown``), so a band that moves with a blend does
-        not add its own step to the seam's."""
-        self.home = np.asarray(home, np.float32)
+        not add its own step to the seam's. A seam that did not move (a static rig's maps moved with a
+        camera's drift) keeps its band, its last difference and its background model: the band's
+        content moved by a pixel or two, which the model's own learning follows."""
+        home = np.asarray(home, np.float32)
+        if self.home is not None and np.array_equal(home, self.home):
+            return
+        self.home = home
         half = self.width // 2
         self._x0 = ((np.floor_divide(np.rint(self.home[self._lines]).astype(np.int32), self.cell) - half)
                     * self.cell).astype(np.int32)  # on the grid of cells, so cells line up from line to line

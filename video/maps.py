@@ -203,8 +203,11 @@ def drifted_maps(maps: PlaneMaps, shift_src: np.ndarray, shift_tgt: np.ndarray) 
 
 
 def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
-    """``start + weight * (goal - start)`` for every map; where either side is NaN, ``goal``'s value."""
+    """``start + weight * (goal - start)`` for every map; where either side is NaN, ``goal``'s value; a
+    map the two share (a drift moves only the source's) is kept as it is."""
     def lerp(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        if a is b:
+            return a
         mixed = a + np.float32(weight) * (b - a)
         return np.where(np.isnan(a) | np.isnan(b), b, mixed).astype(np.float32)
 
@@ -236,16 +239,17 @@ def seam_change_px(before: PlaneMaps, after: PlaneMaps) -> float:
 
 
 def map_change_px(before: PlaneMaps, after: PlaneMaps, shape_src: tuple[int, int], percentile: float,
-                  shape_tgt: tuple[int, int] | None = None) -> float:
+                  shape_tgt: tuple[int, int] | None = None, stride: int = 1) -> float:
     """``percentile`` of |M_s after - M_s before| (source px) over pixels both sample in the source; 0 if none.
 
     With ``shape_tgt`` (rows, cols of the target Y plane) only the overlap counts: pixels that also
-    sample the target.
+    sample the target. ``stride``: every this-th canvas row and column only (a per-frame figure).
     """
-    both = sampled_mask(before.map_src_luma, shape_src) & sampled_mask(after.map_src_luma, shape_src)
+    map_before, map_after = before.map_src_luma[::stride, ::stride], after.map_src_luma[::stride, ::stride]
+    both = sampled_mask(map_before, shape_src) & sampled_mask(map_after, shape_src)
     if shape_tgt is not None:
-        both &= sampled_mask(after.map_tgt_luma, shape_tgt)
+        both &= sampled_mask(after.map_tgt_luma[::stride, ::stride], shape_tgt)
     if not both.any():
         return 0.0
-    change = np.linalg.norm(after.map_src_luma[both] - before.map_src_luma[both], axis=1)
+    change = np.linalg.norm(map_after[both] - map_before[both], axis=1)
     return float(np.percentile(change, percentile))

@@ -45,6 +45,7 @@ from .writer import even_size
 
 RIGS = CHOICES["video_rig"]
 JITTER_PERCENTILE = 99.0  # "largest map change" = this percentile of |delta M_s| per frame (robust to edge pixels)
+JITTER_STRIDE = 4  # ... over every this-th canvas row and column (a 1080p frame's full maps took 0.1 s)
 LUMA_FILL = (BLACK_Y,)  # output Y where no input is sampled
 CHROMA_FILL = (BLACK_UV, BLACK_UV)  # output U, V likewise
 
@@ -269,14 +270,14 @@ class SenaFrameCompositor:
             if self._blend is not None:
                 self._advance_blend()
             elif (drifted := self._drifted(frame_l, frame_r)) is not None:
-                self._blend_to(drifted)
+                self._blend_to(*drifted)
             elif not self.lookahead_frames and not self._pending and self._due(self._time_s):
                 self._submit(frame_l, frame_r)
         changed = self._maps is not before
         self._seam_jitter_px.append(seam_change_px(before, self._maps) if changed else 0.0)
         self._map_change_px.append(
-            map_change_px(before, self._maps, self.source_target(frame_l, frame_r)[0].y.shape, JITTER_PERCENTILE)
-            if changed else 0.0)
+            map_change_px(before, self._maps, self.source_target(frame_l, frame_r)[0].y.shape, JITTER_PERCENTILE,
+                          stride=JITTER_STRIDE) if changed else 0.0)
 
     def _due(self, time_s: float) -> bool:
         if self._reestimate_s is None:
@@ -285,10 +286,11 @@ class SenaFrameCompositor:
             self._last_estimate_s = time_s
         return time_s - self._last_estimate_s >= self._reestimate_s
 
-    def _drifted(self, frame_l: YuvFrame, frame_r: YuvFrame) -> PlaneMaps | None:
+    def _drifted(self, frame_l: YuvFrame, frame_r: YuvFrame) -> tuple[PlaneMaps, int] | None:
         """A static rig's drift check, every ``video_drift_check_s`` from the first estimate's pair on:
         the first estimate's maps moved by how far the views moved (``drifted_maps``) where that
-        differs from the last move by more than ``video_drift_px``, else None."""
+        differs from the last move by more than ``video_drift_px``, and the frames to blend them in
+        over (the source side moving at most ``video_seam_speed_px`` a frame); else None."""
         if self._drift_s is None:
             return None
         time_s = float(frame_l.time_s)
@@ -312,7 +314,8 @@ class SenaFrameCompositor:
         self._drift_applied = shifts
         self._drift_log["applied"].append({"time_s": round(time_s, 4), "source_px": np.round(shifts[0], 2).tolist(),
                                            "target_px": np.round(shifts[1], 2).tolist()})
-        return drifted_maps(self._drift_base, *shifts)
+        frames = int(np.ceil(change / self._cfg.video_seam_speed_px))
+        return drifted_maps(self._drift_base, *shifts), frames
 
     def _prior_seam_tgt(self) -> np.ndarray:
         """The current seam per working-frame target row, in target pixels: where a re-estimate's seam
@@ -359,15 +362,16 @@ class SenaFrameCompositor:
         self._reestimations["applied"].append({"made_on_s": round(time_s, 4), "at_s": round(float(frame_l.time_s), 4)})
         # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
         # estimation noise, which an exponential average over the accepted estimates takes out.
-        self._blend_to(lerp_maps(self._maps, candidate, self._cfg.video_warp_follow))
+        goal = lerp_maps(self._maps, candidate, self._cfg.video_warp_follow)
+        # Over video_blend_frames at least, and slowly enough that the seam moves at most
+        # video_seam_speed_px a frame.
+        seam_move = float(np.nanmax(np.abs(goal.seam_luma.positions - self._maps.seam_luma.positions)))
+        self._blend_to(goal, max(self._cfg.video_blend_frames, int(np.ceil(seam_move / self._cfg.video_seam_speed_px))))
         return True
 
-    def _blend_to(self, goal: PlaneMaps) -> None:
-        """Start blending from the maps of the moment to ``goal``: over ``video_blend_frames`` frames at
-        least, and slowly enough that the seam moves at most ``video_seam_speed_px`` a frame."""
-        seam_move = float(np.nanmax(np.abs(goal.seam_luma.positions - self._maps.seam_luma.positions)))
-        frames = max(self._cfg.video_blend_frames, int(np.ceil(seam_move / self._cfg.video_seam_speed_px)), 1)
-        self._blend = (self._maps, goal, 0, frames)
+    def _blend_to(self, goal: PlaneMaps, frames: int) -> None:
+        """Start blending from the maps of the moment to ``goal`` over ``frames`` frames (at least one)."""
+        self._blend = (self._maps, goal, 0, max(1, frames))
         self._advance_blend()
 
     def _advance_blend(self) -> None:
