@@ -35,6 +35,7 @@ BOX_MARGIN = 0.1  # the overlap's box in each view, widened by this x its size e
 MIN_RESPONSE = 0.15  # phase correlation peaks below this are not trusted (the pitch's views, 8 s on: 0.26)
 MAX_SHARE = 0.05  # a move beyond this x the view's width is not a drift but a moving rig (the pitch: 0.023) ...
 MAX_STEP_SHARE = 0.01  # ... nor one that changed by more since the last check (a pan; the pitch: 0.004)
+HISTORY = 3  # the moves given are the median of this many last checks (people in the view jolt one check)
 
 
 def overlap_boxes(maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[int, int]
@@ -79,15 +80,17 @@ class DriftWatch:
         self._boxes = boxes
         self._references = [thumbnail(part) for part in self._parts(y_src, y_tgt)]
         self._last = [np.zeros(2), np.zeros(2)]  # the moves the last comparable check found
+        self._history: list[tuple[np.ndarray, np.ndarray]] = []  # the last HISTORY trusted (source, target) moves
 
     def _parts(self, y_src: np.ndarray, y_tgt: np.ndarray) -> list[np.ndarray]:
         return [y[y0:y1, x0:x1] for y, (x0, y0, x1, y1) in zip((y_src, y_tgt), self._boxes)]
 
     def shifts(self, y_src: np.ndarray, y_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """(source's, target's) content moves (x, y) in input px from the reference views to these, or
-        None where either comparison is not trusted (:data:`MIN_RESPONSE`) or either move is too large
-        or too fast for a drift (:data:`MAX_SHARE`, :data:`MAX_STEP_SHARE`: a rig that moved on and
-        stays is followed from the next check on)."""
+        """(source's, target's) content moves (x, y) in input px from the reference views to these (the
+        median of the last :data:`HISTORY` trusted checks, this one included), or None where either
+        comparison is not trusted (:data:`MIN_RESPONSE`) or either move is too large or too fast for a
+        drift (:data:`MAX_SHARE`, :data:`MAX_STEP_SHARE`: a rig that moved on and stays is followed from
+        the next check on)."""
         moves = [view_shift(reference, thumbnail(part)[0], scale)
                  for (reference, scale), part in zip(self._references, self._parts(y_src, y_tgt))]
         if min(response for _, response in moves) < MIN_RESPONSE:
@@ -98,4 +101,6 @@ class DriftWatch:
         if any(np.abs(move).max() > MAX_SHARE * width or step > MAX_STEP_SHARE * width
                for (move, _), step, width in zip(moves, steps, widths)):
             return None
-        return moves[0][0], moves[1][0]
+        self._history = [*self._history, (moves[0][0], moves[1][0])][-HISTORY:]
+        source, target = (np.median(np.array(side), axis=0) for side in zip(*self._history))
+        return source, target

@@ -290,7 +290,7 @@ class SenaFrameCompositor:
         """A static rig's drift check, every ``video_drift_check_s`` from the first estimate's pair on:
         the first estimate's maps moved by how far the views moved (``drifted_maps``) where that
         differs from the last move by more than ``video_drift_px``, and the frames to blend them in
-        over (the source side moving at most ``video_seam_speed_px`` a frame); else None."""
+        over (the source side moving at most ``video_drift_speed_px`` a frame); else None."""
         if self._drift_s is None:
             return None
         time_s = float(frame_l.time_s)
@@ -314,7 +314,7 @@ class SenaFrameCompositor:
         self._drift_applied = shifts
         self._drift_log["applied"].append({"time_s": round(time_s, 4), "source_px": np.round(shifts[0], 2).tolist(),
                                            "target_px": np.round(shifts[1], 2).tolist()})
-        frames = int(np.ceil(change / self._cfg.video_seam_speed_px))
+        frames = int(np.ceil(change / self._cfg.video_drift_speed_px))
         return drifted_maps(self._drift_base, *shifts), frames
 
     def _prior_seam_tgt(self) -> np.ndarray:
