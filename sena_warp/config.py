@@ -151,17 +151,14 @@ class Config:
     video_audio: str = "left"  # audio copied into the output: "left", "right" or "none"
     video_estimate_pairs: int = 5  # first frame pairs tried for the first estimate; most inliers wins
     video_estimate_spacing: int = 5  # frame pairs between two of those tries
-    video_rig: str = "static"  # "static": maps estimated once (and moved with a camera that drifts); "moving":
-    # re-estimated every video_reestimate_s
+    video_rig: str = "static"  # "static": estimated once, moved with a drifting camera; "moving": every video_reestimate_s
     video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
     video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's
     video_max_median_change_px: float = 40.0  # reject a re-estimate moving M_s by more (median over the overlap)
     video_crop: bool = False  # crop the output to the largest rectangle the first estimate covers, for the whole video
-    video_drift_check_s: float = 0.25  # static rig: each camera's view is compared with its view when the maps were
-    # made this often (phase correlation; 0: never) ...
-    video_drift_px: float = 2.0  # ... and where a view's move differs from the one the maps follow by more (input
-    # px), the maps are moved by the views' moves (the rig drifted) ...
-    video_drift_speed_px: float = 0.5  # ... blended in at this many px a frame (a drift is slow; a faster move jolts)
+    video_drift_check_s: float = 0.25  # static rig: how often each view is compared with its view at the estimate (0: never)
+    video_drift_px: float = 2.0  # static rig: a view's move (input px) beyond this from what the maps follow moves them
+    video_drift_speed_px: float = 0.5  # static rig: a drift move is blended in at this many px a frame (faster jolts)
     video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly (at least)
     video_seam_speed_px: float = 2.0  # the seam moves at most this per frame (a blend lasts long enough), but for jumps
     video_warp_follow: float = 0.65  # moving rig: an accepted estimate moves the maps this share of the way (causal

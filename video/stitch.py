@@ -2,11 +2,13 @@
 
 ``stitch_videos`` is the ``sena-warp video`` job: the best of the first frame pairs gives the maps and
 fixes the output canvas (``estimate.py``); every frame pair is then composited in YUV 4:2:0 with
-those maps (``maps.py``) by the loop in ``loop.py``. With a moving rig the maps are re-estimated
-every ``cfg.video_reestimate_s`` seconds on the main thread between frames (simple, deterministic);
-implausible estimates are rejected; the maps move ``cfg.video_warp_follow`` of the way to an accepted
-one (an exponential average over the estimates, causal), blended in over ``cfg.video_blend_frames``
-frames at least, so the warp and the seam glide rather than jump. Jitter figures measure what remains.
+those maps (``maps.py``) by the loop in ``loop.py``. A static rig's maps move with a camera that
+drifts (``drift.py``: each view's shift since the estimate). With a moving rig the maps are
+re-estimated every ``cfg.video_reestimate_s`` seconds on a worker thread (on the loop's with
+``video_estimate_workers`` 0: deterministic); implausible estimates are rejected; the maps move
+``cfg.video_warp_follow`` of the way to an accepted one (an exponential average over the estimates,
+causal), blended in over ``cfg.video_blend_frames`` frames at least, so the warp and the seam glide
+rather than jump. Jitter figures measure what remains.
 
 An optional *observer* (``stitch_videos(observer=...)``) is called once per composited frame with a
 :class:`CompositedFrame`: what went in, what came out and what it was composited with. The pipeline
@@ -142,10 +144,10 @@ class SenaFrameCompositor:
     :meth:`passes` (what a frame is composited with, for the bench's reference implementation),
     :meth:`report`; ``observer`` (a :data:`FrameObserver` or None) sees every composited frame. Inside: one :class:`~sena_warp.composite.Compositor` for the Y plane and one for
     the U/V planes (stacked as two channels), both allocated once; every frame the seam is cut anew
-    in its band (``frame_seam``) and the gains follow the cameras' exposure (``exposure``). A moving
-    rig's re-estimates run on a worker thread while frames keep flowing on the current maps; an
-    accepted one is blended in slowly enough that the seam moves at most ``video_seam_speed_px``
-    per frame.
+    in its band (``frame_seam``) and the gains follow the cameras' exposure (``exposure``). A static
+    rig's maps follow a drifting camera (``_drifted``). A moving rig's re-estimates run on a worker
+    thread while frames keep flowing on the current maps; an accepted one is blended in slowly enough
+    that the seam moves at most ``video_seam_speed_px`` per frame.
     """
 
     def __init__(self, first: StitchMaps, first_attempts: list[Attempt], first_pair: int, fps: float,
