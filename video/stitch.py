@@ -35,8 +35,8 @@ from ..outputs import OutputPlan
 from ..report import run_info
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
-from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
 from .drift import DriftWatch, overlap_boxes
+from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width
 from .loop import VideoOptions, run_video
