@@ -12,7 +12,8 @@ from sena_warp.config import Config
 from sena_warp.evaluation.crossing import write_clip
 from sena_warp.evaluation.video_figures import VideoFigures
 from sena_warp.composite import SeamLayout
-from sena_warp.video.drift import MAX_SHARE, MAX_STEP_SHARE, MIN_RESPONSE, DriftWatch, overlap_boxes, thumbnail, view_shift
+from sena_warp.video.drift import (MAX_SHARE, MAX_STEP_SHARE, MIN_RESPONSE, DriftWatch, hann_window, overlap_boxes,
+                                   thumbnail, view_shift)
 from sena_warp.video.maps import PlaneMaps, chroma_positions, chroma_seam, drifted_maps, target_map
 from sena_warp.video.loop import VideoOptions
 from sena_warp.video.stitch import stitch_videos
@@ -37,14 +38,15 @@ def grey_view(bundled_dir) -> np.ndarray:
 
 def test_a_moved_view_is_measured_and_a_person_walking_through_a_fixed_one_is_not(grey_view):
     reference, scale = thumbnail(grey_view)
+    window = hann_window(reference)
     assert reference.shape[1] == 320 and reference.dtype == np.float32
-    same, response = view_shift(reference, thumbnail(grey_view)[0], scale)
+    same, response = view_shift(reference, thumbnail(grey_view)[0], scale, window)
     assert np.abs(same).max() < 0.1 and response > 0.9
-    moved, response = view_shift(reference, thumbnail(shifted(grey_view, 12.0, -5.0))[0], scale)
+    moved, response = view_shift(reference, thumbnail(shifted(grey_view, 12.0, -5.0))[0], scale, window)
     assert np.abs(moved - [12.0, -5.0]).max() < 1.0 and response > MIN_RESPONSE
     walker = grey_view.copy()
     walker[100:260, 200:280] = np.random.default_rng(0).integers(0, 256, (160, 80), dtype=np.uint8)
-    assert np.abs(view_shift(reference, thumbnail(walker)[0], scale)[0]).max() < 1.0
+    assert np.abs(view_shift(reference, thumbnail(walker)[0], scale, window)[0]).max() < 1.0
 
 
 def test_the_watch_gives_both_cameras_moves_and_none_for_a_view_it_cannot_compare(grey_view):

@@ -118,15 +118,20 @@ def valley_band(column: int) -> np.ndarray:
     return np.broadcast_to(3.0 * np.abs(cells - column), (LINES, 2 * BAND + 1)).copy()
 
 
+def valley_seam(cell: int, seed: int) -> tuple[FrameSeam, BandFrames]:
+    """A seam on cells of ``cell`` px and frames whose difference's valley is at its home, over a
+    textured background (``static_band(seed)``)."""
+    band = seam(with_cell(cell))
+    assert band.cell == cell
+    return band, BandFrames(valley_band(BAND), static_band(seed))
+
+
 @pytest.mark.parametrize("cell", [1, 2])
 def test_without_anything_in_front_the_seam_glides_and_then_stays(cell):
     # The difference's valley moves 20 px away at once (nothing in front of the background): the seam
     # may follow at video_seam_speed_px a frame, not jump; once nothing changes it keeps its place
     # (still lines), though the valley is still 18 px away.
-    band = seam(with_cell(cell))
-    assert band.cell == cell
-    total = static_band(7)
-    frames = BandFrames(valley_band(BAND), total)
+    band, frames = valley_seam(cell, 7)
     first, _, _ = band.next(frames)
     np.testing.assert_array_equal(first, np.full(LINES, HOME))  # home: the valley
     band.next(frames)
@@ -142,10 +147,8 @@ def test_without_anything_in_front_the_seam_glides_and_then_stays(cell):
 
 @pytest.mark.parametrize("cell", [1, 2])
 def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
-    band = seam(with_cell(cell))
-    assert band.cell == cell
-    background = static_band(8)
-    frames = BandFrames(valley_band(BAND), background)
+    band, frames = valley_seam(cell, 8)
+    background = frames.total
     for _ in range(5):
         home, _, _ = band.next(frames)
     # A 40-line object over band cells 18-45 (the seam at cell 30 runs through it), 80 levels brighter

@@ -64,10 +64,15 @@ def thumbnail(y: np.ndarray) -> tuple[np.ndarray, float]:
     return cv2.resize(y, size, interpolation=cv2.INTER_AREA).astype(np.float32), scale
 
 
-def view_shift(reference: np.ndarray, now: np.ndarray, scale: float) -> tuple[np.ndarray, float]:
+def hann_window(thumb: np.ndarray) -> np.ndarray:
+    """The Hann window for :func:`view_shift` on thumbnails of ``thumb``'s shape (made once per view)."""
+    return cv2.createHanningWindow((thumb.shape[1], thumb.shape[0]), cv2.CV_32F)
+
+
+def view_shift(reference: np.ndarray, now: np.ndarray, scale: float, window: np.ndarray) -> tuple[np.ndarray, float]:
     """How far a view's content moved (x, y input px) between two :func:`thumbnail` copies of it, and the
-    phase correlation's peak response (1: the same picture moved; near 0: nothing in common)."""
-    window = cv2.createHanningWindow((reference.shape[1], reference.shape[0]), cv2.CV_32F)
+    phase correlation's peak response (1: the same picture moved; near 0: nothing in common);
+    ``window``: :func:`hann_window` of them."""
     (dx, dy), response = cv2.phaseCorrelate(reference, now, window)
     return np.array([dx, dy]) * scale, float(response)
 
@@ -78,7 +83,9 @@ class DriftWatch:
 
     def __init__(self, y_src: np.ndarray, y_tgt: np.ndarray, boxes: tuple[tuple[int, int, int, int], ...]):
         self._boxes = boxes
-        self._references = [thumbnail(part) for part in self._parts(y_src, y_tgt)]
+        # Per view: its reference thumbnail, input px per thumbnail px, and the window for comparing it.
+        self._references = [(thumb, scale, hann_window(thumb))
+                            for thumb, scale in (thumbnail(part) for part in self._parts(y_src, y_tgt))]
         self._last = [np.zeros(2), np.zeros(2)]  # the moves the last comparable check found
         self._history: list[tuple[np.ndarray, np.ndarray]] = []  # the last HISTORY trusted (source, target) moves
 
@@ -91,8 +98,8 @@ class DriftWatch:
         comparison is not trusted (:data:`MIN_RESPONSE`) or either move is too large or too fast for a
         drift (:data:`MAX_SHARE`, :data:`MAX_STEP_SHARE`: a rig that moved on and stays is followed from
         the next check on)."""
-        moves = [view_shift(reference, thumbnail(part)[0], scale)
-                 for (reference, scale), part in zip(self._references, self._parts(y_src, y_tgt))]
+        moves = [view_shift(reference, thumbnail(part)[0], scale, window)
+                 for (reference, scale, window), part in zip(self._references, self._parts(y_src, y_tgt))]
         if min(response for _, response in moves) < MIN_RESPONSE:
             return None
         widths = [y.shape[1] for y in (y_src, y_tgt)]

@@ -99,6 +99,7 @@ class FrameSeam:
         self._last: tuple[np.ndarray, np.ndarray] | None = None  # the last frame's (difference, both)
         self._still = np.zeros(solved, bool)  # the solved lines the last frame found still (``still_lines``)
         self.home: np.ndarray | None = None  # (L,) the estimate's seam, the band's centre (``reset``)
+        self._path: np.ndarray | None = None  # (K,) the solved lines' seam (px, on the grid of cells)
         self.reset(home)
 
     def reset(self, home: np.ndarray) -> None:
@@ -120,8 +121,7 @@ class FrameSeam:
                            * np.abs(self._cells - self.home[self._lines, None])).astype(np.float32)
         self._last = None  # the band's cells moved: the last difference no longer lines up
         self._background = None
-        last = getattr(self, "_path", self.home[self._lines])
-        self._path = self._on_grid(last)
+        self._path = self._on_grid(self.home[self._lines] if self._path is None else self._path)
 
     def _on_grid(self, path: np.ndarray) -> np.ndarray:
         """(K,) int32 the band cells' positions nearest to ``path`` (K,) px on the solved lines."""
