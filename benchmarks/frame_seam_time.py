@@ -3,7 +3,7 @@
 Usage (from the repository root)::
 
     .venv/bin/python benchmarks/frame_seam_time.py [--left L --right R] [--frames N] [--work DIR]
-        [--set video_seam_band_cells=64 ...]
+        [--set video_seam_band_cells=64 ...] [--parts]
 
 Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p clip pair in ``--work``:
 a slow pan over a real pair, so every line of the band changes every frame (the worst case: no line
@@ -11,9 +11,11 @@ is still, the free path is solved every frame). The first N frame pairs are deco
 :class:`~sena_warp.video.stitch.SenaFrameCompositor` is made as ``sena-warp video`` makes it (static
 rig, one estimate pair), and each frame is composited in order; the per-frame seam's call
 (``FrameSeam.next``: the band's difference, still lines, background model, paths, seam blend offsets)
-is timed in wall and process CPU time (no drift re-estimates: nothing else of the process runs
+is timed in wall and process CPU time (no drift checks: nothing else of the process runs
 meanwhile; the estimate is made on the first pair, ``video_estimate_pairs=1``). Prints median,
-mean and p95 over the frames after the first five, and the band's size.
+mean and p95 over the frames after the first five, and the band's size. ``--parts`` also gives the
+mean process CPU time per call of its parts (the band's difference, the dynamic programming, the
+background model and its whole-band fit, still lines, the seam blend's offsets, the paths' costs).
 """
 
 from __future__ import annotations
@@ -21,31 +23,47 @@ from __future__ import annotations
 import argparse
 import ast
 import time
+from collections import defaultdict
+from itertools import islice
 from pathlib import Path
 
-import av
 import numpy as np
 
+from sena_warp import composite, seam_path
 from sena_warp.config import Config
 from sena_warp.evaluation.bench import DATA_DIR, make_clip_pair, pair_paths
 from sena_warp.kernels.runtime import resolve_config
+from sena_warp.video import frame_seam
+from sena_warp.video.reader import FrameReader
 from sena_warp.video.stitch import SenaFrameCompositor
 
 WARMUP = 5  # frames not counted: the first estimate's band, the background model's start
+PARTS = ((composite.Compositor, "band_difference", "band's difference (kernel)"),
+         (seam_path.BandPath, "solve", "dynamic programming (per solve)"),
+         (frame_seam.FrameSeam, "foreground", "background model"),
+         (frame_seam, "whole_band_change", "... its whole-band fit"),
+         (frame_seam.FrameSeam, "still_lines", "still lines"),
+         (frame_seam, "band_offsets", "seam blend's offsets"),
+         (frame_seam.FrameSeam, "_solve", "paths with their costs (the DPs included)"))
 
 
 def yuv_planes(path: Path, count: int) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """The first ``count`` frames of a video as contiguous (y, u, v) 4:2:0 planes."""
-    frames = []
-    with av.open(str(path)) as container:
-        for frame in container.decode(video=0):
-            if len(frames) == count:
-                break
-            planes = frame.reformat(format="yuv420p").to_ndarray()
-            height, width = frame.height, frame.width
-            chroma = planes[height:].reshape(2, height // 2, width // 2)
-            frames.append((np.ascontiguousarray(planes[:height]), chroma[0].copy(), chroma[1].copy()))
-    return frames
+    """The first ``count`` frames of a video as (y, u, v) 4:2:0 planes (the video loop's reader)."""
+    with FrameReader(path) as reader:
+        return [(frame.y, frame.u, frame.v) for frame in islice(reader, count)]
+
+
+def time_parts() -> dict[str, list[float]]:
+    """Wrap the per-frame seam's parts (:data:`PARTS`) to record each call's process CPU seconds."""
+    seconds: dict[str, list[float]] = defaultdict(list)
+    for owner, name, label in PARTS:
+        def timed(*args, _call=getattr(owner, name), _label=label, **kwargs):
+            start = time.process_time()
+            result = _call(*args, **kwargs)
+            seconds[_label].append(time.process_time() - start)
+            return result
+        setattr(owner, name, timed)
+    return seconds
 
 
 def main() -> int:
@@ -55,14 +73,16 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--work", type=Path, default=Path("out/frame_seam_time"))
     parser.add_argument("--set", nargs="*", default=[], metavar="FIELD=VALUE")
+    parser.add_argument("--parts", action="store_true", help="also the CPU time of the seam's parts")
     args = parser.parse_args()
+    parts = time_parts() if args.parts else {}
     changes = {k: ast.literal_eval(v) for k, v in (item.split("=", 1) for item in args.set)}
     cfg = resolve_config(Config(device="cpu", **changes))
     if args.left is None:
         args.work.mkdir(parents=True, exist_ok=True)
         args.left, args.right = make_clip_pair(pair_paths(DATA_DIR), args.work, (1920, 1080), 5.0)
     left, right = yuv_planes(args.left, args.frames), yuv_planes(args.right, args.frames)
-    # One estimate, on the first pair, and no drift re-estimates: nothing else of the process runs
+    # One estimate, on the first pair, and no drift checks: nothing else of the process runs
     # while the seam is timed (a worker's estimate would count in the process's CPU time).
     compositor = SenaFrameCompositor.from_videos(
         args.left, args.right, 0.0, cfg.replace(video_estimate_pairs=1, video_drift_check_s=0.0), "auto")
@@ -87,6 +107,8 @@ def main() -> int:
     for name, values in (("wall", wall), ("CPU", cpu)):
         ms = np.array(values[WARMUP:]) * 1e3
         print(f"  {name}: median {np.median(ms):.2f} ms, mean {ms.mean():.2f} ms, p95 {np.percentile(ms, 95):.2f} ms")
+    for label, values in parts.items():
+        print(f"  {label}: {np.mean(values) * 1e3:.2f} ms CPU a call, {len(values)} calls")
     return 0
 
 

@@ -14,22 +14,25 @@ from __future__ import annotations
 
 import argparse
 
-import av
 import cv2
 import numpy as np
+
+from sena_warp.video.drift import hann_window, view_shift
+from sena_warp.video.reader import FrameReader
 
 
 def frame_shifts(path: str, x0: int, x1: int) -> np.ndarray:
     """Per consecutive frame pair, the shift (px) of columns x0..x1 of the luma."""
-    shifts, previous = [], None
-    with av.open(path) as container:
-        for frame in container.decode(video=0):
-            part = frame.to_ndarray(format="gray")[:, x0:x1].astype(np.float32)
+    shifts, previous, window = [], None, None
+    with FrameReader(path) as reader:
+        for frame in reader:
+            part = frame.y[:, x0:x1]
             half = cv2.resize(part, (part.shape[1] // 2, part.shape[0] // 2), interpolation=cv2.INTER_AREA)
+            half = half.astype(np.float32)
             if previous is not None:
-                window = cv2.createHanningWindow((half.shape[1], half.shape[0]), cv2.CV_32F)
-                (dx, dy), _ = cv2.phaseCorrelate(previous, half, window)
-                shifts.append(2.0 * float(np.hypot(dx, dy)))
+                window = hann_window(half) if window is None else window
+                move, _ = view_shift(previous, half, 2.0, window)
+                shifts.append(float(np.hypot(*move)))
             previous = half
     return np.array(shifts)
 
