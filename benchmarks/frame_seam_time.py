@@ -103,7 +103,7 @@ def main() -> int:
     compositor.close()
     width, height = compositor.output_size
     print(f"{args.left.name}: canvas {width}x{height}, band {seam.band} px each side, cells of {seam.cell} px, "
-          f"{len(seam.home)} lines (solved: every {max(1, cfg.video_seam_line_step)}), {len(wall) - WARMUP} frames timed")
+          f"{len(seam.home)} lines (solved: every {seam.step}), {len(wall) - WARMUP} frames timed")
     for name, values in (("wall", wall), ("CPU", cpu)):
         ms = np.array(values[WARMUP:]) * 1e3
         print(f"  {name}: median {np.median(ms):.2f} ms, mean {ms.mean():.2f} ms, p95 {np.percentile(ms, 95):.2f} ms")

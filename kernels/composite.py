@@ -307,6 +307,8 @@ NOT_BOTH = wp.constant(1.0e9)  # band_difference_kernel: the cell is not a band 
 @wp.kernel
 def band_difference_kernel(
     row0: int,
+    col_step: int,
+    width: int,
     img_src: wp.array(dtype=wp.uint8),
     img_tgt: wp.array(dtype=wp.uint8),
     steps: wp.vec4i,
@@ -323,37 +325,47 @@ def band_difference_kernel(
     gain_tgt: wp.vec4i,
     bias_tgt: wp.vec4i,
     tone: wp.vec2i,
+    last_diff: wp.array2d(dtype=float),
     diff: wp.array2d(dtype=float),
     total: wp.array2d(dtype=float),
+    delta: wp.array2d(dtype=float),
 ):
     """Per solved line k = row0 + i (seam line lines[k]) and band cell j (position band_x0[k] + j cell):
     channel 0 of the source minus the target there (``diff``) and their sum (``total``), both with
     their gains and knee (grey levels), or ``NOT_BOTH`` and 0 where the plan does not hold both taps
-    (outside the overlap or the band). The per-frame seam reads them."""
-    i, j = wp.tid()
+    (outside the overlap or the band); ``delta``: how much ``diff`` changed from ``last_diff`` (the
+    last frame's), 0 where either lacks a view. The per-frame seam reads them. Thread (i, j) does
+    cells j, j + col_step, ... < width of its line (``runtime.launch_row_loops``)."""
+    i, j0 = wp.tid()
     k = row0 + i
     line = lines[k]
-    pos = band_x0[k] + j * cell
-    x = pos
-    y = line
-    if lines_are_rows == 0:
-        x = line
-        y = pos
-    value = float(NOT_BOTH)
-    both_sum = float(0.0)
-    if x >= 0 and y >= 0 and x < canvas_width and y < canvas_height:
-        q = y * canvas_width + x
-        word = plan[q]
-        if int(word & wp.int64(3)) == KIND_BAND:
-            word_t = plan_tgt[q]
-            vs = adjusted(sample_fixed(img_src, word_offset(word), word_fx(word), word_fy(word), steps[0], steps[1]),
-                          gain_src[0], bias_src[0], 0, tone)
-            vt = adjusted(sample_fixed(img_tgt, word_offset(word_t), word_fx(word_t), word_fy(word_t), steps[2],
-                                       steps[3]), gain_tgt[0], bias_tgt[0], 0, tone)
-            value = float(vs - vt) / float(ONE20)
-            both_sum = float(vs + vt) / float(ONE20)
-    diff[k, j] = value
-    total[k, j] = both_sum
+    for j in range(j0, width, col_step):
+        pos = band_x0[k] + j * cell
+        x = pos
+        y = line
+        if lines_are_rows == 0:
+            x = line
+            y = pos
+        value = float(NOT_BOTH)
+        both_sum = float(0.0)
+        if x >= 0 and y >= 0 and x < canvas_width and y < canvas_height:
+            q = y * canvas_width + x
+            word = plan[q]
+            if int(word & wp.int64(3)) == KIND_BAND:
+                word_t = plan_tgt[q]
+                vs = adjusted(sample_fixed(img_src, word_offset(word), word_fx(word), word_fy(word), steps[0],
+                                           steps[1]), gain_src[0], bias_src[0], 0, tone)
+                vt = adjusted(sample_fixed(img_tgt, word_offset(word_t), word_fx(word_t), word_fy(word_t), steps[2],
+                                           steps[3]), gain_tgt[0], bias_tgt[0], 0, tone)
+                value = float(vs - vt) / float(ONE20)
+                both_sum = float(vs + vt) / float(ONE20)
+        diff[k, j] = value
+        total[k, j] = both_sum
+        last = last_diff[k, j]
+        change = float(0.0)
+        if value < 0.5 * NOT_BOTH and last < 0.5 * NOT_BOTH:
+            change = wp.abs(value - last)
+        delta[k, j] = change
 
 
 @wp.kernel

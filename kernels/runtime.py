@@ -81,9 +81,12 @@ def resolve_config(cfg: Config) -> Config:
     return cfg.replace(device=resolve_device(cfg.device))
 
 
+CORES = os.cpu_count() or 1  # asked once: a launch's thread count is worked out on every frame
+
+
 def cpu_threads(threads: int) -> int:
     """Number of CPU launch threads: ``threads`` when > 0, else one per core."""
-    return threads if threads > 0 else (os.cpu_count() or 1)
+    return threads if threads > 0 else CORES
 
 
 def _pool(threads: int) -> ThreadPoolExecutor:
@@ -161,6 +164,15 @@ def launch_rows(kernel, height: int, width: int, inputs: list, device: str, thre
         future.result()
 
 
+def upload(array: wp.array, values) -> None:
+    """Copy ``values`` (array-like of ``array``'s shape) into the Warp ``array``: in place through its
+    numpy view on the CPU (no staging array), by ``assign`` on a GPU."""
+    if array.device.is_cpu:
+        np.copyto(array.numpy(), values, casting="unsafe")
+    else:
+        array.assign(np.ascontiguousarray(values, wp.dtype_to_numpy(array.dtype)))
+
+
 def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str, threads: int) -> None:
     """Run ``kernel(row0, col_step, width, *inputs)`` over rows [0, height) and wait until it has finished.
 
@@ -177,6 +189,9 @@ def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str,
         wp.synchronize_device(device)
         return
     bands = row_bands(height, cpu_threads(threads))
+    if len(bands) == 1:
+        wp.launch(kernel, dim=(height, 1), inputs=[0, 1, width, *inputs], device=device)
+        return
     futures = [
         _pool(len(bands)).submit(wp.launch, kernel, (rows, 1), [row0, 1, width, *inputs], device=device)
         for row0, rows in bands

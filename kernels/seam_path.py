@@ -52,13 +52,11 @@ def seam_dp_kernel(
         for j in range(width):
             best = float(INF)
             best_d = int(0)
-            for d in range(-max_step, max_step + 1):
-                jp = j + shift - d
-                if jp >= 0 and jp < width:
-                    v = acc[s, cur, jp] + step_cost * float(wp.abs(d))
-                    if v < best:
-                        best = v
-                        best_d = d
+            # steps d from -max_step up, within the last row's cells (jp = j + shift - d in [0, width))
+            for d in range(wp.max(-max_step, j + shift - width + 1), wp.min(max_step, j + shift) + 1):
+                v = acc[s, cur, j + shift - d] + step_cost * float(wp.abs(d))
+                best_d = wp.where(v < best, d, best_d)  # without a branch: which step wins is data
+                best = wp.where(v < best, v, best)
             acc[s, nxt, j] = best + cost[r, j]
             back[r, j] = wp.int8(best_d)
         cur = nxt

@@ -171,7 +171,7 @@ class Config:
     # --- Video over time: the per-frame seam and exposure (issue 14) ----------------------------
     video_seam_band_ratio: float = 0.05  # per-frame seam: band half-width, x the canvas diagonal (room to go round an object)
     video_seam_band_min_px: int = 8  # per-frame seam: band half-width at least this
-    video_seam_line_step: int = 2  # per-frame seam: solved on every this-th line, interpolated between
+    video_seam_line_step: int = 2  # per-frame seam: solved on every this-th line (or every cell-th), interpolated between
     video_seam_band_cells: int = 64  # per-frame seam: band half-width in cells; a cell is round(half-width / this) px
     # wide, at least 1 (640-px pairs: 1 px; 720p and 1080p pairs: 2 px): the seam's work grows less with the size
     video_seam_noise: float = 6.0  # per-frame seam: differences below this (grey levels) are noise, not motion

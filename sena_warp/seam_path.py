@@ -154,28 +154,36 @@ def seam_cost_canvas(warped_src: np.ndarray, placed_tgt: np.ndarray, both: np.nd
 
 class BandPath:
     """The DP of ``kernels/seam_path.py`` for a band of fixed shape, its device arrays allocated once
-    (a video solves the same band every frame)."""
+    (a video solves the same band every frame, mostly with the same segments: uploaded when they change)."""
 
     def __init__(self, rows: int, width: int, segments: int, cfg: Config):
         device = cfg.device
         self.cfg = cfg
         self.shape = (rows, width)
-        self.cost = wp.zeros((rows, width), dtype=float, device=device)
+        self.cost: wp.array | None = None  # made on the first solve of a numpy cost band
         self.band_x0 = wp.zeros(rows, dtype=int, device=device)
         self.segments = [wp.zeros(segments, dtype=int, device=device) for _ in range(4)]
+        self._segments: np.ndarray | None = None  # the segments last uploaded
         self.acc = wp.zeros((segments, 2, width), dtype=float, device=device)
         self.back = wp.zeros((rows, width), dtype=wp.int8, device=device)
         self.path = wp.zeros(rows, dtype=int, device=device)
 
-    def solve(self, cost_band: np.ndarray, band_x0: np.ndarray, segments: np.ndarray, max_step: int,
+    def solve(self, cost_band: np.ndarray | wp.array, band_x0: np.ndarray, segments: np.ndarray, max_step: int,
               step_cost: float) -> np.ndarray:
-        """See :func:`dp_segments`; ``segments`` must have the count given at construction."""
-        self.cost.assign(np.ascontiguousarray(cost_band, np.float32))
-        self.band_x0.assign(np.ascontiguousarray(band_x0, np.int32))
+        """See :func:`dp_segments`; ``segments`` must have the count given at construction. ``cost_band``
+        may be a Warp array of the band's shape on this device: it is read in place."""
+        if not isinstance(cost_band, wp.array):
+            if self.cost is None:
+                self.cost = wp.zeros(self.shape, dtype=float, device=self.cfg.device)
+            runtime.upload(self.cost, cost_band)
+            cost_band = self.cost
+        runtime.upload(self.band_x0, band_x0)
         segments = np.asarray(segments, np.int32).reshape(-1, 4)
-        for k in range(4):
-            self.segments[k].assign(np.ascontiguousarray(segments[:, k]))
-        inputs = [self.cost, self.band_x0, *self.segments, int(max_step), float(step_cost), self.acc, self.back,
+        if self._segments is None or not np.array_equal(segments, self._segments):
+            for k in range(4):
+                runtime.upload(self.segments[k], segments[:, k])
+            self._segments = segments.copy()
+        inputs = [cost_band, self.band_x0, *self.segments, int(max_step), float(step_cost), self.acc, self.back,
                   self.path]
         runtime.launch_rows(seam_dp_kernel, len(segments), 1, inputs, self.cfg.device, self.cfg.cpu_threads)
         return self.path.numpy()

@@ -152,10 +152,15 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     lines = np.arange(1, len(seam.positions), 3, dtype=np.int32)  # every third line, as the frame seam solves
     count = 2 * (8 // cell) + 1  # cells of ``cell`` px 8 px each side of the seam, inside the plan's band
     band_x0 = (np.rint(seam.positions[lines]) - 8).astype(np.int32)
+    cells = (len(lines), count)
+    last = np.full(cells, 3.0, np.float32)
+    last[:, 0] = NOT_BOTH  # the last frame lacked a view there
+    delta = wp.zeros(cells, dtype=float, device=warp_device)
     diff, total = comp.band_difference(wp.array(lines, dtype=int, device=warp_device),
-                                       wp.array(band_x0, dtype=int, device=warp_device), count,
-                                       wp.zeros((len(lines), count), dtype=float, device=warp_device),
-                                       wp.zeros((len(lines), count), dtype=float, device=warp_device), cell)
+                                       wp.array(band_x0, dtype=int, device=warp_device), count, cell,
+                                       wp.array(last, dtype=float, device=warp_device),
+                                       wp.zeros(cells, dtype=float, device=warp_device),
+                                       wp.zeros(cells, dtype=float, device=warp_device), delta)
     v_src, ok_src = remap_reference(plane_src[:, :, None], map_src)
     v_tgt, ok_tgt = remap_reference(plane_tgt[:, :, None], map_tgt)
     rows = lines[:, None]
@@ -169,6 +174,9 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     assert np.abs(diff[both] - (adjusted_src - adjusted_tgt)[both]).max() < 0.25  # taps in 1/1024 px
     assert np.abs(total[both] - (adjusted_src + adjusted_tgt)[both]).max() < 0.25
     assert np.all(total[~both] == 0.0)
+    changed = both & (last < 0.5 * NOT_BOTH)
+    np.testing.assert_allclose(delta.numpy()[changed], np.abs(diff - 3.0)[changed], atol=1e-5)
+    assert np.all(delta.numpy()[~changed] == 0.0)
 
 
 def test_compositor_rejects_mismatched_inputs(scene, warp_device):  # noqa: F811

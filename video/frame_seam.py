@@ -8,9 +8,10 @@ a cell costs its difference beyond the noise floor, plus ``video_seam_stay_cost`
 the last frame's seam and ``video_seam_home_cost`` per pixel away from the estimate's.
 
 *Glide and jump.* The seam glides: it moves at most ``video_seam_speed_px`` per line from the last
-frame's. On a static rig, while something is in front of the background (below), a second path, free
-in the band, is taken instead when the gliding one would cost ``video_seam_jump_cost`` per line more:
-something moved across the seam and the seam steps round it at once. (On a moving rig everything
+frame's (one cell where cells are wider). On a static rig, while something is in front of the
+background (below), a second path, free in the band, is taken instead when the gliding one would cost
+``video_seam_jump_cost`` per line more: something moved across the seam and the seam steps round it
+at once. (On a moving rig everything
 shifts a little every frame; there the seam only glides.) A new path replaces the last one only when
 it is cheaper by ``video_seam_margin`` per line: while nothing moves the costs only carry noise.
 
@@ -31,10 +32,11 @@ through it would lose a strip of it.
 
 Only the compositor's seam positions and the seam blend's offsets change per frame; its plan stays.
 Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig). The seam is
-solved on every ``video_seam_line_step``-th line and interpolated between (half the work at 2; the
-seam blend's transition is wider than the interpolation's rounding), and along a line on a grid of
-cells ``cell`` px apart (:func:`cell_px`: 1 px on a 640-px pair's canvas, 2 px on a 720p pair's or a
-1080p one's), so the work per frame grows less with the size; the boxes above are counted in cells.
+solved on a grid of square cells: along a line every ``cell`` px (:func:`cell_px`: about
+``video_seam_band_cells`` cells each side of the seam), on every ``cell``-th line but at least
+every ``video_seam_line_step``-th (:func:`line_step`), and interpolated between the solved lines (the
+seam blend's transition is wider than the interpolation's rounding). The work per frame so grows
+little with the canvas; the boxes above are counted in cells and solved lines.
 """
 
 from __future__ import annotations
@@ -47,7 +49,9 @@ from ..composite import Compositor
 from ..config import Config
 from ..partition import running_mean
 from ..seam_path import BandPath
+from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
+from sena_warp.kernels.frame_seam import background_kernel, band_cost_kernel, strip_mean_kernel
 
 FIT_STRIDE = 4  # the whole band's gain and offset are fitted on every this-th line and cell
 SPREAD_FACTOR = 3.0  # a band cell is off its background beyond this x its mean absolute deviation there
@@ -64,13 +68,21 @@ def cell_px(band: int, cfg: Config) -> int:
     return max(1, int(round(band / max(1, cfg.video_seam_band_cells))))
 
 
+def line_step(cell: int, cfg: Config) -> int:
+    """The per-frame seam is solved on every this-th line: ``video_seam_line_step``, or the cell
+    width where cells are wider (square cells: the grid coarsens with the canvas both ways)."""
+    return max(1, cfg.video_seam_line_step, cell)
+
+
 class FrameSeam:
     """The per-frame seam of one luma compositor whose plan keeps both views within ``band`` of the
     estimate's seam ``home`` (L,) float32 (positions per line); ``jumps``: whether it may leave its
     gliding path and keeps a background model (a static rig); ``fps``: the video's frame rate.
 
-    The seam is solved on every ``video_seam_line_step``-th line (and the last) and interpolated
-    between them; ``positions``, ``shown`` and ``still`` are per line."""
+    The seam is solved on every ``step``-th line (:func:`line_step`, and the last) and interpolated
+    between them; ``positions``, ``shown`` and ``still`` are per line. The band's cells live in Warp
+    arrays (K solved lines, ``width`` cells) that the kernels of ``kernels/frame_seam.py`` fill, on one
+    CPU thread each: the band is small, a second thread costs more in hand-over than it saves."""
 
     def __init__(self, home: np.ndarray, band: int, jumps: bool, fps: float, cfg: Config):
         self.cfg = cfg
@@ -79,24 +91,44 @@ class FrameSeam:
         self.cell = cell_px(band, cfg)
         self.width = 2 * int(np.ceil(band / self.cell)) + 1  # cells
         count = len(home)
-        step = max(1, cfg.video_seam_line_step)
+        self._every_line = np.arange(count)
+        self.step = line_step(self.cell, cfg)
+        step = self.step
         self._lines = np.unique(np.append(np.arange(0, count, step), count - 1)).astype(np.int32)
         solved = len(self._lines)
         self._max_step = int(np.ceil(cfg.seam_max_step_px * step / self.cell))  # cells between solved lines
         self._step_cost = cfg.seam_step_cost * self.cell  # per cell of sideways step
         self._solver = BandPath(solved, self.width, 1, cfg)
-        self._glide_width = min(self.width, 2 * int(np.ceil(cfg.video_seam_speed_px / self.cell)) + 1)
+        self._speed = max(cfg.video_seam_speed_px, self.cell)  # px a frame: at least one cell, or it could not glide
+        self._glide_width = min(self.width, 2 * int(np.ceil(self._speed / self.cell)) + 1)
         self._glide_solver = BandPath(solved, self._glide_width, 1, cfg)
         self._segment = np.array([[0, solved - 1, -1, -1]])
-        self._lines_wp = wp.array(self._lines, dtype=int, device=cfg.device)
-        self._x0_wp = wp.zeros(solved, dtype=int, device=cfg.device)  # the band's first cells, per reset
-        self._diff = wp.zeros((solved, self.width), dtype=float, device=cfg.device)
-        self._total = wp.zeros((solved, self.width), dtype=float, device=cfg.device)
+        device, cells = cfg.device, (solved, self.width)
+        self._lines_wp = wp.array(self._lines, dtype=int, device=device)
+        self._x0_wp = wp.zeros(solved, dtype=int, device=device)  # the band's first cells, per reset
+        self._diff = wp.zeros(cells, dtype=float, device=device)  # this frame's difference and sum
+        self._total = wp.zeros(cells, dtype=float, device=device)
+        self._last_diff = wp.zeros(cells, dtype=float, device=device)  # the last frame's difference
+        self._delta = wp.zeros(cells, dtype=float, device=device)  # how much it changed since
         self._learn = 1.0 / max(1.0, fps * cfg.video_seam_background_s)  # the background's update per frame
-        self._background: np.ndarray | None = None  # (K, width) source-plus-target luma of the background
-        self._spread: np.ndarray | None = None  # (K, width) its mean absolute deviation
+        self._background = wp.zeros(cells, dtype=float, device=device)  # source-plus-target luma of the background
+        self._spread = wp.zeros(cells, dtype=float, device=device)  # its mean absolute deviation
+        self._off = wp.zeros(cells, dtype=wp.uint8, device=device)  # 1: off the background this frame
+        self._moving = wp.zeros(cells, dtype=wp.uint8, device=device)  # 1: something in front (a static rig's)
+        self._home_term = wp.zeros(cells, dtype=float, device=device)  # the cost of leaving home, per reset
+        self._last_wp = wp.zeros(solved, dtype=int, device=device)  # the last frame's seam, per solved line
+        self._still_wp = wp.zeros(solved, dtype=wp.uint8, device=device)
+        self._change = wp.zeros(cells, dtype=float, device=device)  # a cell's cost without the seam's terms
+        self._free_cost = wp.zeros(cells, dtype=float, device=device)  # ... with them: the free path's
+        self._glide_first = wp.zeros(solved, dtype=int, device=device)  # the glide's first cells
+        self._glide_cost = wp.zeros((solved, self._glide_width), dtype=float, device=device)  # ... its cost
+        self._line_min = wp.zeros(solved, dtype=float, device=device)  # each line's cheapest cell
+        self._path_wp = wp.zeros(solved, dtype=int, device=device)  # this frame's seam, for the strip's mean
+        self._strip_mean = wp.zeros(solved, dtype=float, device=device)  # the seam blend's difference by the seam
+        self._strip_count = wp.zeros(solved, dtype=int, device=device)
+        self._modelled = False  # whether the background model holds this estimate's band
         self._shown: np.ndarray | None = None  # (K,) the solved lines' seam the last frame was composited with
-        self._last: tuple[np.ndarray, np.ndarray] | None = None  # the last frame's (difference, both)
+        self._has_last = False  # whether ``_last_diff`` holds the last frame's difference on this band
         self._still = np.zeros(solved, bool)  # the solved lines the last frame found still (``still_lines``)
         self.home: np.ndarray | None = None  # (L,) the estimate's seam, the band's centre (``reset``)
         self._path: np.ndarray | None = None  # (K,) the solved lines' seam (px, on the grid of cells)
@@ -117,10 +149,10 @@ class FrameSeam:
                     * self.cell).astype(np.int32)  # on the grid of cells, so cells line up from line to line
         self._x0_wp.assign(self._x0)
         self._cells = self._x0[:, None] + self.cell * np.arange(self.width, dtype=np.int32)[None, :]
-        self._home_term = (self.cfg.video_seam_home_cost
-                           * np.abs(self._cells - self.home[self._lines, None])).astype(np.float32)
-        self._last = None  # the band's cells moved: the last difference no longer lines up
-        self._background = None
+        runtime.upload(self._home_term, self.cfg.video_seam_home_cost
+                       * np.abs(self._cells - self.home[self._lines, None]))
+        self._has_last = False  # the band's cells moved: the last difference no longer lines up
+        self._modelled = False
         self._path = self._on_grid(self.home[self._lines] if self._path is None else self._path)
 
     def _on_grid(self, path: np.ndarray) -> np.ndarray:
@@ -128,8 +160,8 @@ class FrameSeam:
         nearest = self._x0 + self.cell * np.rint((np.asarray(path, np.float64) - self._x0) / self.cell)
         return np.clip(nearest, self._x0, self._cells[:, -1]).astype(np.int32)
 
-    def _solve_band(self, solver: BandPath, cost: np.ndarray, x0: np.ndarray) -> np.ndarray:
-        """(K,) int32 positions (px) of the cheapest path through ``cost`` (K, cells) whose cells start
+    def _solve_band(self, solver: BandPath, cost: wp.array, x0: np.ndarray) -> np.ndarray:
+        """(K,) int32 positions (px) of the cheapest path through ``cost`` (K, cells; a Warp array) whose cells start
         at ``x0`` (K,) px on the grid of cells."""
         first = x0 // self.cell
         return (solver.solve(cost, first, self._segment, self._max_step, self._step_cost) * self.cell).astype(np.int32)
@@ -147,39 +179,50 @@ class FrameSeam:
     @property
     def still(self) -> np.ndarray:
         """(L,) bool the lines the last frame found still (both solved lines around them still)."""
-        lines = np.arange(len(self.home))
-        return np.interp(lines, self._lines, self._still.astype(np.float64)) == 1.0
+        return np.interp(self._every_line, self._lines, self._still.astype(np.float64)) == 1.0
 
     def _per_line(self, path: np.ndarray) -> np.ndarray:
-        return np.rint(np.interp(np.arange(len(self.home)), self._lines, path)).astype(np.int32)
+        return np.rint(np.interp(self._every_line, self._lines, path)).astype(np.int32)
 
     def next(self, luma: Compositor) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The seam of the frame loaded in ``luma`` and its seam blend's offsets (``band_offsets``):
         (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32)."""
-        cfg = self.cfg
-        diff, total = luma.band_difference(self._lines_wp, self._x0_wp, self.width, self._diff, self._total,
-                                           self.cell)
-        both = diff < 0.5 * NOT_BOTH
-        self._still = self.still_lines(diff, both)
-        self._last = (diff.copy(), both)
+        self._diff, self._last_diff = self._last_diff, self._diff  # this frame's fills the older
+        luma.band_difference(self._lines_wp, self._x0_wp, self.width, self.cell, self._last_diff, self._diff,
+                             self._total, self._delta)
+        self._still = self.still_lines()
+        self._has_last = True
         last = self._path if self._shown is None else self._shown
         if not self._still.all():  # else nothing changed on any line: the seam and the background model stay
-            moving = self.foreground(total, both) if self.jumps else None
-            self._path = self._solve(diff, both, moving, last)
+            moving = self.foreground(self._diff, self._total) if self.jumps else None
+            self._path = self._solve(moving, last)
         self._shown = self._path.copy()
-        offsets_src, offsets_tgt = band_offsets(self._path, self._cells, diff, both, self._lines, cfg)
+        runtime.upload(self._path_wp, self._path)
+        runtime.launch_rows(strip_mean_kernel, len(self._lines), 1, [
+            self._diff, self._x0_wp, self.cell, self._path_wp, self.cfg.seam_blend_strip_px // self.cell,
+            self._strip_mean, self._strip_count], self.cfg.device, 1)
+        offsets_src, offsets_tgt = band_offsets(self._strip_mean.numpy(), self._strip_count.numpy(), self._lines,
+                                                self.step, self.cfg)
         return self.positions, offsets_src, offsets_tgt
 
-    def _solve(self, diff: np.ndarray, both: np.ndarray, moving: np.ndarray | None, last: np.ndarray) -> np.ndarray:
-        """The solved lines' new path (module docstring)."""
+    def _solve(self, moving: np.ndarray | None, last: np.ndarray) -> np.ndarray:
+        """The solved lines' new path (module docstring); ``moving``: the cells in front of the
+        background (``foreground``), None on a moving rig.
+
+        The glide moves at most ``video_seam_speed_px`` (or one cell) per solved line from ``last`` (K,)
+        and not at all on still lines: it is solved on the few cells it may take, from ``first``."""
         cfg = self.cfg
-        change = np.maximum(np.abs(diff) - np.float32(cfg.video_seam_noise), np.float32(0.0))
-        if moving is not None:
-            change += np.float32(cfg.video_seam_motion_cost) * moving
-        change[~both] = cfg.video_seam_blocked_cost
-        cost = change + self._home_term
-        cost += np.float32(cfg.video_seam_stay_cost) * np.abs(self._cells - last[:, None]).astype(np.float32)
-        glide = self._glide(cost, last)
+        first = np.clip((last - self._x0) // self.cell - self._glide_width // 2, 0, self.width - self._glide_width)
+        runtime.upload(self._last_wp, last)
+        runtime.upload(self._still_wp, self._still)
+        runtime.upload(self._glide_first, first)
+        runtime.launch_rows(band_cost_kernel, len(self._lines), 1, [
+            self._diff, self._moving, self._home_term, self._x0_wp, self.cell, self._last_wp, self._still_wp,
+            self._glide_first, float(self._speed), float(cfg.video_seam_noise), float(cfg.video_seam_motion_cost),
+            float(cfg.video_seam_blocked_cost), float(cfg.video_seam_stay_cost), float(cfg.video_seam_blocked_cost * 10),
+            self._change, self._free_cost, self._glide_cost, self._line_min], cfg.device, 1)
+        change = self._change.numpy()
+        glide = self._solve_band(self._glide_solver, self._glide_cost, self._x0 + self.cell * first)
         lines = np.arange(len(self._lines))
 
         def along(path: np.ndarray) -> float:
@@ -190,88 +233,70 @@ class FrameSeam:
         jump = cfg.video_seam_jump_cost * limit
         # Something in front of the background, and a path cheaper than the glide's by a jump may exist
         # (no path costs less than each line's cheapest cell): it may jump round it.
-        if moving is not None and moving.any() and along(glide) - float(change.min(axis=1).sum()) > jump:
-            block = np.float32(cfg.video_seam_blocked_cost * 10)
-            cost[self._still[:, None] & (self._cells != last[:, None])] += block  # still lines keep their seam
-            free = self._solve_band(self._solver, cost, self._x0)
+        if moving is not None and moving.any() and along(glide) - float(self._line_min.numpy().sum()) > jump:
+            free = self._solve_band(self._solver, self._free_cost, self._x0)
             path = free if along(glide) - along(free) > jump else glide
         if along(self._path) - along(path) > cfg.video_seam_margin * limit:
             return path.astype(np.int32)
         return self._path
 
-    def _glide(self, cost: np.ndarray, last: np.ndarray) -> np.ndarray:
-        """The cheapest path through ``cost`` (K, width) that moves at most ``video_seam_speed_px`` per
-        solved line from ``last`` (K,) and not at all on still lines, solved on the few cells it may take."""
-        cfg = self.cfg
-        reach = self._glide_width // 2
-        first = np.clip((last - self._x0) // self.cell - reach, 0, self.width - self._glide_width)
-        taken = first[:, None] + np.arange(self._glide_width)[None, :]
-        glide_x0 = (self._x0 + self.cell * first).astype(np.int32)
-        cells = np.take_along_axis(self._cells, taken, axis=1)
-        # Where the band has moved past the last seam (rounding of a blend's step), its nearest cell is near enough.
-        outside = np.maximum(np.maximum(self._x0 - last, last - self._cells[:, -1]), 0)
-        far = np.abs(cells - last[:, None]) > np.maximum(cfg.video_seam_speed_px, outside)[:, None]
-        blocked = far | (self._still[:, None] & (cells != last[:, None]))
-        sub = np.take_along_axis(cost, taken, axis=1) + blocked * np.float32(cfg.video_seam_blocked_cost * 10)
-        return self._solve_band(self._glide_solver, sub, glide_x0)
-
-    def foreground(self, total: np.ndarray, both: np.ndarray) -> np.ndarray:
-        """(K, width) float32 over the solved lines' band ``total`` (source plus target), 1 on cells off
-        the background model (module docstring), grown by ``video_seam_still_box_px``; none on the first
-        frame of an estimate. Updates the model."""
+    def foreground(self, diff: wp.array, total: wp.array) -> np.ndarray:
+        """(K, width) uint8 over the solved lines' band (its difference ``diff`` and source-plus-target
+        ``total``, Warp arrays as ``band_difference`` fills them), 1 on cells off the background model
+        (module docstring), grown by ``video_seam_still_box_px``; none on the first frame of an estimate.
+        Updates the model."""
         noise = np.float32(2.0 * self.cfg.video_seam_noise)
-        if self._background is None:
-            self._background = total.copy()
-            self._spread = np.full(total.shape, noise / SPREAD_FACTOR, np.float32)
-        change = total - self._background
-        change[~both] = 0.0
-        deviation = np.abs(change - whole_band_change(self._background, total, both, float(noise)))
-        off = both & (deviation > np.maximum(noise, np.float32(SPREAD_FACTOR) * self._spread))
-        learn = np.float32(self._learn)
-        self._background += learn * change
-        deviation -= self._spread
-        deviation[~both] = 0.0
-        self._spread += learn * deviation
+        if not self._modelled:
+            wp.copy(self._background, total)
+            self._spread.fill_(float(noise / SPREAD_FACTOR))
+            self._modelled = True
+        fit = (slice(None, None, FIT_STRIDE),) * 2
+        gain, offset = whole_band_fit(self._background.numpy()[fit], total.numpy()[fit],
+                                      diff.numpy()[fit] < 0.5 * NOT_BOTH, float(noise))
+        runtime.launch_row_loops(background_kernel, len(self._lines), self.width, [
+            diff, total, float(np.float32(gain - 1.0)), float(np.float32(offset)), float(noise), SPREAD_FACTOR,
+            float(np.float32(self._learn)), self._background, self._spread, self._off], self.cfg.device, 1)
         box = 2 * max(1, self.cfg.video_seam_still_box_px) + 1
-        solid = (cv2.blur(off.view(np.uint8), (box, box)) > 0).view(np.uint8)
-        return cv2.dilate(solid, np.ones((box, box), np.uint8)).astype(np.float32)
+        solid = (cv2.blur(self._off.numpy(), (box, box)) > 0).view(np.uint8)
+        moving = cv2.dilate(solid, np.ones((box, box), np.uint8))
+        runtime.upload(self._moving, moving)
+        return moving
 
-    def still_lines(self, diff: np.ndarray, both: np.ndarray) -> np.ndarray:
-        """(K,) bool: solved lines where nothing changed since the last frame (module docstring); none
-        without one."""
-        if self._last is None:
-            return np.zeros(len(diff), bool)
-        last_diff, last_both = self._last
-        common = both & last_both
-        delta = np.where(common, np.abs(diff - last_diff), 0.0).astype(np.float32)
+    def still_lines(self) -> np.ndarray:
+        """(K,) bool: solved lines where nothing changed since the last frame (module docstring), from the
+        band's difference loaded by ``band_difference``; none without a last frame."""
+        if not self._has_last:
+            return np.zeros(len(self._lines), bool)
         box = max(1, self.cfg.video_seam_still_box_px)
-        moved = (cv2.blur(delta, (box, box)) > self.cfg.video_seam_noise).any(axis=1)
-        return ~lines_near(moved, int(np.ceil(self.width * self.cell / max(1, self.cfg.video_seam_line_step))))
+        moved = (cv2.blur(self._delta.numpy(), (box, box)) > self.cfg.video_seam_noise).any(axis=1)
+        return ~lines_near(moved, int(np.ceil(self.width * self.cell / self.step)))
 
 
-def whole_band_change(background: np.ndarray, total: np.ndarray, both: np.ndarray, noise: float) -> np.ndarray:
-    """(L, width) float32 the change of ``total`` from ``background`` that a gain and an offset over the
-    whole band explain (a camera's exposure step, a flickering light): their least-squares fit on the
-    cells in ``both``, every :data:`FIT_STRIDE`-th line and cell, fitted again without the cells more
-    than ``noise`` (and twice the median residual) off the first fit (an object in front)."""
-    fit = both[::FIT_STRIDE, ::FIT_STRIDE]
-    x = background[::FIT_STRIDE, ::FIT_STRIDE][fit].astype(np.float64)
-    y = total[::FIT_STRIDE, ::FIT_STRIDE][fit].astype(np.float64)
+def whole_band_fit(background: np.ndarray, total: np.ndarray, both: np.ndarray, noise: float) -> tuple[float, float]:
+    """(gain, offset): how ``total`` changed from ``background`` over the whole band (a camera's exposure
+    step, a flickering light): their least-squares fit on the cells in ``both`` (the caller takes every
+    :data:`FIT_STRIDE`-th line and cell), fitted again without the cells more than ``noise`` (and twice
+    the median residual) off the first fit (an object in front). ``(gain - 1) x background + offset``
+    is the change they explain."""
+    x = background[both].astype(np.float64)
+    y = total[both].astype(np.float64)
     gain, offset = _gain_offset(x, y)
     residual = np.abs(y - gain * x - offset)
     kept = residual <= max(noise, 2.0 * float(np.median(residual))) if residual.size else residual > 0
-    gain, offset = _gain_offset(x[kept], y[kept])
-    return np.float32(gain - 1.0) * background + np.float32(offset)
+    return _gain_offset(x[kept], y[kept])
 
 
 def _gain_offset(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     """Least squares y = gain x + offset; gain 1 where x does not vary, (1, 0) without points."""
     if x.size == 0:
         return 1.0, 0.0
-    if x.size < 2 or x.var() <= 1e-6:
-        return 1.0, float(y.mean() - x.mean())
-    gain = float(np.mean((x - x.mean()) * (y - y.mean())) / x.var())
-    return gain, float(y.mean() - gain * x.mean())
+    x_mean, y_mean = x.sum() / x.size, y.sum() / y.size
+    dx = x - x_mean
+    x_var = float(dx @ dx) / x.size
+    if x.size < 2 or x_var <= 1e-6:
+        return 1.0, float(y_mean - x_mean)
+    gain = float(dx @ (y - y_mean)) / x.size / x_var
+    return gain, float(y_mean - gain * x_mean)
 
 
 def lines_near(flags: np.ndarray, reach: int) -> np.ndarray:
@@ -281,17 +306,13 @@ def lines_near(flags: np.ndarray, reach: int) -> np.ndarray:
     return count[np.minimum(lines + reach + 1, len(flags))] > count[np.maximum(lines - reach, 0)]
 
 
-def band_offsets(path: np.ndarray, cells: np.ndarray, diff: np.ndarray, both: np.ndarray, lines: np.ndarray,
+def band_offsets(strip_mean: np.ndarray, strip_count: np.ndarray, lines: np.ndarray, step: int,
                  cfg: Config) -> tuple[np.ndarray, np.ndarray]:
-    """The seam blend's low-frequency offsets of one frame (``partition.seam_offsets`` on the band):
-    per solved line (seam line ``lines`` (K,), ascending, the last line last), half the mean
-    difference ``diff`` (K, width) within ``seam_blend_strip_px`` of the seam ``path`` (K,) (the band
-    cells' positions ``cells`` (K, width)), averaged over ``seam_blend_rows`` lines, off the source and
-    onto the target, interpolated to every line: ((L, 1), (L, 1)) float32."""
-    strip = both & (np.abs(cells - path[:, None]) <= cfg.seam_blend_strip_px)
-    count = strip.sum(axis=1)
-    per_line = np.where(strip, diff, 0.0).sum(axis=1) / np.maximum(count, 1)
-    step = max(1, cfg.video_seam_line_step)
-    solved = running_mean(per_line[:, None], count > 0, max(1, round(cfg.seam_blend_rows / step)))[:, 0]
+    """The seam blend's low-frequency offsets of one frame (``partition.seam_offsets`` on the band): per
+    solved line (seam line ``lines`` (K,), ascending, the last line last, every ``step``-th), half the
+    mean difference next to the seam (``strip_mean`` (K,) over ``strip_count`` (K,) cells within
+    ``seam_blend_strip_px`` of it: ``strip_mean_kernel``), averaged over ``seam_blend_rows`` lines, off
+    the source and onto the target, interpolated to every line: ((L, 1), (L, 1)) float32."""
+    solved = running_mean(strip_mean[:, None], strip_count > 0, max(1, round(cfg.seam_blend_rows / step)))[:, 0]
     delta = np.interp(np.arange(int(lines[-1]) + 1), lines, solved).astype(np.float32)[:, None]
     return -0.5 * delta, 0.5 * delta
