@@ -41,7 +41,7 @@ WARMUP = 5  # frames not counted: the first estimate's band, the background mode
 PARTS = ((composite.Compositor, "band_difference", "band's difference (kernel)"),
          (seam_path.BandPath, "solve", "dynamic programming (per solve)"),
          (frame_seam.FrameSeam, "foreground", "background model"),
-         (frame_seam, "whole_band_change", "... its whole-band fit"),
+         (frame_seam, "whole_band_fit", "... its whole-band fit"),
          (frame_seam.FrameSeam, "still_lines", "still lines"),
          (frame_seam, "band_offsets", "seam blend's offsets"),
          (frame_seam.FrameSeam, "_solve", "paths with their costs (the DPs included)"))

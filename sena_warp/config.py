@@ -172,8 +172,8 @@ class Config:
     video_seam_band_ratio: float = 0.05  # per-frame seam: band half-width, x the canvas diagonal (room to go round an object)
     video_seam_band_min_px: int = 8  # per-frame seam: band half-width at least this
     video_seam_line_step: int = 2  # per-frame seam: solved on every this-th line (or every cell-th), interpolated between
-    video_seam_band_cells: int = 64  # per-frame seam: band half-width in cells; a cell is round(half-width / this) px
-    # wide, at least 1 (640-px pairs: 1 px; 720p and 1080p pairs: 2 px): the seam's work grows less with the size
+    video_seam_band_cells: int = 48  # per-frame seam: band half-width in cells; a cell is round(half-width / this) px
+    # wide, at least 1 (640-px pairs: 1 px; 720p: 2 px; 1080p: 3 px): the seam's work grows little with the size
     video_seam_noise: float = 6.0  # per-frame seam: differences below this (grey levels) are noise, not motion
     video_seam_still_box_px: int = 5  # per-frame seam: a line is still where no box this wide changed by video_seam_noise
     video_seam_stay_cost: float = 0.5  # per-frame seam: cost per px per line of leaving the last frame's seam

@@ -32,8 +32,8 @@ through it would lose a strip of it.
 
 Only the compositor's seam positions and the seam blend's offsets change per frame; its plan stays.
 Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig). The seam is
-solved on a grid of square cells: along a line every ``cell`` px (:func:`cell_px`: about
-``video_seam_band_cells`` cells each side of the seam), on every ``cell``-th line but at least
+solved on a grid of square cells: along a line every ``cell`` px (:func:`cell_px`: 1 px on a 640-px
+pair's canvas, 2 px on a 720p pair's, 3 px on a 1080p one's), on every ``cell``-th line but at least
 every ``video_seam_line_step``-th (:func:`line_step`), and interpolated between the solved lines (the
 seam blend's transition is wider than the interpolation's rounding). The work per frame so grows
 little with the canvas; the boxes above are counted in cells and solved lines.

@@ -468,7 +468,7 @@ class SenaFrameCompositor:
                 "map_change_p99_px_max": round(max(self._map_change_px, default=0.0), 4),
                 "frames": len(self._seam_jitter_px),
             },
-            "frame_seam": {"band_px": self._band, "cell_px": self._seam.cell,
+            "frame_seam": {"band_px": self._band, "cell_px": self._seam.cell, "line_step": self._seam.step,
                            "motion_px_mean": round(float(motion.mean()), 4),
                            "motion_px_p99": round(float(np.percentile(motion, 99)), 4),
                            "motion_px_max": round(float(motion.max()), 4)},
