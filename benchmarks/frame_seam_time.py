@@ -3,7 +3,7 @@
 Usage (from the repository root)::
 
     .venv/bin/python benchmarks/frame_seam_time.py [--left L --right R] [--frames N] [--work DIR]
-        [--set video_seam_band_cells=64 ...] [--parts]
+        [--set video_seam_frame_cells=360 ...] [--parts]
 
 Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p clip pair in ``--work``:
 a slow pan over a real pair, so every line of the band changes every frame (the worst case: no line

@@ -111,7 +111,7 @@ def band_cost_kernel(
     width = diff.shape[1]
     outside = wp.max(wp.max(x0 - seam, seam - (x0 + cell * (width - 1))), 0)
     reach = wp.max(speed, float(outside))
-    lowest = float(blocked_cost)
+    lowest = float(1.0e30)
     for j in range(width):
         d = diff[k, j]
         c = wp.max(wp.abs(d) - noise, 0.0)

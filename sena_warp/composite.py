@@ -296,21 +296,20 @@ class Compositor:
             self._border[channels] = (0, wp.vec2(0.0, 0.0), 0, none, none)
 
     def band_difference(self, lines: wp.array, band_x0: wp.array, width: int, cell: int, last: wp.array,
-                        out: wp.array, out_total: wp.array, out_delta: wp.array) -> tuple[np.ndarray, np.ndarray]:
-        """Source minus target and source plus target (channel 0, with gains; grey levels) of the
-        loaded pair on seam lines ``lines`` (K,) int, ``width`` cells each from ``band_x0`` (K,) int, one
-        every ``cell`` positions (Warp arrays on this device, uploaded once by the caller): two (K,
-        width) float32, ``NOT_BOTH`` and 0 where a cell does not hold both views. ``out``,
-        ``out_total``: (K, width) float Warp arrays to fill; ``out_delta`` gets |difference - ``last``|
-        (the last frame's difference), 0 where either lacks a view."""
+                        out: wp.array, out_total: wp.array, out_delta: wp.array) -> None:
+        """Fill ``out`` and ``out_total`` ((K, width) float Warp arrays on this device) with source minus
+        target and source plus target (channel 0, with gains; grey levels) of the loaded pair on seam
+        lines ``lines`` (K,) int, ``width`` cells each from ``band_x0`` (K,) int, one every ``cell``
+        positions (Warp arrays, uploaded once by the caller): ``NOT_BOTH`` and 0 where a cell does not
+        hold both views; ``out_delta`` with |difference - ``last``| (the last frame's difference), 0
+        where either lacks a view."""
         buf, channels, _ = self._loaded
         gains = self._gains[channels]
         inputs = [buf.src.flatten(), buf.tgt.flatten(), buf.frame_inputs[2], buf.plan, buf.plan_tgt,
                   self.canvas_shape[1], self.canvas_shape[0], int(self.layout.lines_are_rows), lines, band_x0,
                   int(cell), *gains, self.tone, last, out, out_total, out_delta]
-        # One CPU thread: the band is small, a second costs more in hand-over than it saves.
-        runtime.launch_row_loops(band_difference_kernel, lines.shape[0], width, inputs, self.device, 1)
-        return out.numpy(), out_total.numpy()
+        runtime.launch_row_loops(band_difference_kernel, lines.shape[0], width, inputs, self.device,
+                                 runtime.BAND_THREADS)
 
     def composite(self, fill: Sequence[int] | None = None) -> np.ndarray:
         """The panorama of the loaded pair: (Hc, Wc, C) uint8, or (Hc, Wc) for planes; ``fill``: the C

@@ -160,7 +160,7 @@ class Config:
     video_drift_px: float = 2.0  # static rig: a view's move (input px) beyond this from what the maps follow moves them
     video_drift_speed_px: float = 0.5  # static rig: a drift move is blended in at this many px a frame (faster jolts)
     video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly (at least)
-    video_seam_speed_px: float = 2.0  # the seam moves at most this per frame (a blend lasts long enough), but for jumps
+    video_seam_speed_px: float = 2.0  # the seam moves at most this (or one cell) per frame (a blend lasts long enough), but for jumps
     video_warp_follow: float = 0.65  # moving rig: an accepted estimate moves the maps this share of the way (causal
     # exponential smoothing of the warp across estimates: estimation noise averages out; 1: all the way)
     video_estimate_workers: int = 1  # moving rig: re-estimates run on this many threads off the frame loop (0: on it)
@@ -172,8 +172,8 @@ class Config:
     video_seam_band_ratio: float = 0.05  # per-frame seam: band half-width, x the canvas diagonal (room to go round an object)
     video_seam_band_min_px: int = 8  # per-frame seam: band half-width at least this
     video_seam_line_step: int = 2  # per-frame seam: solved on every this-th line (or every cell-th), interpolated between
-    video_seam_band_cells: int = 48  # per-frame seam: band half-width in cells; a cell is round(half-width / this) px
-    # wide, at least 1 (640-px pairs: 1 px; 720p: 2 px; 1080p: 3 px): the seam's work grows little with the size
+    video_seam_frame_cells: int = 360  # per-frame seam: the inputs' short side in cells; a cell is round(short side /
+    # this) px wide, at least 1 (inputs up to 640x480: 1 px; 720p: 2 px; 1080p: 3 px; 4K: 6 px): the work grows little
     video_seam_noise: float = 6.0  # per-frame seam: differences below this (grey levels) are noise, not motion
     video_seam_still_box_px: int = 5  # per-frame seam: a line is still where no box this wide changed by video_seam_noise
     video_seam_stay_cost: float = 0.5  # per-frame seam: cost per px per line of leaving the last frame's seam

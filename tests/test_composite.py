@@ -155,12 +155,11 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     cells = (len(lines), count)
     last = np.full(cells, 3.0, np.float32)
     last[:, 0] = NOT_BOTH  # the last frame lacked a view there
-    delta = wp.zeros(cells, dtype=float, device=warp_device)
-    diff, total = comp.band_difference(wp.array(lines, dtype=int, device=warp_device),
-                                       wp.array(band_x0, dtype=int, device=warp_device), count, cell,
-                                       wp.array(last, dtype=float, device=warp_device),
-                                       wp.zeros(cells, dtype=float, device=warp_device),
-                                       wp.zeros(cells, dtype=float, device=warp_device), delta)
+    out = [wp.zeros(cells, dtype=float, device=warp_device) for _ in range(3)]
+    comp.band_difference(wp.array(lines, dtype=int, device=warp_device),
+                         wp.array(band_x0, dtype=int, device=warp_device), count, cell,
+                         wp.array(last, dtype=float, device=warp_device), *out)
+    diff, total, delta = (array.numpy() for array in out)
     v_src, ok_src = remap_reference(plane_src[:, :, None], map_src)
     v_tgt, ok_tgt = remap_reference(plane_tgt[:, :, None], map_tgt)
     rows = lines[:, None]
@@ -175,8 +174,8 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     assert np.abs(total[both] - (adjusted_src + adjusted_tgt)[both]).max() < 0.25
     assert np.all(total[~both] == 0.0)
     changed = both & (last < 0.5 * NOT_BOTH)
-    np.testing.assert_allclose(delta.numpy()[changed], np.abs(diff - 3.0)[changed], atol=1e-5)
-    assert np.all(delta.numpy()[~changed] == 0.0)
+    np.testing.assert_allclose(delta[changed], np.abs(diff - 3.0)[changed], atol=1e-5)
+    assert np.all(delta[~changed] == 0.0)
 
 
 def test_compositor_rejects_mismatched_inputs(scene, warp_device):  # noqa: F811

@@ -10,7 +10,7 @@ import warp as wp
 
 from sena_warp.config import Config
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.video.frame_seam import FrameSeam, lines_near, whole_band_fit
+from sena_warp.video.frame_seam import FrameSeam, cell_px, line_step, lines_near, whole_band_fit
 
 CFG = Config(device="cpu")
 LINES, BAND = 120, 30
@@ -26,8 +26,8 @@ def static_band(seed: int) -> np.ndarray:
 HOME = 100  # the estimate's seam on every line; the bands below start at HOME - BAND
 
 
-def seam(cfg: Config = CFG) -> FrameSeam:
-    return FrameSeam(np.full(LINES, float(HOME), np.float32), BAND, True, FPS, cfg)
+def seam(cfg: Config = CFG, cell: int = 1) -> FrameSeam:
+    return FrameSeam(np.full(LINES, float(HOME), np.float32), BAND, cell, True, FPS, cfg)
 
 
 def model_seam() -> FrameSeam:
@@ -48,9 +48,18 @@ def explained_change(background: np.ndarray, total: np.ndarray, both: np.ndarray
     return (gain - 1.0) * background + offset
 
 
-def with_cell(cell: int) -> Config:
-    """The settings with a per-frame seam cell of ``cell`` px for a band of BAND px."""
-    return CFG.replace(video_seam_band_cells=BAND // cell)
+def test_a_cell_is_the_same_share_of_the_inputs_whatever_their_size():
+    def cell(*shapes):
+        return cell_px(shapes, CFG)
+
+    assert cell((480, 640), (480, 640)) == 1  # the shared 640-px recordings
+    assert cell((480, 270), (480, 270)) == 1  # a portrait phone clip
+    assert cell((720, 1280), (720, 1280)) == 2
+    assert cell((1080, 1920), (1080, 1920)) == cell((1920, 1080), (1920, 1080)) == 3
+    assert cell((2160, 3840), (2160, 3840)) == 6
+    assert cell((2160, 3840), (720, 1280)) == 2  # the smaller input's
+    # Square cells: solved on every cell-th line where cells are wider than the line step.
+    assert [line_step(c, CFG) for c in (1, 2, 3, 6)] == [CFG.video_seam_line_step, 2, 3, 6]
 
 
 def test_lines_near_is_a_dilation_along_the_lines():
@@ -132,7 +141,6 @@ class BandFrames:
         out_total.assign(np.where(inside, np.take_along_axis(self.total[solved], taken, axis=1), 0.0).astype(np.float32))
         last = last.numpy()
         out_delta.assign(np.where(inside & (last < 0.5 * NOT_BOTH), np.abs(diff - last), 0.0).astype(np.float32))
-        return out.numpy(), out_total.numpy()
 
 
 def valley_band(column: int) -> np.ndarray:
@@ -144,9 +152,7 @@ def valley_band(column: int) -> np.ndarray:
 def valley_seam(cell: int, seed: int) -> tuple[FrameSeam, BandFrames]:
     """A seam on cells of ``cell`` px and frames whose difference's valley is at its home, over a
     textured background (``static_band(seed)``)."""
-    band = seam(with_cell(cell))
-    assert band.cell == cell
-    return band, BandFrames(valley_band(BAND), static_band(seed))
+    return seam(cell=cell), BandFrames(valley_band(BAND), static_band(seed))
 
 
 @pytest.mark.parametrize("cell", [1, 2, 3])
@@ -185,5 +191,20 @@ def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
     positions, offsets_src, offsets_tgt = band.next(frames)
     cells = positions - (HOME - BAND)
     assert np.all((cells[40:80] < 18) | (cells[40:80] > 45))  # round the object, not through it
-    assert np.abs(positions - home).max() > CFG.video_seam_speed_px  # a jump, not a glide
+    assert np.abs(positions - home).max() > max(CFG.video_seam_speed_px, cell)  # a jump, not a glide
     assert offsets_src.shape == (LINES, 1) and np.allclose(offsets_src, -offsets_tgt)
+
+
+def test_a_reset_to_the_same_home_keeps_the_band_and_a_new_home_starts_it_again():
+    band, frames = valley_seam(1, 9)
+    for _ in range(3):
+        band.next(frames)
+    assert band.still.all()  # nothing changes: every line still
+    band.reset(band.home.copy())  # the maps moved with a camera's drift, the seam did not
+    band.next(frames)
+    assert band.still.all()  # the last difference was kept: still at once
+    band.reset(band.home + 4.0)  # a new estimate's seam: the band's cells moved
+    band.next(frames)
+    assert not band.still.any()  # no last difference on the new cells: nothing is still yet
+    band.next(frames)
+    assert band.still.all()

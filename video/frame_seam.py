@@ -32,11 +32,11 @@ through it would lose a strip of it.
 
 Only the compositor's seam positions and the seam blend's offsets change per frame; its plan stays.
 Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig). The seam is
-solved on a grid of square cells: along a line every ``cell`` px (:func:`cell_px`: 1 px on a 640-px
-pair's canvas, 2 px on a 720p pair's, 3 px on a 1080p one's), on every ``cell``-th line but at least
-every ``video_seam_line_step``-th (:func:`line_step`), and interpolated between the solved lines (the
+solved on a grid of square cells: along a line every ``cell`` px (:func:`cell_px`: 1 px for inputs
+up to 640x480, 2 px for 720p, 3 px for 1080p), on every ``video_seam_line_step``-th line or, where
+cells are wider, every cell-th (:func:`line_step`), and interpolated between the solved lines (the
 seam blend's transition is wider than the interpolation's rounding). The work per frame so grows
-little with the canvas; the boxes above are counted in cells and solved lines.
+little with the size; the boxes above are counted in cells and solved lines.
 """
 
 from __future__ import annotations
@@ -62,10 +62,12 @@ def band_half_width(shape: tuple[int, int], cfg: Config) -> int:
     return max(cfg.video_seam_band_min_px, int(round(cfg.video_seam_band_ratio * float(np.hypot(*shape)))))
 
 
-def cell_px(band: int, cfg: Config) -> int:
-    """The per-frame seam's cell width in px for a band half-width of ``band`` px: about
-    ``video_seam_band_cells`` cells each side of the seam."""
-    return max(1, int(round(band / max(1, cfg.video_seam_band_cells))))
+def cell_px(frame_shapes: tuple[tuple[int, int], ...], cfg: Config) -> int:
+    """The per-frame seam's cell width in px for inputs of (rows, cols) ``frame_shapes``: their short
+    side in ``video_seam_frame_cells`` cells, so that a cell covers the same share of the scene
+    whatever the canvas's shape."""
+    short = min(min(shape) for shape in frame_shapes)
+    return max(1, int(round(short / max(1, cfg.video_seam_frame_cells))))
 
 
 def line_step(cell: int, cfg: Config) -> int:
@@ -76,19 +78,20 @@ def line_step(cell: int, cfg: Config) -> int:
 
 class FrameSeam:
     """The per-frame seam of one luma compositor whose plan keeps both views within ``band`` of the
-    estimate's seam ``home`` (L,) float32 (positions per line); ``jumps``: whether it may leave its
-    gliding path and keeps a background model (a static rig); ``fps``: the video's frame rate.
+    estimate's seam ``home`` (L,) float32 (positions per line), on cells ``cell`` px wide
+    (:func:`cell_px`); ``jumps``: whether it may leave its gliding path and keeps a background model (a
+    static rig); ``fps``: the video's frame rate.
 
     The seam is solved on every ``step``-th line (:func:`line_step`, and the last) and interpolated
     between them; ``positions``, ``shown`` and ``still`` are per line. The band's cells live in Warp
-    arrays (K solved lines, ``width`` cells) that the kernels of ``kernels/frame_seam.py`` fill, on one
-    CPU thread each: the band is small, a second thread costs more in hand-over than it saves."""
+    arrays (K solved lines, ``width`` cells) that the kernels of ``kernels/frame_seam.py`` fill (on
+    ``runtime.BAND_THREADS`` CPU threads)."""
 
-    def __init__(self, home: np.ndarray, band: int, jumps: bool, fps: float, cfg: Config):
+    def __init__(self, home: np.ndarray, band: int, cell: int, jumps: bool, fps: float, cfg: Config):
         self.cfg = cfg
         self.jumps = jumps
         self.band = band
-        self.cell = cell_px(band, cfg)
+        self.cell = cell
         self.width = 2 * int(np.ceil(band / self.cell)) + 1  # cells
         count = len(home)
         self._every_line = np.arange(count)
@@ -200,7 +203,7 @@ class FrameSeam:
         runtime.upload(self._path_wp, self._path)
         runtime.launch_rows(strip_mean_kernel, len(self._lines), 1, [
             self._diff, self._x0_wp, self.cell, self._path_wp, self.cfg.seam_blend_strip_px // self.cell,
-            self._strip_mean, self._strip_count], self.cfg.device, 1)
+            self._strip_mean, self._strip_count], self.cfg.device, runtime.BAND_THREADS)
         offsets_src, offsets_tgt = band_offsets(self._strip_mean.numpy(), self._strip_count.numpy(), self._lines,
                                                 self.step, self.cfg)
         return self.positions, offsets_src, offsets_tgt
@@ -219,8 +222,9 @@ class FrameSeam:
         runtime.launch_rows(band_cost_kernel, len(self._lines), 1, [
             self._diff, self._moving, self._home_term, self._x0_wp, self.cell, self._last_wp, self._still_wp,
             self._glide_first, float(self._speed), float(cfg.video_seam_noise), float(cfg.video_seam_motion_cost),
-            float(cfg.video_seam_blocked_cost), float(cfg.video_seam_stay_cost), float(cfg.video_seam_blocked_cost * 10),
-            self._change, self._free_cost, self._glide_cost, self._line_min], cfg.device, 1)
+            float(cfg.video_seam_blocked_cost), float(cfg.video_seam_stay_cost),
+            float(cfg.video_seam_blocked_cost * 10),  # a blocked cell; still lines keep their seam
+            self._change, self._free_cost, self._glide_cost, self._line_min], cfg.device, runtime.BAND_THREADS)
         change = self._change.numpy()
         glide = self._solve_band(self._glide_solver, self._glide_cost, self._x0 + self.cell * first)
         lines = np.arange(len(self._lines))
@@ -245,6 +249,8 @@ class FrameSeam:
         ``total``, Warp arrays as ``band_difference`` fills them), 1 on cells off the background model
         (module docstring), grown by ``video_seam_still_box_px``; none on the first frame of an estimate.
         Updates the model."""
+        if diff.shape != self._background.shape or total.shape != self._background.shape:
+            raise ValueError(f"band of {diff.shape} / {total.shape} cells for a model of {self._background.shape}")
         noise = np.float32(2.0 * self.cfg.video_seam_noise)
         if not self._modelled:
             wp.copy(self._background, total)
@@ -255,7 +261,8 @@ class FrameSeam:
                                       diff.numpy()[fit] < 0.5 * NOT_BOTH, float(noise))
         runtime.launch_row_loops(background_kernel, len(self._lines), self.width, [
             diff, total, float(np.float32(gain - 1.0)), float(np.float32(offset)), float(noise), SPREAD_FACTOR,
-            float(np.float32(self._learn)), self._background, self._spread, self._off], self.cfg.device, 1)
+            float(np.float32(self._learn)), self._background, self._spread, self._off], self.cfg.device,
+            runtime.BAND_THREADS)
         box = 2 * max(1, self.cfg.video_seam_still_box_px) + 1
         solid = (cv2.blur(self._off.numpy(), (box, box)) > 0).view(np.uint8)
         moving = cv2.dilate(solid, np.ones((box, box), np.uint8))

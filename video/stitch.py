@@ -38,7 +38,7 @@ from sena_warp.kernels.runtime import prewarm, resolve_config
 from .drift import DriftWatch, overlap_boxes
 from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
 from .exposure import ExposureTracker
-from .frame_seam import FrameSeam, band_half_width
+from .frame_seam import FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_video
 from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, chroma_lines, drifted_maps, lerp_maps, map_change_px,
                    plane_maps, sampled_mask, seam_change_px, target_offset)
@@ -177,7 +177,8 @@ class SenaFrameCompositor:
                                   None)
         self._border_set = None  # the border offsets last uploaded
         self._set_border()
-        self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, self._reestimate_s is None, fps, cfg)
+        self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, cell_px(frame_shapes, cfg),
+                               self._reestimate_s is None, fps, cfg)
         self._fps = fps
         self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
         self._plane_shapes: tuple[tuple[int, int], tuple[int, int]] | None = None
