@@ -33,6 +33,7 @@ KIND_BAND = wp.constant(3)  # both valid near the seam: the side (or the mix) fo
 FRAC_BITS = wp.constant(10)  # sub-pixel steps of 1/1024 px: the value moves < 0.25 grey level
 FRAC_ONE = wp.constant(1 << 10)
 FRAC_MASK = wp.constant(2047)  # 11 bits: a fraction may be exactly 1 at the last row / column
+ALPHA_TAIL_SIGMAS = wp.constant(8.0)  # the smoothed ramp is within 1e-4 of 0 or 1 this many sigmas past its ends
 
 
 @wp.func
@@ -260,9 +261,13 @@ def _composite_frame_kernel(channels: int):
             if kind == KIND_TARGET:
                 a = 0.0
             elif kind == KIND_BAND:
-                # The smoothed ramp's tails never reach 0 or 1 exactly: one side alone beyond 1e-4.
-                a = source_alpha(d, transition_px, smooth_sigma_px)
-                a = wp.where(a > 0.9999, 1.0, wp.where(a < 0.0001, 0.0, a))
+                # The smoothed ramp's tails never reach 0 or 1 exactly: one side alone beyond 1e-4, which
+                # they pass well within ALPHA_TAIL_SIGMAS of the ramp's ends (no erf or exp there).
+                if wp.abs(d) >= 0.5 * transition_px + ALPHA_TAIL_SIGMAS * smooth_sigma_px:
+                    a = wp.where(d > 0.0, 0.0, 1.0)
+                else:
+                    a = source_alpha(d, transition_px, smooth_sigma_px)
+                    a = wp.where(a > 0.9999, 1.0, wp.where(a < 0.0001, 0.0, a))
             p = word_offset(word)
             fx = word_fx(word)
             fy = word_fy(word)

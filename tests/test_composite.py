@@ -11,11 +11,13 @@ import math
 
 import numpy as np
 import pytest
+import warp as wp
 
 from sena_warp.composite import Compositor, SeamLayout
 from sena_warp.config import Config
 from sena_warp.gains import tone_curve
-from sena_warp.kernels.composite import NOT_BOTH
+from sena_warp.kernels.composite import ALPHA_TAIL_SIGMAS, NOT_BOTH
+from sena_warp.kernels.seam import source_alpha
 from test_kernels_maps import DEVICES
 from test_kernels_remap import remap_reference, scene  # noqa: F401  (scene is a fixture)
 
@@ -141,8 +143,6 @@ def test_the_frame_seam_moves_within_its_band_without_a_new_plan(scene, device, 
 
 @pytest.mark.parametrize("cell", [1, 2])
 def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_device, cell):  # noqa: F811
-    import warp as wp
-
     img_src, img_tgt, map_src, map_tgt, _ = scene
     plane_src, plane_tgt = np.ascontiguousarray(img_src[:, :, 0]), np.ascontiguousarray(img_tgt[:, :, 0])
     seam = layout(scene, band_px=10.0)
@@ -205,3 +205,27 @@ def test_planes_load_as_their_interleaved_image(scene, warp_device):  # noqa: F8
     assert interleaved.shape[2] == 2 and interleaved.std() > 10
     with pytest.raises(ValueError, match="planes"):
         comp.load_planes(planes_src, [planes_tgt[0], planes_tgt[1][:-1]])
+
+
+@wp.kernel
+def alpha_at_kernel(t: wp.array(dtype=float), transition_px: wp.array(dtype=float), sigma_px: wp.array(dtype=float),
+                    alpha: wp.array(dtype=float)):
+    i = wp.tid()
+    alpha[i] = source_alpha(t[i], transition_px[i], sigma_px[i])
+
+
+def test_the_frame_kernel_may_skip_the_smoothed_ramp_beyond_its_tails(warp_device):  # noqa: F811
+    # The frame kernel shows one side alone where the smoothed ramp is within 1e-4 of 0 or 1 and takes
+    # that to hold from ALPHA_TAIL_SIGMAS past the ramp's ends without computing it there: check it does,
+    # on both sides, for transitions of 1-64 px and sigmas of 0-16 px.
+    grid = np.meshgrid([-1.0, 1.0], [1.0, 2.0, 8.0, 24.0, 64.0], [0.0, 0.5, 1.5, 4.0, 16.0], [0.0, 0.5, 3.0, 100.0],
+                       indexing="ij")
+    side, transition, sigma, beyond = (np.ravel(v).astype(np.float32) for v in grid)
+    at = side * (0.5 * transition + float(ALPHA_TAIL_SIGMAS) * sigma + beyond)
+    alpha = wp.zeros(len(at), dtype=float, device=warp_device)
+    wp.launch(alpha_at_kernel, dim=len(at), inputs=[wp.array(at, dtype=float, device=warp_device),
+                                                    wp.array(transition, dtype=float, device=warp_device),
+                                                    wp.array(sigma, dtype=float, device=warp_device), alpha],
+              device=warp_device)
+    values = alpha.numpy()
+    assert np.all(values[at > 0] < 0.0001) and np.all(values[at < 0] > 0.9999)  # the target's side, the source's
