@@ -77,7 +77,7 @@ fi
 
 # The CUDA cases of the kernel tests ([cuda] in their ids), and the device choice's own tests.
 run cuda_tests 120 $PY -m pytest -q -rs -k "cuda or resolve_device" tests/test_kernels_maps.py \
-  tests/test_kernels_remap.py tests/test_composite.py tests/test_kernels_runtime.py
+  tests/test_kernels_remap.py tests/test_composite.py tests/test_kernels_frame_seam.py tests/test_kernels_runtime.py
 TESTS_RC=$?
 [[ -f $DATA/pairs/rew_lawn_2160/a.jpg ]] || echo "gpu_check: no benchmark pair at $DATA/pairs/rew_lawn_2160" \
   "(set DATA to the shared data set): the bench steps will fail"
