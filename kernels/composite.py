@@ -242,6 +242,7 @@ def _composite_frame_kernel(channels: int):
         """
         i, j = wp.tid()
         y = row0 + i
+        bw_row = border_weights(y, border_lines, border_on, lf_px)  # a row's, where the lines are rows
         for x in range(j, width, col_step):
             q = y * width + x
             o = q * wp.static(channels)
@@ -255,7 +256,9 @@ def _composite_frame_kernel(channels: int):
             d = float(lp[1]) - seam[lp[0]]
             lf = lf_weight(d, lf_px)
             lo = lp[0] * wp.static(channels)
-            bw = border_weights(lp[0], border_lines, border_on, lf_px)
+            bw = bw_row
+            if lines_are_rows == 0:
+                bw = border_weights(lp[0], border_lines, border_on, lf_px)
             bo = lp[1] * wp.static(channels)
             a = float(1.0)
             if kind == KIND_TARGET:
