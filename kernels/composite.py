@@ -312,6 +312,12 @@ COMPOSITE_FRAME_KERNELS = {channels: _composite_frame_kernel(channels) for chann
 NOT_BOTH = wp.constant(1.0e9)  # band_difference_kernel: the cell is not a band pixel (a view is missing)
 
 
+@wp.func
+def holds_both(diff: float) -> bool:
+    """Whether a band cell of difference ``diff`` (``band_difference_kernel``) holds both views."""
+    return diff < 0.5 * NOT_BOTH
+
+
 @wp.kernel
 def band_difference_kernel(
     row0: int,
@@ -371,7 +377,7 @@ def band_difference_kernel(
         total[k, j] = both_sum
         last = last_diff[k, j]
         change = float(0.0)
-        if value < 0.5 * NOT_BOTH and last < 0.5 * NOT_BOTH:
+        if holds_both(value) and holds_both(last):
             change = wp.abs(value - last)
         delta[k, j] = change
 

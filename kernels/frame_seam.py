@@ -13,13 +13,7 @@ from __future__ import annotations
 
 import warp as wp
 
-from sena_warp.kernels.composite import NOT_BOTH
-
-
-@wp.func
-def holds_both(diff: float) -> bool:
-    """Whether a band cell of difference ``diff`` holds both views."""
-    return diff < 0.5 * NOT_BOTH
+from sena_warp.kernels.composite import holds_both
 
 
 @wp.kernel

@@ -153,39 +153,27 @@ def seam_cost_canvas(warped_src: np.ndarray, placed_tgt: np.ndarray, both: np.nd
 
 
 class BandPath:
-    """The DP of ``kernels/seam_path.py`` for a band of fixed shape, its device arrays allocated once
-    (a video solves the same band every frame, mostly with the same segments: uploaded when they change)."""
+    """The DP of ``kernels/seam_path.py`` for a band of fixed shape and fixed ``segments`` (S, 4) (see
+    :func:`dp_segments`), its device arrays allocated and its segments uploaded once (a video solves
+    the same band every frame)."""
 
-    def __init__(self, rows: int, width: int, segments: int, cfg: Config):
+    def __init__(self, rows: int, width: int, segments: np.ndarray, cfg: Config):
         device = cfg.device
         self.cfg = cfg
         self.shape = (rows, width)
-        self.cost: wp.array | None = None  # made on the first solve of a numpy cost band
+        segments = np.asarray(segments, np.int32).reshape(-1, 4)
+        self.segments = [wp.array(np.ascontiguousarray(segments[:, k]), dtype=int, device=device) for k in range(4)]
         self.band_x0 = wp.zeros(rows, dtype=int, device=device)
-        self.segments = [wp.zeros(segments, dtype=int, device=device) for _ in range(4)]
-        self._segments: np.ndarray | None = None  # the segments last uploaded
-        self.acc = wp.zeros((segments, 2, width), dtype=float, device=device)
+        self.acc = wp.zeros((len(segments), 2, width), dtype=float, device=device)
         self.back = wp.zeros((rows, width), dtype=wp.int8, device=device)
         self.path = wp.zeros(rows, dtype=int, device=device)
 
-    def solve(self, cost_band: np.ndarray | wp.array, band_x0: np.ndarray, segments: np.ndarray, max_step: int,
-              step_cost: float) -> np.ndarray:
-        """See :func:`dp_segments`; ``segments`` must have the count given at construction. ``cost_band``
-        may be a Warp array of the band's shape on this device: it is read in place."""
-        if not isinstance(cost_band, wp.array):
-            if self.cost is None:
-                self.cost = wp.zeros(self.shape, dtype=float, device=self.cfg.device)
-            runtime.upload(self.cost, cost_band)
-            cost_band = self.cost
+    def solve(self, cost_band: wp.array, band_x0: np.ndarray, max_step: int, step_cost: float) -> np.ndarray:
+        """See :func:`dp_segments`; ``cost_band``: a (rows, width) float Warp array on this device."""
         runtime.upload(self.band_x0, band_x0)
-        segments = np.asarray(segments, np.int32).reshape(-1, 4)
-        if self._segments is None or not np.array_equal(segments, self._segments):
-            for k in range(4):
-                runtime.upload(self.segments[k], segments[:, k])
-            self._segments = segments.copy()
         inputs = [cost_band, self.band_x0, *self.segments, int(max_step), float(step_cost), self.acc, self.back,
                   self.path]
-        runtime.launch_rows(seam_dp_kernel, len(segments), 1, inputs, self.cfg.device, self.cfg.cpu_threads)
+        runtime.launch_rows(seam_dp_kernel, self.acc.shape[0], 1, inputs, self.cfg.device, self.cfg.cpu_threads)
         return self.path.numpy()
 
 
@@ -199,8 +187,8 @@ def dp_segments(cost_band: np.ndarray, band_x0: np.ndarray, segments: np.ndarray
     (resolved) with ``cfg.cpu_threads``.
     """
     rows, width = cost_band.shape
-    segments = np.asarray(segments, np.int32).reshape(-1, 4)
-    return BandPath(rows, width, len(segments), cfg).solve(cost_band, band_x0, segments, max_step, step_cost)
+    cost = wp.array(np.ascontiguousarray(cost_band, np.float32), dtype=float, device=cfg.device)
+    return BandPath(rows, width, segments, cfg).solve(cost, band_x0, max_step, step_cost)
 
 
 def overlap_rows(both: np.ndarray) -> tuple[int, int]:

@@ -95,17 +95,20 @@ class FrameSeam:
         self.width = 2 * int(np.ceil(band / self.cell)) + 1  # cells
         count = len(home)
         self._every_line = np.arange(count)
+        box = 2 * max(1, cfg.video_seam_still_box_px) + 1
+        self._object_box = (box, np.ones((box, box), np.uint8))  # an object's box (``foreground``): size, kernel
         self.step = line_step(self.cell, cfg)
         step = self.step
         self._lines = np.unique(np.append(np.arange(0, count, step), count - 1)).astype(np.int32)
         solved = len(self._lines)
+        self._solved = np.arange(solved)
         self._max_step = int(np.ceil(cfg.seam_max_step_px * step / self.cell))  # cells between solved lines
         self._step_cost = cfg.seam_step_cost * self.cell  # per cell of sideways step
-        self._solver = BandPath(solved, self.width, 1, cfg)
+        segment = np.array([[0, solved - 1, -1, -1]])  # one, free at both ends
+        self._solver = BandPath(solved, self.width, segment, cfg)
         self._speed = max(cfg.video_seam_speed_px, self.cell)  # px a frame: at least one cell, or it could not glide
         self._glide_width = min(self.width, 2 * int(np.ceil(self._speed / self.cell)) + 1)
-        self._glide_solver = BandPath(solved, self._glide_width, 1, cfg)
-        self._segment = np.array([[0, solved - 1, -1, -1]])
+        self._glide_solver = BandPath(solved, self._glide_width, segment, cfg)
         device, cells = cfg.device, (solved, self.width)
         self._lines_wp = wp.array(self._lines, dtype=int, device=device)
         self._x0_wp = wp.zeros(solved, dtype=int, device=device)  # the band's first cells, per reset
@@ -150,7 +153,7 @@ class FrameSeam:
         half = self.width // 2
         self._x0 = ((np.floor_divide(np.rint(self.home[self._lines]).astype(np.int32), self.cell) - half)
                     * self.cell).astype(np.int32)  # on the grid of cells, so cells line up from line to line
-        self._x0_wp.assign(self._x0)
+        runtime.upload(self._x0_wp, self._x0)
         self._cells = self._x0[:, None] + self.cell * np.arange(self.width, dtype=np.int32)[None, :]
         runtime.upload(self._home_term, self.cfg.video_seam_home_cost
                        * np.abs(self._cells - self.home[self._lines, None]))
@@ -167,7 +170,7 @@ class FrameSeam:
         """(K,) int32 positions (px) of the cheapest path through ``cost`` (K, cells; a Warp array) whose cells start
         at ``x0`` (K,) px on the grid of cells."""
         first = x0 // self.cell
-        return (solver.solve(cost, first, self._segment, self._max_step, self._step_cost) * self.cell).astype(np.int32)
+        return (solver.solve(cost, first, self._max_step, self._step_cost) * self.cell).astype(np.int32)
 
     @property
     def positions(self) -> np.ndarray:
@@ -227,12 +230,10 @@ class FrameSeam:
             self._change, self._free_cost, self._glide_cost, self._line_min], cfg.device, runtime.BAND_THREADS)
         change = self._change.numpy()
         glide = self._solve_band(self._glide_solver, self._glide_cost, self._x0 + self.cell * first)
-        lines = np.arange(len(self._lines))
-
         def along(path: np.ndarray) -> float:
-            return float(change[lines, (path - self._x0) // self.cell].sum())
+            return float(change[self._solved, (path - self._x0) // self.cell].sum())
 
-        limit = len(lines)
+        limit = len(self._lines)
         path = glide
         jump = cfg.video_seam_jump_cost * limit
         # Something in front of the background, and a path cheaper than the glide's by a jump may exist
@@ -263,9 +264,9 @@ class FrameSeam:
             diff, total, float(np.float32(gain - 1.0)), float(np.float32(offset)), float(noise), SPREAD_FACTOR,
             float(np.float32(self._learn)), self._background, self._spread, self._off], self.cfg.device,
             runtime.BAND_THREADS)
-        box = 2 * max(1, self.cfg.video_seam_still_box_px) + 1
+        box, kernel = self._object_box
         solid = (cv2.blur(self._off.numpy(), (box, box)) > 0).view(np.uint8)
-        moving = cv2.dilate(solid, np.ones((box, box), np.uint8))
+        moving = cv2.dilate(solid, kernel)
         runtime.upload(self._moving, moving)
         return moving
 

@@ -296,7 +296,7 @@ class SenaFrameCompositor:
         over (the source side moving at most ``video_drift_speed_px`` a frame); else None."""
         if self._drift_s is None:
             return None
-        time_s = float(frame_l.time_s)
+        time_s = self._time_s
         y_src, y_tgt = (frame.y for frame in self.source_target(frame_l, frame_r))
         if self._drift is None:
             if time_s + 1e-6 >= self._drift_from_s:
