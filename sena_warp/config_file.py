@@ -88,8 +88,10 @@ def field_docs() -> tuple[FieldDoc, ...]:
     return tuple(docs)
 
 
+@functools.cache
 def field_types() -> dict[str, type]:
-    """Field name -> its Python type (``int``, ``float`` or ``str``)."""
+    """Field name -> its Python type (``int``, ``float`` or ``str``); worked out once (checking every field
+    had taken 0.13 s of a video's set-up)."""
     hints = typing.get_type_hints(Config)
     return {f.name: hints[f.name] for f in dataclasses.fields(Config)}
 
