@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from operator import attrgetter
 
@@ -19,6 +19,7 @@ from ..features import Matches, match_images
 from ..global_affine import fit_global_affine
 from ..rig import detect_rig, matches_to_working
 from ..stitch import StitchMaps, estimate_maps
+from ..xfeat import working_size
 from .maps import PlaneMaps, map_change_px
 from .pairing import pair_by_time
 from .reader import FrameReader, YuvFrame, probe_video
@@ -63,24 +64,44 @@ def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: 
     return estimate_maps(frame_l.to_bgr(), frame_r.to_bgr(), cfg, reference, matches, prior_seam_tgt)
 
 
+def screening_config(cfg: Config) -> Config:
+    """The settings a pair is screened with: XFeat at a long side of ``cfg.video_screen_max_side`` at most.
+    The ranking needs inlier counts, not the estimate's precision; at 1080p it costs a third as much."""
+    if cfg.features != "xfeat":
+        return cfg
+    return replace(cfg, xfeat_max_side=min(cfg.xfeat_max_side, cfg.video_screen_max_side))
+
+
+def screened_at_full_resolution(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config) -> bool:
+    """Whether screening ``frame_l``, ``frame_r`` sees them as the full estimate does (its matches serve it)."""
+    if cfg.features != "xfeat":
+        return True
+    side = screening_config(cfg).xfeat_max_side
+    return all(working_size(f.y.shape, side) == working_size(f.y.shape, cfg.xfeat_max_side) for f in (frame_l, frame_r))
+
+
 def screen_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str) -> tuple[Matches, int]:
-    """Steps 0-1 only: the pair's matches and its global-affine inlier count (raises StitchError)."""
-    matches = match_images(frame_l.to_bgr(), frame_r.to_bgr(), cfg)
+    """Steps 0-1 only, with :func:`screening_config`: the pair's matches and its global-affine inlier
+    count (raises StitchError)."""
+    screen = screening_config(cfg)
+    matches = match_images(frame_l.to_bgr(), frame_r.to_bgr(), screen)
     rig = detect_rig(matches.pts_a, matches.pts_b, reference)
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
-    return matches, fit_global_affine(pts_src, pts_tgt, cfg).n_inliers
+    return matches, fit_global_affine(pts_src, pts_tgt, screen).n_inliers
 
 
 def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
                         reference: str) -> tuple[StitchMaps, int, list[Attempt]]:
     """The estimate with the most inliers among :func:`first_pairs`; (maps, its pair index, all attempts).
 
-    Every pair is screened by steps 0-1 (the inlier count is what ranks them); the full estimate,
-    ten times dearer (the gate and the seam work over the whole canvas), runs on the best pair only,
-    or on the next best if that one fails later on. When all fail, the last failure is raised.
+    Every pair is screened by steps 0-1 (:func:`screen_pair`: the inlier count is what ranks them); the
+    full estimate, ten times dearer (the gate and the seam work over the whole canvas), runs on the best
+    pair only, or on the next best if that one fails later on; pairs whose screening at a lower
+    resolution failed come last (the full resolution may find the matches it lacked). When all fail,
+    the last failure is raised.
     """
     attempts: list[Attempt] = []
-    screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches]] = []
+    screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]] = []
     last_error: StitchError | None = None
     tried = []
     for index, frame_l, frame_r in first_pairs(left, right, offset_s, cfg):  # screened while the next decodes
@@ -90,11 +111,15 @@ def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offse
         except StitchError as exc:
             last_error = exc
             attempts.append(Attempt(index, float(frame_l.time_s), None, str(exc)))
+            if not screened_at_full_resolution(frame_l, frame_r, cfg):
+                screened.append((-1, index, frame_l, frame_r, None))
             continue
         attempts.append(Attempt(index, float(frame_l.time_s), inliers, None))
         screened.append((inliers, index, frame_l, frame_r, matches))
     # Most inliers first; among equals the earliest pair.
     for inliers, index, frame_l, frame_r, matches in sorted(screened, key=lambda s: (-s[0], s[1])):
+        if not screened_at_full_resolution(frame_l, frame_r, cfg):
+            matches = None
         try:
             return estimate_pair(frame_l, frame_r, cfg, reference, matches), index, attempts
         except StitchError as exc:
