@@ -86,7 +86,9 @@ def test_rooftop_side_by_side_frames_pts_audio_and_pairing(clips, tmp_path):
     assert report["dropped"] == 0 and report["repeated"] == 0
     assert report["damaged"] == {"left": 0, "right": 0}
     assert report["output"]["audio_mode"] == "copy"
-    assert set(report["timing_s"]) == {"decode_wait", "compositor_setup", "composite", "encode", "total"}
+    assert set(report["timing_s"]) == {"decode_wait", "compositor_setup", "composite", "encode", "total", "first_frame"}
+    timing = report["timing_s"]
+    assert timing["compositor_setup"] < timing["first_frame"] < timing["total"]
 
     spans = stream_spans(out)
     n_video, t_video, end_video = spans["video"]

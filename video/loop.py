@@ -183,7 +183,7 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
             stage("stitching frames")
             expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
             _encode_pairs(chain([first], pairs), compositor, writer, Count("frames", expected, "fps"), timing,
-                          options.queue_frames)
+                          options.queue_frames, t_run)
             readers = {"left": reader_l, "right": reader_r}
             problems += _input_problems(infos, readers)
             if problems and options.strict:
@@ -316,11 +316,12 @@ class EncodeThread:
 
 
 def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progress: Count, timing: dict,
-                  queue_frames: int) -> None:
+                  queue_frames: int, t_run: float) -> None:
     """Composite every ``(left, right)`` pair and encode it on :class:`EncodeThread`.
 
     The output pts follow the left frames' times. ``timing["composite"]`` is this thread's compositing
-    time, ``timing["encode"]`` the encoder thread's time (the two overlap).
+    time, ``timing["encode"]`` the encoder thread's time (the two overlap), ``timing["first_frame"]``
+    the time from the run's start (``t_run``, a ``perf_counter``) until the first frame was composited.
     """
     t_first, last_pts = None, -1
     update = getattr(compositor, "update", None)
@@ -339,7 +340,9 @@ def _encode_pairs(pairs, compositor: FrameCompositor, writer: VideoWriter, progr
             t0 = time.perf_counter()
             planes = compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
             timing["composite"] += time.perf_counter() - t0
-            t_first = frame_l.time_s if t_first is None else t_first
+            if t_first is None:
+                timing["first_frame"] = time.perf_counter() - t_run
+                t_first = frame_l.time_s
             # The left frame's own time in the writer's time base; forced to increase should rounding collide.
             last_pts = max(last_pts + 1, round((frame_l.time_s - t_first) / writer.time_base))
             encoder.write(planes, last_pts)

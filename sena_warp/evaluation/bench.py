@@ -151,17 +151,21 @@ sys.exit(code)"""
 
 
 def stitch_in_child(left: Path, right: Path, output: Path, device: str) -> dict:
-    """``sena-warp video`` in a child process; its report plus ``max_rss_mib`` (the child's peak RSS)."""
+    """``sena-warp video`` in a child process; its report plus ``max_rss_mib`` (the child's peak RSS) and
+    ``process_s`` (the child's wall time, from its start to its exit)."""
     report_path = output.with_suffix(".json")
     cmd = [sys.executable, "-c", _CHILD, "video", str(left), str(right), "-o", str(output),
            "--report", str(report_path), "--audio", "none", "--device", device, "-y"]
+    t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True)
+    process_s = time.perf_counter() - t0
     if proc.returncode != 0:  # the child's own error, with its exit code
         said = (proc.stderr or proc.stdout).strip().splitlines() or [f"exit {proc.returncode}"]
         raise error_for_exit_code(proc.returncode)(f"stitching {left.name}: {said[-1].removeprefix(ERROR_PREFIX)}")
     hwm_kib = int(proc.stdout.strip().splitlines()[-1].split()[1])  # "VmHWM:  123456 kB"
     report = json.loads(report_path.read_text())
     report["max_rss_mib"] = hwm_kib / 1024
+    report["process_s"] = process_s
     return report
 
 
@@ -296,6 +300,9 @@ def bench_size(label: str, size: tuple[int, int], seconds: float, work: Path, pa
     # Whole run, and the steady rate after the first estimate (once per video, whatever its length).
     run_fps = frames / timing["total"]
     stitch_fps = frames / (timing["total"] - timing["compositor_setup"])
+    # From the process's start to the first frame composited: all but the run after that frame (the run's
+    # end to the process's exit, writing the report, is counted too: an upper bound by a few ms).
+    first_frame_s = stitch["process_s"] - timing["total"] + timing["first_frame"]
     compositing = compare_compositing(left, right, cfg, settings)
     decode_s = sum(stitch["inputs"][side]["decode_s"] for side in ("left", "right"))
     return {
@@ -303,6 +310,7 @@ def bench_size(label: str, size: tuple[int, int], seconds: float, work: Path, pa
         "canvas": f"{stitch['output']['width']}x{stitch['output']['height']}",
         "frames": frames, "baseline_fps": baseline["fps"], "run_fps": run_fps, "run_ratio": run_fps / baseline["fps"],
         "stitch_fps": stitch_fps, "fps_ratio": stitch_fps / baseline["fps"], "setup_s": timing["compositor_setup"],
+        "first_frame_s": first_frame_s,
         "decode_ms": 1000 * decode_s / frames, "composite_ms": 1000 * timing["composite"] / frames,
         "encode_ms": 1000 * timing["encode"] / frames, "warp_ms": compositing["warp_ms"],
         "opencv_ms": compositing["opencv_ms"], "kernel_ratio": compositing["ratio"],
@@ -317,6 +325,7 @@ COLUMNS = (  # (key, header, format)
     ("baseline_fps", "transcode fps", "{:.1f}"), ("run_fps", "stitch fps, whole run", "{:.1f}"),
     ("run_ratio", "whole run / transcode", "{:.2f}"), ("stitch_fps", "stitch fps after estimate", "{:.1f}"),
     ("fps_ratio", "after estimate / transcode", "{:.2f}"), ("setup_s", "estimate s", "{:.1f}"),
+    ("first_frame_s", "process start to first frame s", "{:.2f}"),
     ("decode_ms", "decode ms/frame", "{:.1f}"), ("composite_ms", "composite ms/frame", "{:.1f}"),
     ("encode_ms", "encode ms/frame", "{:.1f}"), ("warp_ms", "Warp composite ms", "{:.1f}"),
     ("opencv_ms", "OpenCV ref ms", "{:.1f}"), ("kernel_ratio", "Warp / OpenCV", "{:.2f}"),
