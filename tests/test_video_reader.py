@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import threading
 from fractions import Fraction
 
@@ -25,6 +26,16 @@ def test_probe_reports_size_rate_length_and_audio(clips):
     office = probe_video(clips / "office_cam1.mp4")
     assert (office.width, office.height, office.fps, office.pix_fmt) == (640, 480, Fraction(24), "yuv422p")
     assert not office.has_audio and office.audio_codec is None
+
+
+def test_probe_follows_a_file_that_is_replaced(clips, tmp_path):
+    """Probes are kept per version of a file, so one rewritten under the same name is probed again."""
+    path = tmp_path / "clip.mp4"
+    shutil.copyfile(clips / "rooftop_left.mp4", path)
+    assert probe_video(path).width == 270 and probe_video(path).path == path
+    shutil.copyfile(clips / "office_cam1.mp4", path)
+    assert probe_video(path).width == 640
+    assert probe_video(str(path)).path == path  # the caller's name, not the cached one's
 
 
 def test_frames_carry_exact_times_and_offset(clips):
