@@ -1,0 +1,109 @@
+"""How far the per-frame Y pass is from a kernel that only samples (issue 17's per-frame CPU budget).
+
+Usage (from the repository root)::
+
+    .venv/bin/python benchmarks/frame_kernel_floor.py [--left L --right R] [--work DIR] [--calls 20]
+
+Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p clip pair in ``--work``.
+The compositor is made as ``sena-warp video`` makes it (one estimate pair) and the first frame pair is
+composited once. Then, over the same plan and planes, the process CPU time per call (mean of
+``--calls``, after one untimed call) of:
+
+- the Y pass's frame kernel as the loop launches it (``Compositor.composite``: seam, gains with the
+  knee, seam and border blends);
+- :func:`sample_only_kernel`: the same launch and plan words, but each pixel is only its one side's
+  bilinear tap, gained, stored: no seam, no blend, no offsets. No frame kernel on this plan can cost
+  less than this floor;
+- the UV pass's frame kernel (two channels at half resolution).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import warp as wp
+
+from sena_warp.config import Config
+from sena_warp.evaluation.bench import DATA_DIR, make_clip_pair, pair_paths
+from sena_warp.kernels import runtime
+from sena_warp.kernels.composite import (KIND_FILL, KIND_TARGET, adjusted, grey_level, sample_fixed, word_fx,
+                                         word_fy, word_offset)
+from sena_warp.kernels.runtime import resolve_config
+from sena_warp.video.reader import FrameReader
+from sena_warp.video.stitch import SenaFrameCompositor
+
+
+@wp.kernel
+def sample_only_kernel(row0: int, col_step: int, width: int, img_src: wp.array(dtype=wp.uint8),
+                       img_tgt: wp.array(dtype=wp.uint8), steps: wp.vec4i, plan: wp.array(dtype=wp.int64),
+                       plan_tgt: wp.array(dtype=wp.int64), gain: wp.vec4i, bias: wp.vec4i, tone: wp.vec2i,
+                       out: wp.array(dtype=wp.uint8)):
+    """One channel: per pixel of row ``row0 + i``, columns j, j + col_step, ..., its plan word's side alone."""
+    i, j = wp.tid()
+    y = row0 + i
+    for x in range(j, width, col_step):
+        q = y * width + x
+        word = plan[q]
+        kind = int(word & wp.int64(3))
+        if kind == KIND_FILL:
+            out[q] = wp.uint8(0)
+            continue
+        p = word_offset(word)
+        if kind == KIND_TARGET:
+            sample = sample_fixed(img_tgt, p, word_fx(word), word_fy(word), steps[2], steps[3])
+        else:
+            sample = sample_fixed(img_src, p, word_fx(word), word_fy(word), steps[0], steps[1])
+        out[q] = grey_level(adjusted(sample, gain[0], bias[0], 0, tone))
+
+
+def cpu_ms(call, calls: int) -> float:
+    """Mean process CPU ms of ``call`` over ``calls`` calls, after one untimed call."""
+    call()
+    start = time.process_time()
+    for _ in range(calls):
+        call()
+    return (time.process_time() - start) / calls * 1e3
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--left", type=Path)
+    parser.add_argument("--right", type=Path)
+    parser.add_argument("--work", type=Path, default=Path("out/frame_seam_time"))
+    parser.add_argument("--calls", type=int, default=20)
+    args = parser.parse_args()
+    cfg = resolve_config(Config(device="cpu"))
+    if args.left is None:
+        args.work.mkdir(parents=True, exist_ok=True)
+        args.left, args.right = make_clip_pair(pair_paths(DATA_DIR), args.work, (1920, 1080), 5.0)
+    with FrameReader(args.left) as reader_l, FrameReader(args.right) as reader_r:
+        frame_l, frame_r = next(iter(reader_l)), next(iter(reader_r))
+    compositor = SenaFrameCompositor.from_videos(args.left, args.right, 0.0, cfg.replace(video_estimate_pairs=1),
+                                                 "auto")
+    planes = (frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
+    compositor.composite_yuv(*planes)
+    luma, chroma = compositor._luma, compositor._chroma
+    y_src, y_tgt = (frame.y for frame in compositor.source_target(frame_l, frame_r))
+    uv_src, uv_tgt = ((frame.u, frame.v) for frame in compositor.source_target(frame_l, frame_r))
+    rows, cols = luma.canvas_shape
+    out = wp.zeros(rows * cols, dtype=wp.uint8, device="cpu")
+    luma.load(y_src, y_tgt)
+    buf, channels, _ = luma._loaded
+    floor_inputs = [*buf.frame_inputs, *luma._gains[channels][:2], luma.tone, out]
+    floor = cpu_ms(lambda: runtime.launch_row_loops(sample_only_kernel, rows, cols, floor_inputs, "cpu", cfg.cpu_threads),
+                   args.calls)
+    y_pass = cpu_ms(luma.composite, args.calls)
+    chroma.load_planes(uv_src, uv_tgt)
+    uv_pass = cpu_ms(chroma.composite, args.calls)
+    compositor.close()
+    print(f"{args.left.name}: canvas {cols}x{rows}, {runtime.cpu_threads(cfg.cpu_threads)} row bands")
+    print(f"  Y pass, frame kernel: {y_pass:.2f} ms CPU a call")
+    print(f"  Y pass, sample only (the floor): {floor:.2f} ms CPU a call")
+    print(f"  UV pass, frame kernel: {uv_pass:.2f} ms CPU a call")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
