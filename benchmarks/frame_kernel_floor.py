@@ -71,7 +71,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--left", type=Path)
     parser.add_argument("--right", type=Path)
-    parser.add_argument("--work", type=Path, default=Path("out/frame_seam_time"))
+    parser.add_argument("--work", type=Path, default=Path("out/frame_kernel_floor"))
     parser.add_argument("--calls", type=int, default=20)
     args = parser.parse_args()
     cfg = resolve_config(Config(device="cpu"))

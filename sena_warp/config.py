@@ -151,8 +151,7 @@ class Config:
     video_audio: str = "left"  # audio copied into the output: "left", "right" or "none"
     video_estimate_pairs: int = 5  # first frame pairs tried for the first estimate; most inliers wins
     video_estimate_spacing: int = 5  # frame pairs between two of those tries
-    video_screen_max_side: int = 640  # those tries are ranked by XFeat at this long side at most (set-up time); the
-    # best is then estimated at xfeat_max_side
+    video_screen_max_side: int = 640  # those tries are ranked by XFeat at this long side at most; the best is estimated at xfeat_max_side
     video_rig: str = "static"  # "static": estimated once, moved with a drifting camera; "moving": every video_reestimate_s
     video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
     video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's

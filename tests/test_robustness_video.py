@@ -277,7 +277,10 @@ def test_crash_while_encoding_propagates_and_leaves_nothing(clips, dirs, capfd, 
 
 @pytest.fixture
 def no_input_opened(monkeypatch):
-    """Fail the test if any input is opened for decoding (every probe and reader goes through open_input)."""
+    """Fail the test if any input is opened for decoding (every probe and reader goes through open_input;
+    the probes kept from earlier tests are dropped)."""
+    video_reader._probe_version.cache_clear()
+
     def refuse(path):
         raise AssertionError(f"{path} was opened before the output paths were checked")
     monkeypatch.setattr(video_reader, "open_input", refuse)

@@ -33,9 +33,13 @@ def full_estimates(monkeypatch) -> list:
 
 
 def test_screening_caps_xfeat_working_side_only():
-    assert screening_config(CFG).xfeat_max_side == 640
-    assert screening_config(CFG.replace(xfeat_max_side=512)).xfeat_max_side == 512  # never above the estimate's
-    assert screening_config(CFG.replace(features="sift")) == CFG.replace(features="sift")  # SIFT has no working side
+    hd = ((1080, 1920), (1080, 1920))
+    assert screening_config(CFG, hd).xfeat_max_side == 640
+    assert screening_config(CFG.replace(xfeat_max_side=512), hd).xfeat_max_side == 512  # never above the estimate's
+    assert screening_config(CFG.replace(features="sift"), hd) == CFG.replace(features="sift")  # no working side
+    # A side too small for XFeat on these frames (a side under 32 px): screened as they are estimated.
+    tiny = CFG.replace(video_screen_max_side=40)
+    assert screening_config(tiny, hd) == tiny
 
 
 def test_inputs_within_the_screening_side_reuse_the_screening_matches(clips, full_estimates):
@@ -58,9 +62,18 @@ def test_pairs_whose_screening_failed_are_still_estimated_in_full(clips, full_es
     """At 384 px the office clips give too few matches on every pair; 640 px (the estimate's) is enough."""
     cfg = CFG.replace(video_screen_max_side=384)
     maps, chosen, attempts = best_first_estimate(clips / "office_cam1.mp4", clips / "office_cam2.mp4", 0.0, cfg, "auto")
-    assert all(a.error is not None for a in attempts)
     assert chosen == 0 and full_estimates == [None]
     assert maps.warp.glob.n_inliers > 0
+    # The report's attempts: the others' screening errors; the chosen pair's full estimate.
+    assert [(a.inliers, a.error) for a in attempts if a.pair == chosen] == [(maps.warp.glob.n_inliers, None)]
+    assert all(a.error is not None for a in attempts if a.pair != chosen)
+
+
+def test_a_screening_side_too_small_for_xfeat_screens_at_the_estimate_s(clips, full_estimates):
+    cfg = CFG.replace(video_screen_max_side=40)  # 640x480 at 40 px would be 32 x 0 px
+    maps, chosen, attempts = best_first_estimate(clips / "office_cam1.mp4", clips / "office_cam2.mp4", 0.0, cfg, "auto")
+    assert len(full_estimates) == 1 and full_estimates[0] is not None
+    assert maps.warp.glob.n_inliers == next(a.inliers for a in attempts if a.pair == chosen)
 
 
 def test_first_pairs_are_spaced_by_the_setting(clips):

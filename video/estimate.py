@@ -14,7 +14,7 @@ from fractions import Fraction
 from operator import attrgetter
 
 from ..config import Config
-from ..errors import StitchError, VideoError
+from ..errors import InputError, StitchError, VideoError
 from ..features import Matches, match_images
 from ..global_affine import fit_global_affine
 from ..rig import detect_rig, matches_to_working
@@ -25,6 +25,7 @@ from .pairing import pair_by_time
 from .reader import FrameReader, YuvFrame, probe_video
 
 MEDIAN_PERCENTILE = 50.0  # the rejection test compares the median map change
+FAILED_SCREENING = -1  # the rank of a pair whose screening failed: after every screened one
 
 
 @dataclass(frozen=True)
@@ -64,26 +65,33 @@ def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: 
     return estimate_maps(frame_l.to_bgr(), frame_r.to_bgr(), cfg, reference, matches, prior_seam_tgt)
 
 
-def screening_config(cfg: Config) -> Config:
-    """The settings a pair is screened with: XFeat at a long side of ``cfg.video_screen_max_side`` at most.
-    The ranking needs inlier counts, not the estimate's precision; at 1080p it costs a third as much."""
+def screening_config(cfg: Config, shapes: tuple[tuple[int, int], ...]) -> Config:
+    """The settings frames of (rows, cols) ``shapes`` are screened with: XFeat at a long side of
+    ``cfg.video_screen_max_side`` at most, where XFeat can take them that small. The ranking needs inlier
+    counts, not the estimate's precision; at 1080p it costs two thirds as much."""
     if cfg.features != "xfeat":
         return cfg
-    return replace(cfg, xfeat_max_side=min(cfg.xfeat_max_side, cfg.video_screen_max_side))
+    side = min(cfg.xfeat_max_side, cfg.video_screen_max_side)
+    try:
+        for shape in shapes:
+            working_size(shape, side)
+    except InputError:
+        return cfg
+    return replace(cfg, xfeat_max_side=side)
 
 
 def screened_at_full_resolution(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config) -> bool:
     """Whether screening ``frame_l``, ``frame_r`` sees them as the full estimate does (its matches serve it)."""
-    if cfg.features != "xfeat":
-        return True
-    side = screening_config(cfg).xfeat_max_side
-    return all(working_size(f.y.shape, side) == working_size(f.y.shape, cfg.xfeat_max_side) for f in (frame_l, frame_r))
+    shapes = (frame_l.y.shape, frame_r.y.shape)
+    side = screening_config(cfg, shapes).xfeat_max_side
+    return cfg.features != "xfeat" or all(working_size(shape, side) == working_size(shape, cfg.xfeat_max_side)
+                                          for shape in shapes)
 
 
 def screen_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str) -> tuple[Matches, int]:
     """Steps 0-1 only, with :func:`screening_config`: the pair's matches and its global-affine inlier
     count (raises StitchError)."""
-    screen = screening_config(cfg)
+    screen = screening_config(cfg, (frame_l.y.shape, frame_r.y.shape))
     matches = match_images(frame_l.to_bgr(), frame_r.to_bgr(), screen)
     rig = detect_rig(matches.pts_a, matches.pts_b, reference)
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
@@ -97,8 +105,10 @@ def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offse
     Every pair is screened by steps 0-1 (:func:`screen_pair`: the inlier count is what ranks them); the
     full estimate, ten times dearer (the gate and the seam work over the whole canvas), runs on the best
     pair only, or on the next best if that one fails later on; pairs whose screening at a lower
-    resolution failed come last (the full resolution may find the matches it lacked). When all fail,
-    the last failure is raised.
+    resolution failed come last (the full resolution may find the matches it lacked: a video whose
+    first pairs all fail so pays for a full try of each before its error). When all fail, the last
+    failure is raised. Each attempt gives its screening's inliers, or its full estimate's where that
+    was all it had.
     """
     attempts: list[Attempt] = []
     screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]] = []
@@ -112,7 +122,7 @@ def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offse
             last_error = exc
             attempts.append(Attempt(index, float(frame_l.time_s), None, str(exc)))
             if not screened_at_full_resolution(frame_l, frame_r, cfg):
-                screened.append((-1, index, frame_l, frame_r, None))
+                screened.append((FAILED_SCREENING, index, frame_l, frame_r, None))
             continue
         attempts.append(Attempt(index, float(frame_l.time_s), inliers, None))
         screened.append((inliers, index, frame_l, frame_r, matches))
@@ -121,7 +131,11 @@ def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offse
         if not screened_at_full_resolution(frame_l, frame_r, cfg):
             matches = None
         try:
-            return estimate_pair(frame_l, frame_r, cfg, reference, matches), index, attempts
+            maps = estimate_pair(frame_l, frame_r, cfg, reference, matches)
+            if inliers == FAILED_SCREENING:  # what the report gives is the full estimate's
+                attempts = [Attempt(a.pair, a.time_s, maps.warp.glob.n_inliers, None) if a.pair == index else a
+                            for a in attempts]
+            return maps, index, attempts
         except StitchError as exc:
             last_error = exc
             attempts = [Attempt(a.pair, a.time_s, a.inliers, str(exc)) if a.pair == index else a for a in attempts]

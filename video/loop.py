@@ -15,6 +15,7 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from fractions import Fraction
 from itertools import chain
 from operator import attrgetter
@@ -128,7 +129,8 @@ def run_video(
     each is paired with the right frame nearest in time (see ``pairing.py``). The output appears
     under its name only once complete (with ``plan``: when the plan commits). Report keys:
     ``frames_in``, ``frames_out``, ``dropped``, ``repeated``, ``damaged`` (per input), ``pairing``
-    (all counts), ``timing_s`` (decode_wait, compositor_setup, composite, encode, total; maps_update
+    (all counts), ``started`` (when the run began, ISO 8601 UTC), ``timing_s`` (decode_wait,
+    compositor_setup, first_frame, composite, encode, total; maps_update
     when the compositor has ``update``), ``output_fps``, ``inputs``, ``output``, ``notes``, and
     ``warnings``: what a user must hear about (damaged frames, a truncated input, audio left out),
     one sentence each; with ``options.strict`` those raise VideoError instead.
@@ -140,6 +142,7 @@ def run_video(
 def _run(left, right, output, compositor_factory: CompositorFactory, options: VideoOptions,
          plan: OutputPlan) -> dict:
     t_run = time.perf_counter()
+    started = datetime.now(timezone.utc)
     stage("opening videos")
     infos = {"left": probe_video(left), "right": probe_video(right)}
     for info in infos.values():
@@ -195,7 +198,8 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
     timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
     for note in _input_notes(infos, readers, stats):
         _note(notes, note)
-    return _report(infos, (reader_l, reader_r), writer, stats, timing, notes, warnings, output, audio_side)
+    return {"started": started.isoformat(timespec="microseconds"),
+            **_report(infos, (reader_l, reader_r), writer, stats, timing, notes, warnings, output, audio_side)}
 
 
 def _note(notes: list[str], text: str) -> None:

@@ -23,6 +23,7 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
+from datetime import datetime
 from fractions import Fraction
 from pathlib import Path
 
@@ -152,20 +153,19 @@ sys.exit(code)"""
 
 def stitch_in_child(left: Path, right: Path, output: Path, device: str) -> dict:
     """``sena-warp video`` in a child process; its report plus ``max_rss_mib`` (the child's peak RSS) and
-    ``process_s`` (the child's wall time, from its start to its exit)."""
+    ``spawned`` (the time the child was started, as ``time.time()``)."""
     report_path = output.with_suffix(".json")
     cmd = [sys.executable, "-c", _CHILD, "video", str(left), str(right), "-o", str(output),
            "--report", str(report_path), "--audio", "none", "--device", device, "-y"]
-    t0 = time.perf_counter()
+    spawned = time.time()
     proc = subprocess.run(cmd, capture_output=True, text=True)
-    process_s = time.perf_counter() - t0
     if proc.returncode != 0:  # the child's own error, with its exit code
         said = (proc.stderr or proc.stdout).strip().splitlines() or [f"exit {proc.returncode}"]
         raise error_for_exit_code(proc.returncode)(f"stitching {left.name}: {said[-1].removeprefix(ERROR_PREFIX)}")
     hwm_kib = int(proc.stdout.strip().splitlines()[-1].split()[1])  # "VmHWM:  123456 kB"
     report = json.loads(report_path.read_text())
     report["max_rss_mib"] = hwm_kib / 1024
-    report["process_s"] = process_s
+    report["spawned"] = spawned
     return report
 
 
@@ -300,9 +300,8 @@ def bench_size(label: str, size: tuple[int, int], seconds: float, work: Path, pa
     # Whole run, and the steady rate after the first estimate (once per video, whatever its length).
     run_fps = frames / timing["total"]
     stitch_fps = frames / (timing["total"] - timing["compositor_setup"])
-    # From the process's start to the first frame composited: all but the run after that frame (the run's
-    # end to the process's exit, writing the report, is counted too: an upper bound by a few ms).
-    first_frame_s = stitch["process_s"] - timing["total"] + timing["first_frame"]
+    # From the child's start to its first frame composited: until its run started, then the run's own.
+    first_frame_s = datetime.fromisoformat(stitch["started"]).timestamp() - stitch["spawned"] + timing["first_frame"]
     compositing = compare_compositing(left, right, cfg, settings)
     decode_s = sum(stitch["inputs"][side]["decode_s"] for side in ("left", "right"))
     return {
