@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import importlib.resources
+import os
 
 import cv2
 import numpy as np
@@ -39,9 +40,8 @@ def xfeat_session(threads: int) -> ort.InferenceSession:
     """The ONNX backbone from the installed package, loaded once per thread count (CUDA provider when available).
 
     ``threads``: onnxruntime's intra-op threads (``Config.cpu_threads``; 0 = one per physical core).
-    The pool does not spin while waiting for work: the process shares the machine (batch workers, the
-    video decoders and encoder, a moving rig's compositing beside its re-estimates), and spinning took
-    cores from them without making XFeat faster (docs/benchmarks.md, issue 17).
+    With fewer threads than cores the process shares the machine (batch workers, the video decoder
+    and encoder), so the pool does not spin while waiting for work: spinning would take cores from them.
     """
     model = importlib.resources.files("sena_warp") / "models" / MODEL_FILE
     if not model.is_file():
@@ -53,7 +53,8 @@ def xfeat_session(threads: int) -> ort.InferenceSession:
     options = ort.SessionOptions()
     options.log_severity_level = 3  # errors only: the CUDA provider's fallbacks are not news
     options.intra_op_num_threads = threads
-    options.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    if 0 < threads < (os.cpu_count() or 1):
+        options.add_session_config_entry("session.intra_op.allow_spinning", "0")
     return ort.InferenceSession(model.read_bytes(), sess_options=options, providers=providers)
 
 

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+
+import pytest
 
 from sena_warp import xfeat
 from sena_warp.cli import main
@@ -38,7 +41,8 @@ def test_threads_reach_warp_onnxruntime_decoders_and_encoder(bundled_dir, tmp_pa
     assert sessions and set(sessions) == {THREADS}
     options = real_session(THREADS).get_session_options()
     assert options.intra_op_num_threads == THREADS
-    assert options.get_session_config_entry("session.intra_op.allow_spinning") == "0"  # it shares the machine
+    if THREADS < (os.cpu_count() or 1):  # sharing the machine: the pool does not spin
+        assert options.get_session_config_entry("session.intra_op.allow_spinning") == "0"
     assert [report["inputs"][side]["decoder_threads"] for side in ("left", "right")] == [THREADS, THREADS]
     assert report["output"]["encoder"]["threads"] == THREADS
 
@@ -46,4 +50,5 @@ def test_threads_reach_warp_onnxruntime_decoders_and_encoder(bundled_dir, tmp_pa
 def test_without_threads_each_library_chooses(bundled_dir):
     options = xfeat.xfeat_session(0).get_session_options()
     assert options.intra_op_num_threads == 0
-    assert options.get_session_config_entry("session.intra_op.allow_spinning") == "0"  # never spins
+    with pytest.raises(RuntimeError):  # left as onnxruntime has it
+        options.get_session_config_entry("session.intra_op.allow_spinning")
