@@ -5,9 +5,11 @@ Usage (from the repository root)::
     .venv/bin/python benchmarks/frame_kernel_floor.py [--left L --right R] [--work DIR] [--calls 20]
 
 Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p clip pair in ``--work``.
-The compositor is made as ``sena-warp video`` makes it (one estimate pair) and the first frame pair is
-composited once. Then, over the same plan and planes, the process CPU time per call (mean of
-``--calls``, after one untimed call) of:
+The compositor is made as ``sena-warp video`` makes it (one estimate pair, no drift checks). First the
+whole per-frame path but the maps' update (``composite_yuv``: exposure, the frame's seam, both passes)
+over the first ``--frames`` pairs, in order: process CPU time per frame after the first ten. Then, on
+the last pair's plan and planes, the process CPU time per call (mean of ``--calls``, after one
+untimed call) of:
 
 - the Y pass's frame kernel as the loop launches it (``Compositor.composite``: seam, gains with the
   knee, seam and border blends);
@@ -21,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from itertools import islice
 from pathlib import Path
 
 import warp as wp
@@ -33,6 +36,9 @@ from sena_warp.kernels.composite import (KIND_FILL, KIND_TARGET, adjusted, grey_
 from sena_warp.kernels.runtime import resolve_config
 from sena_warp.video.reader import FrameReader
 from sena_warp.video.stitch import SenaFrameCompositor
+
+
+WARMUP_FRAMES = 10  # not timed: the seam's background model and the exposure settle
 
 
 @wp.kernel
@@ -73,17 +79,21 @@ def main() -> int:
     parser.add_argument("--right", type=Path)
     parser.add_argument("--work", type=Path, default=Path("out/frame_kernel_floor"))
     parser.add_argument("--calls", type=int, default=20)
+    parser.add_argument("--frames", type=int, default=40)
     args = parser.parse_args()
     cfg = resolve_config(Config(device="cpu"))
     if args.left is None:
         args.work.mkdir(parents=True, exist_ok=True)
         args.left, args.right = make_clip_pair(pair_paths(DATA_DIR), args.work, (1920, 1080), 5.0)
     with FrameReader(args.left) as reader_l, FrameReader(args.right) as reader_r:
-        frame_l, frame_r = next(iter(reader_l)), next(iter(reader_r))
-    compositor = SenaFrameCompositor.from_videos(args.left, args.right, 0.0, cfg.replace(video_estimate_pairs=1),
-                                                 "auto")
-    planes = (frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
-    compositor.composite_yuv(*planes)
+        pairs = list(zip(islice(reader_l, args.frames), islice(reader_r, args.frames)))
+    compositor = SenaFrameCompositor.from_videos(
+        args.left, args.right, 0.0, cfg.replace(video_estimate_pairs=1, video_drift_check_s=0.0), "auto")
+    start = 0.0
+    for index, (frame_l, frame_r) in enumerate(pairs):
+        start = time.process_time() if index == WARMUP_FRAMES else start
+        compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
+    per_frame = (time.process_time() - start) / max(1, len(pairs) - WARMUP_FRAMES) * 1e3
     luma, chroma = compositor._luma, compositor._chroma
     y_src, y_tgt = (frame.y for frame in compositor.source_target(frame_l, frame_r))
     uv_src, uv_tgt = ((frame.u, frame.v) for frame in compositor.source_target(frame_l, frame_r))
@@ -99,6 +109,8 @@ def main() -> int:
     uv_pass = cpu_ms(chroma.composite, args.calls)
     compositor.close()
     print(f"{args.left.name}: canvas {cols}x{rows}, {runtime.cpu_threads(cfg.cpu_threads)} row bands")
+    print(f"  composite_yuv (exposure, the frame's seam, both passes): {per_frame:.2f} ms CPU a frame, "
+          f"{len(pairs) - WARMUP_FRAMES} frames")
     print(f"  Y pass, frame kernel: {y_pass:.2f} ms CPU a call")
     print(f"  Y pass, sample only (the floor): {floor:.2f} ms CPU a call")
     print(f"  UV pass, frame kernel: {uv_pass:.2f} ms CPU a call")
