@@ -20,13 +20,11 @@ from pathlib import Path
 
 from sena_warp.config import Config
 from sena_warp.errors import StitchError
+from sena_warp.evaluation.sync_bench import RECORDINGS
 from sena_warp.kernels.runtime import resolve_config
 from sena_warp.video.estimate import first_pairs, screen_pair
 
 REPO = Path(__file__).resolve().parents[1]
-CAMERAS = {"office_static": ("cam1.mp4", "cam2.mp4"), "lecture_hall_static": ("left.mp4", "right.mp4"),
-           "futsal_night_static": ("cam1.mp4", "cam2.mp4"), "rooftop_handheld": ("left.mp4", "right.mp4"),
-           "house_handheld_stereo": ("left.mp4", "right.mp4")}
 
 
 def ranking(left: Path, right: Path, side: int) -> tuple[list[int | None], int, float]:
@@ -52,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="more pairs of videos, LEFT RIGHT ...")
     parser.add_argument("--sides", type=int, nargs="+", default=[1024, 640, 512])
     args = parser.parse_args(argv)
-    pairs = [(name, args.videos / name / a, args.videos / name / b) for name, (a, b) in CAMERAS.items()
+    pairs = [(name, args.videos / name / a, args.videos / name / b) for name, a, b in RECORDINGS
              if (args.videos / name).is_dir()]
     pairs += [(left.parent.name or left.stem, left, right) for left, right in zip(args.extra[::2], args.extra[1::2])]
     print("| recording | order | " + " | ".join(f"{side} px: inliers per pair, taken, s a pair" for side in args.sides) + " |")

@@ -20,13 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
+from sena_warp.evaluation.sync_bench import RECORDINGS
 from sena_warp.video.drift import hann_window, thumbnail, view_shift
 from sena_warp.video.reader import FrameReader
 
 REPO = Path(__file__).resolve().parents[1]
-CAMERAS = {"office_static": ("cam1.mp4", "cam2.mp4"), "lecture_hall_static": ("left.mp4", "right.mp4"),
-           "futsal_night_static": ("cam1.mp4", "cam2.mp4"), "rooftop_handheld": ("left.mp4", "right.mp4"),
-           "house_handheld_stereo": ("left.mp4", "right.mp4")}
 
 
 def view_moves(path: Path, every: int) -> tuple[float, float, float]:
@@ -52,7 +50,7 @@ def main() -> int:
     parser.add_argument("--every", type=int, default=10)
     args = parser.parse_args()
     print("| recording | camera | max shift px | min response | ms a comparison |\n|---|---|---:|---:|---:|")
-    for recording, cameras in CAMERAS.items():
+    for recording, *cameras in RECORDINGS:
         for camera in cameras:
             shift, response, seconds = view_moves(args.videos / recording / camera, args.every)
             print(f"| {recording} | {camera} | {shift:.1f} | {response:.2f} | {seconds * 1e3:.2f} |")
