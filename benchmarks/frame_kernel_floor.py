@@ -73,6 +73,20 @@ def cpu_ms(call, calls: int) -> float:
     return (time.process_time() - start) / calls * 1e3
 
 
+def y_floor_ms(compositor: SenaFrameCompositor, frame_l, frame_r, cfg: Config, calls: int) -> float:
+    """Process CPU ms a call of :func:`sample_only_kernel` over ``compositor``'s Y plan, on the pair's Y
+    planes; the Y pass's planes stay loaded for its frame kernel."""
+    luma = compositor._luma
+    y_src, y_tgt = (frame.y for frame in compositor.source_target(frame_l, frame_r))
+    rows, cols = luma.canvas_shape
+    out = wp.zeros(rows * cols, dtype=wp.uint8, device="cpu")
+    luma.load(y_src, y_tgt)
+    buf, channels, _ = luma._loaded
+    floor_inputs = [*buf.frame_inputs, *luma._gains[channels][:2], luma.tone, out]
+    return cpu_ms(lambda: runtime.launch_row_loops(sample_only_kernel, rows, cols, floor_inputs, "cpu", cfg.cpu_threads),
+                  calls)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--left", type=Path)
@@ -95,19 +109,13 @@ def main() -> int:
         compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
     per_frame = (time.process_time() - start) / max(1, len(pairs) - WARMUP_FRAMES) * 1e3
     luma, chroma = compositor._luma, compositor._chroma
-    y_src, y_tgt = (frame.y for frame in compositor.source_target(frame_l, frame_r))
-    uv_src, uv_tgt = ((frame.u, frame.v) for frame in compositor.source_target(frame_l, frame_r))
-    rows, cols = luma.canvas_shape
-    out = wp.zeros(rows * cols, dtype=wp.uint8, device="cpu")
-    luma.load(y_src, y_tgt)
-    buf, channels, _ = luma._loaded
-    floor_inputs = [*buf.frame_inputs, *luma._gains[channels][:2], luma.tone, out]
-    floor = cpu_ms(lambda: runtime.launch_row_loops(sample_only_kernel, rows, cols, floor_inputs, "cpu", cfg.cpu_threads),
-                   args.calls)
+    floor = y_floor_ms(compositor, frame_l, frame_r, cfg, args.calls)
     y_pass = cpu_ms(luma.composite, args.calls)
+    uv_src, uv_tgt = ((frame.u, frame.v) for frame in compositor.source_target(frame_l, frame_r))
     chroma.load_planes(uv_src, uv_tgt)
     uv_pass = cpu_ms(chroma.composite, args.calls)
     compositor.close()
+    rows, cols = luma.canvas_shape
     print(f"{args.left.name}: canvas {cols}x{rows}, {runtime.cpu_threads(cfg.cpu_threads)} row bands")
     print(f"  composite_yuv (exposure, the frame's seam, both passes): {per_frame:.2f} ms CPU a frame, "
           f"{len(pairs) - WARMUP_FRAMES} frames")
