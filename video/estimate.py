@@ -23,6 +23,7 @@ from ..xfeat import working_size
 from .maps import PlaneMaps, map_change_px
 from .pairing import pair_by_time
 from .reader import FrameReader, YuvFrame, probe_video
+from .working import axis_scales, prior_to_small, scaled_up, shrunk, small_matches, working_scale
 
 MEDIAN_PERCENTILE = 50.0  # the rejection test compares the median map change
 FAILED_SCREENING = -1  # the rank of a pair whose screening failed: after every screened one
@@ -61,8 +62,18 @@ def first_pairs(left: str | os.PathLike, right: str | os.PathLike, offset_s: flo
 def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str,
                   matches: Matches | None = None, prior_seam_tgt=None) -> StitchMaps:
     """SENA maps for one frame pair (left = input a); the BGR conversion happens only here, not per frame.
-    ``prior_seam_tgt``: the seam to stay near (``stitch.estimate_maps``)."""
-    return estimate_maps(frame_l.to_bgr(), frame_r.to_bgr(), cfg, reference, matches, prior_seam_tgt)
+    Frames larger than ``cfg.video_estimate_max_side`` are estimated made that small, and the maps
+    scaled up to them (``working.py``). ``matches`` of the full frames; ``prior_seam_tgt``: the seam
+    to stay near (``stitch.estimate_maps``), full target pixels."""
+    bgr = frame_l.to_bgr(), frame_r.to_bgr()
+    scale = working_scale((frame_l.y.shape, frame_r.y.shape), cfg.video_estimate_max_side)
+    if scale == 1.0:
+        return estimate_maps(*bgr, cfg, reference, matches, prior_seam_tgt)
+    small = tuple(shrunk(img, scale) for img in bgr)
+    scales = tuple(axis_scales(full.shape, img.shape) for full, img in zip(bgr, small))
+    maps = estimate_maps(*small, cfg, reference, small_matches(matches, *scales), prior_to_small(prior_seam_tgt, scale))
+    scale_src, scale_tgt = maps.rig.pick(*scales)
+    return scaled_up(maps, scale_src, scale_tgt, maps.rig.pick(*bgr)[1].shape[:2])
 
 
 def screening_config(cfg: Config, shapes: tuple[tuple[int, int], ...]) -> Config:

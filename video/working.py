@@ -1,0 +1,149 @@
+"""A video's estimates at a working resolution: the frames made small, the maps scaled up (issue 17).
+
+An estimate's dear stages work per canvas pixel (the warp map, the views, the gains, the seam). Above
+``video_estimate_max_side`` the frames are made that small for it (XFeat sees them at ``xfeat_max_side``
+anyway), and what the video composites with is scaled up to the full frames: the source map and the
+alpha by bilinear interpolation (the maps are smooth), the seam and the border blend along their lines.
+The target stays unwarped: its map on the full canvas is exact, at a whole-pixel offset.
+
+Conventions: pixel centres at whole coordinates at both resolutions, so a position p of a frame made
+(sx, sy) times smaller is at ``(p + 0.5) * s - 0.5`` in the full frame. The canvas follows the target
+(pasted unwarped): working canvas position u is at ``(u - o + 0.5) * s_tgt - 0.5 + O`` on the full canvas,
+o the working canvas's target offset, O = round(o * s_tgt) the full one's. The positions of a vertical
+rig's working frame are transposed (``rig.py``), so its scales swap there.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import cv2
+import numpy as np
+
+from ..composite import SeamLayout
+from ..features import Matches
+from ..partition import BorderOffsets, SeamMaps
+from ..rig import map_from_working
+from ..stitch import StitchMaps
+
+
+def working_scale(shapes: tuple[tuple[int, ...], ...], max_side: int) -> float:
+    """Full pixels per working pixel for frames of ``shapes`` (rows, cols, ...): their long side down to
+    ``max_side``, 1.0 where they are no larger."""
+    return max(1.0, max(max(shape[:2]) for shape in shapes) / max_side)
+
+
+def shrunk(img: np.ndarray, scale: float) -> np.ndarray:
+    """``img`` made ``scale`` times smaller (area interpolation), each side rounded; itself at 1.0."""
+    if scale == 1.0:
+        return img
+    rows, cols = img.shape[:2]
+    return cv2.resize(img, (max(1, round(cols / scale)), max(1, round(rows / scale))), interpolation=cv2.INTER_AREA)
+
+
+def axis_scales(full: tuple[int, ...], small: tuple[int, ...]) -> np.ndarray:
+    """(sx, sy) float64: full pixels per working pixel of a frame of shape ``full`` made ``small``."""
+    return np.array([full[1] / small[1], full[0] / small[0]], np.float64)
+
+
+def to_small(pts: np.ndarray, scale) -> np.ndarray:
+    """Full-frame positions (..., 2) or values along an axis, ``scale`` (sx, sy) or one factor."""
+    return (np.asarray(pts, np.float64) + 0.5) / scale - 0.5
+
+
+def to_full(pts: np.ndarray, scale) -> np.ndarray:
+    """Working-frame positions to the full frame (the inverse of :func:`to_small`)."""
+    return (np.asarray(pts, np.float64) + 0.5) * scale - 0.5
+
+
+def small_matches(matches: Matches | None, scale_a: np.ndarray, scale_b: np.ndarray) -> Matches | None:
+    """Matches of the full frames a, b on the frames made (sx, sy) ``scale_a`` / ``scale_b`` smaller."""
+    if matches is None:
+        return None
+    return replace(matches, pts_a=to_small(matches.pts_a, scale_a), pts_b=to_small(matches.pts_b, scale_b))
+
+
+def at_positions(values: np.ndarray, positions: np.ndarray, axis: int = 0) -> np.ndarray:
+    """``values`` sampled linearly along ``axis`` at fractional ``positions`` (clamped to its ends); NaN
+    where a tap that counts is NaN."""
+    last = values.shape[axis] - 1
+    p = np.clip(np.asarray(positions, np.float64), 0, last)
+    i0 = np.floor(p).astype(np.int64)
+    i1 = np.minimum(i0 + 1, last)
+    shape = [1] * values.ndim
+    shape[axis] = len(p)
+    f = (p - i0).reshape(shape)
+    low, high = np.take(values, i0, axis=axis), np.take(values, i1, axis=axis)
+    return np.where(f == 0.0, low, low * (1.0 - f) + high * f)
+
+
+def prior_to_small(prior_seam_tgt: np.ndarray | None, scale: float) -> np.ndarray | None:
+    """A seam to stay near (x per working-frame target row, target pixels; ``stitch.estimate_seam``) on the
+    target made ``scale`` times smaller (its rows as many fewer)."""
+    if prior_seam_tgt is None:
+        return None
+    rows_full = to_full(np.arange(max(1, round(len(prior_seam_tgt) / scale))), scale)
+    return to_small(at_positions(np.asarray(prior_seam_tgt, np.float64), rows_full), scale)
+
+
+def scaled_up(maps: StitchMaps, scale_src: np.ndarray, scale_tgt: np.ndarray, shape_tgt: tuple[int, int]) -> StitchMaps:
+    """``maps`` estimated on frames made (sx, sy) ``scale_src`` / ``scale_tgt`` smaller (input frame) as
+    the full frames' maps; ``shape_tgt`` (rows, cols) of the full target (input frame).
+
+    At full resolution: the input-frame maps and alpha, the seam's layout (its lf fade scaled with the
+    canvas; transition and band stay the settings', in full pixels, as the frames are composited) and
+    the seam's maps and border blend. The rest (``warp``, ``matches``, the seam's path, zone, gains and
+    offsets) stays at the working resolution; ``seconds`` gains ``scale_up``.
+    """
+    t0 = time.perf_counter()
+    rig, seam = maps.rig, maps.seam
+    s_src, s_tgt = (s[::-1] if rig.vertical else s for s in (scale_src, scale_tgt))
+    rows_tgt, cols_tgt = shape_tgt[::-1] if rig.vertical else shape_tgt
+    small_canvas = maps.warp.overlap.canvas
+    o = np.asarray(small_canvas.offset_tgt, np.float64)
+    big_o = np.round(o * s_tgt)
+    height = int(max(round(small_canvas.height * s_tgt[1]), big_o[1] + rows_tgt))
+    width = int(max(round(small_canvas.width * s_tgt[0]), big_o[0] + cols_tgt))
+    u_x = to_small(np.arange(width) - big_o[0], s_tgt[0]) + o[0]  # working canvas column of each full one
+    u_y = to_small(np.arange(height) - big_o[1], s_tgt[1]) + o[1]
+    # Full canvas pixel (x, y) -> working canvas position (u_x[x], u_y[y]), as the matrix warpAffine inverts with.
+    full_to_small = np.array([[1 / s_tgt[0], 0.0, u_x[0]], [0.0, 1 / s_tgt[1], u_y[0]]])
+
+    def canvas_x(x_small: np.ndarray) -> np.ndarray:
+        return to_full(x_small - o[0], s_tgt[0]) + big_o[0]
+
+    def resampled(field: np.ndarray) -> np.ndarray:
+        return cv2.warpAffine(np.ascontiguousarray(field, np.float32), full_to_small, (width, height),
+                              flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+
+    map_src = resampled(seam.maps.map_src_canvas)
+    map_src += np.float32(0.5)  # to_full in place, in float32: the map is the largest array here
+    map_src *= s_src.astype(np.float32)
+    map_src -= np.float32(0.5)
+    map_tgt = np.empty((height, width, 2), np.float32)
+    map_tgt[:, :, 0] = np.arange(width, dtype=np.float32)[None, :] - np.float32(big_o[0])
+    map_tgt[:, :, 1] = np.arange(height, dtype=np.float32)[:, None] - np.float32(big_o[1])
+    alpha = resampled(seam.maps.alpha_canvas)
+    seam_x = canvas_x(at_positions(seam.maps.seam_x_canvas.astype(np.float64), u_y)).astype(np.float32)
+
+    def anchors(pts: np.ndarray) -> np.ndarray:
+        pts = np.asarray(pts, np.float64).reshape(-1, 2)
+        return np.stack([canvas_x(pts[:, 0]), to_full(pts[:, 1] - o[1], s_tgt[1]) + big_o[1]], axis=1)
+
+    seam_maps = SeamMaps(map_src, map_tgt, alpha, seam_x, anchors(seam.maps.anchors_src_canvas),
+                         anchors(seam.maps.anchors_tgt_canvas))
+    border = seam.border
+    if border.on:
+        lines = tuple(float(to_full(line - o[1], s_tgt[1]) + big_o[1]) for line in border.lines)
+        border = BorderOffsets(lines, at_positions(border.src, u_x, axis=1).astype(np.float32),
+                               at_positions(border.tgt, u_x, axis=1).astype(np.float32), True)
+    path_x = canvas_x(at_positions(seam.path.seam_x_canvas.astype(np.float64), u_y)).astype(np.float32)
+    layout = maps.seam_input
+    seam_input = SeamLayout(positions=path_x, lines_are_rows=layout.lines_are_rows, band_px=layout.band_px,
+                            transition_px=layout.transition_px, smooth_sigma_px=layout.smooth_sigma_px,
+                            lf_px=float(layout.lf_px * s_tgt[0]))
+    return replace(maps, map_src_input=map_from_working(map_src, rig), map_tgt_input=map_from_working(map_tgt, rig),
+                   alpha_input=map_from_working(alpha, rig), seam_input=seam_input,
+                   seam=replace(seam, maps=seam_maps, border=border),
+                   seconds={**maps.seconds, "scale_up": time.perf_counter() - t0})
