@@ -83,8 +83,10 @@ def shift_onto(field: np.ndarray, shift_xy: np.ndarray, shape: tuple[int, int], 
 
 def target_map(shape: tuple[int, int], offset_tgt: np.ndarray) -> np.ndarray:
     """(H, W, 2) float32 target map ``u - o`` of a canvas of ``shape`` (H, W) with target offset o = (ox, oy)."""
-    rows, cols = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float32)
-    return np.stack([cols - np.float32(offset_tgt[0]), rows - np.float32(offset_tgt[1])], axis=-1)
+    out = np.empty((*shape, 2), np.float32)
+    out[:, :, 0] = np.arange(shape[1], dtype=np.float32)[None, :] - np.float32(offset_tgt[0])
+    out[:, :, 1] = np.arange(shape[0], dtype=np.float32)[:, None] - np.float32(offset_tgt[1])
+    return out
 
 
 def chroma_positions(map_luma: np.ndarray) -> np.ndarray:

@@ -26,6 +26,7 @@ from ..features import Matches
 from ..partition import BorderOffsets, SeamMaps
 from ..rig import map_from_working
 from ..stitch import StitchMaps
+from .maps import target_map
 
 
 def working_scale(shapes: tuple[tuple[int, ...], ...], max_side: int) -> float:
@@ -121,9 +122,7 @@ def scaled_up(maps: StitchMaps, scale_src: np.ndarray, scale_tgt: np.ndarray, sh
     map_src += np.float32(0.5)  # to_full in place, in float32: the map is the largest array here
     map_src *= s_src.astype(np.float32)
     map_src -= np.float32(0.5)
-    map_tgt = np.empty((height, width, 2), np.float32)
-    map_tgt[:, :, 0] = np.arange(width, dtype=np.float32)[None, :] - np.float32(big_o[0])
-    map_tgt[:, :, 1] = np.arange(height, dtype=np.float32)[:, None] - np.float32(big_o[1])
+    map_tgt = target_map((height, width), big_o)
     alpha = resampled(seam.maps.alpha_canvas)
     seam_x = canvas_x(at_positions(seam.maps.seam_x_canvas.astype(np.float64), u_y)).astype(np.float32)
 
