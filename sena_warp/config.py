@@ -152,7 +152,7 @@ class Config:
     video_estimate_pairs: int = 5  # first frame pairs tried for the first estimate; most inliers wins
     video_estimate_spacing: int = 5  # frame pairs between two of those tries
     video_screen_max_side: int = 640  # those tries are ranked by XFeat at this long side at most; the best is estimated at xfeat_max_side
-    video_estimate_max_side: int = 1024  # an estimate runs on the frames made this small (long side) and is scaled up
+    video_estimate_max_side: int = 1920  # an estimate runs on the frames made this small (long side) and is scaled up
     video_rig: str = "static"  # "static": estimated once, moved with a drifting camera; "moving": every video_reestimate_s
     video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
     video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's

@@ -6,6 +6,11 @@ anyway), and what the video composites with is scaled up to the full frames: the
 alpha by bilinear interpolation (the maps are smooth), the seam and the border blend along their lines.
 The target stays unwarped: its map on the full canvas is exact, at a whole-pixel offset.
 
+The default side, 1920 px, leaves frames up to 1080p as they were: the estimate's settings are in
+pixels, and a smaller working side lands on another model and seam, better on some recordings and
+worse on others (``docs/benchmarks.md``, 2026-12-02 sixth session); a 4K video is estimated as a
+1080p one is.
+
 Conventions: pixel centres at whole coordinates at both resolutions, so a position p of a frame made
 (sx, sy) times smaller is at ``(p + 0.5) * s - 0.5`` in the full frame. The canvas follows the target
 (pasted unwarped): working canvas position u is at ``(u - o + 0.5) * s_tgt - 0.5 + O`` on the full canvas,
