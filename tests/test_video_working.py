@@ -14,7 +14,6 @@ import pytest
 from sena_warp.config import Config
 from sena_warp.features import match_images
 from sena_warp.kernels.runtime import resolve_config
-from sena_warp.rig import matches_to_working
 from sena_warp.video.estimate import estimate_pair
 from sena_warp.video.reader import FrameReader
 from sena_warp.video.working import at_positions, prior_to_small, to_full, to_small, working_scale
@@ -54,11 +53,13 @@ def test_a_prior_seam_is_carried_to_the_smaller_target():
     assert prior_to_small(None, 2.0) is None
 
 
-@pytest.fixture(scope="module")
-def rooftop_pair(bundled_dir):
-    """Frame 10 of the rooftop clips (270x480, portrait) made twice as large: frames above the working
-    side, as 1080p ones are above 1024 px."""
+@pytest.fixture(scope="module", params=[False, True], ids=["horizontal", "turned"])
+def rooftop_pair(bundled_dir, request):
+    """Frame 10 of the rooftop clips (480x270, portrait) made twice as large: frames above the working
+    side, as 1080p ones are above 1024 px. Turned by 90 degrees, the left camera is on top: a
+    vertical rig, whose working frame is transposed."""
     def doubled(plane: np.ndarray) -> np.ndarray:
+        plane = np.ascontiguousarray(plane.T) if request.param else plane
         return cv2.resize(plane, (2 * plane.shape[1], 2 * plane.shape[0]), interpolation=cv2.INTER_CUBIC)
 
     frames = []
@@ -69,12 +70,11 @@ def rooftop_pair(bundled_dir):
     return tuple(frames)
 
 
-def residuals_px(maps, pair) -> np.ndarray:
-    """|M_s(a match's target point on the canvas) - its source point| (full source pixels) over the pair's
-    matches at full resolution that land on the canvas: how well the stitch aligns them."""
-    assert not maps.rig.vertical  # the input frame is the working frame
-    matches = match_images(pair[0].to_bgr(), pair[1].to_bgr(), CFG)
-    pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, maps.rig)
+def residuals_px(maps, pair, cfg: Config) -> np.ndarray:
+    """|M_s(a match's target point on the canvas) - its source point| (full source pixels, input frame)
+    over the pair's matches at full resolution that land on the canvas: how well the stitch aligns them."""
+    matches = match_images(pair[0].to_bgr(), pair[1].to_bgr(), cfg)
+    pts_src, pts_tgt = maps.rig.pick(matches.pts_a, matches.pts_b)
     canvas = (pts_tgt - maps.map_tgt_input[0, 0]).astype(np.float32)  # the target is pasted at offset -map_tgt[0, 0]
     sampled = cv2.remap(maps.map_src_input, canvas[:, :1], canvas[:, 1:], cv2.INTER_LINEAR,
                         borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)[:, 0]
@@ -82,25 +82,32 @@ def residuals_px(maps, pair) -> np.ndarray:
 
 
 def test_an_estimate_at_half_the_size_aligns_as_the_full_one_does(rooftop_pair):
-    """The doubled rooftop frames (540x960) estimated at a long side of 480 and scaled up, against the
-    estimate at full resolution, XFeat at 480 px in both (as at 1080p, where XFeat works at 1024 px
-    either way): the canvas is as large, the target sits unwarped at a whole-pixel offset, the seam
-    and the lf fade are on the full canvas, and the matches line up as closely."""
+    """The doubled rooftop frames estimated at a long side of 480 and scaled up, against the estimate at
+    full resolution, XFeat at 480 px in both (as at 1080p, where XFeat works at 1024 px either way): the
+    canvas is as large, the target sits unwarped at a whole-pixel offset, the seam (where the alpha
+    crosses 0.5) and the lf fade are on the full canvas, and the matches line up as closely."""
     cfg = CFG.replace(xfeat_max_side=480)
     full = estimate_pair(*rooftop_pair, cfg.replace(video_estimate_max_side=960), "auto")
     half = estimate_pair(*rooftop_pair, cfg.replace(video_estimate_max_side=480), "auto")
     assert "scale_up" in half.seconds and "scale_up" not in full.seconds
+    assert half.rig.vertical == full.rig.vertical
     assert abs(half.alpha_input.shape[0] - full.alpha_input.shape[0]) <= 0.05 * full.alpha_input.shape[0]
     assert abs(half.alpha_input.shape[1] - full.alpha_input.shape[1]) <= 0.05 * full.alpha_input.shape[1]
     offset = -half.map_tgt_input[0, 0]
     rows, cols = half.map_tgt_input.shape[:2]
     assert np.array_equal(offset, np.round(offset))
     assert np.array_equal(half.map_tgt_input[rows - 1, cols - 1], [cols - 1 - offset[0], rows - 1 - offset[1]])
-    assert half.map_src_input.shape == (rows, cols, 2) and len(half.seam_input.positions) == rows
-    assert len(half.seam.maps.seam_x_canvas) == rows
+    lines = cols if half.rig.vertical else rows
+    assert half.map_src_input.shape == (rows, cols, 2) and len(half.seam_input.positions) == lines
+    assert len(half.seam.maps.seam_x_canvas) == lines
+    alpha = half.alpha_input.T if half.rig.vertical else half.alpha_input  # one line per row
+    for line in range(0, lines, 97):
+        crossing = np.argmax(alpha[line] < 0.5)
+        if alpha[line, 0] >= 0.5 and crossing > 0:
+            assert abs(crossing - half.seam_input.positions[line]) <= 2
     assert half.seam_input.lf_px == pytest.approx(full.seam_input.lf_px, rel=0.05)  # a fade of the same reach
     assert half.seam_input.transition_px == full.seam_input.transition_px  # composited at full resolution
-    res_full, res_half = residuals_px(full, rooftop_pair), residuals_px(half, rooftop_pair)
+    res_full, res_half = residuals_px(full, rooftop_pair, cfg), residuals_px(half, rooftop_pair, cfg)
     assert len(res_half) > 0.9 * len(res_full) > 100
     assert np.median(res_half) < 1.1 * np.median(res_full) + 0.2
     assert (res_half < 3).mean() > 0.9 * (res_full < 3).mean()
