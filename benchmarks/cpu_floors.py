@@ -34,7 +34,6 @@ side-by-side frames is timed too, to show where the transcode's time goes.
 
 from __future__ import annotations
 
-import argparse
 import subprocess
 import sys
 import tempfile
@@ -48,10 +47,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from frame_kernel_floor import y_floor_ms  # noqa: E402
+from frame_kernel_floor import clip_pair, clip_parser, y_floor_ms  # noqa: E402
 
 from sena_warp.config import Config  # noqa: E402
-from sena_warp.evaluation.bench import DATA_DIR, SideBySide, make_clip_pair, pair_paths, transcode_baseline  # noqa: E402
+from sena_warp.evaluation.bench import SideBySide, transcode_baseline  # noqa: E402
 from sena_warp.features import Matches, match_images  # noqa: E402
 from sena_warp.kernels.runtime import cpu_threads, prewarm, resolve_config  # noqa: E402
 from sena_warp.stitch import estimate_maps  # noqa: E402
@@ -120,17 +119,12 @@ def decode(left: Path, right: Path, frames: int, threads: int) -> None:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--left", type=Path)
-    parser.add_argument("--right", type=Path)
-    parser.add_argument("--work", type=Path, default=Path("out/cpu_floors"))
+    parser = clip_parser(__doc__.split("\n")[0], "out/cpu_floors")
     parser.add_argument("--frames", type=int, default=60)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()
     cfg = resolve_config(Config(device="cpu"))
-    args.work.mkdir(parents=True, exist_ok=True)
-    if args.left is None:
-        args.left, args.right = make_clip_pair(pair_paths(DATA_DIR), args.work, (1920, 1080), 5.0)
+    args.left, args.right = clip_pair(args)
 
     imports = min(imports_s(FIRST_FRAME_IMPORTS) for _ in range(args.repeats))
     imports_warp = min(imports_s(f"{FIRST_FRAME_IMPORTS}; {WARP_IMPORTS}") for _ in range(args.repeats))

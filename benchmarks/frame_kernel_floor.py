@@ -87,18 +87,30 @@ def y_floor_ms(compositor: SenaFrameCompositor, frame_l, frame_r, cfg: Config, c
                   calls)
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+def clip_parser(description: str, work: str) -> argparse.ArgumentParser:
+    """A script's arguments for its clip pair: ``--left``/``--right``, or ``--work`` (default ``work``)."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--left", type=Path)
     parser.add_argument("--right", type=Path)
-    parser.add_argument("--work", type=Path, default=Path("out/frame_kernel_floor"))
+    parser.add_argument("--work", type=Path, default=Path(work))
+    return parser
+
+
+def clip_pair(args: argparse.Namespace) -> tuple[Path, Path]:
+    """``--left``/``--right``, or the bench's 1080p clip pair made (or reused) in ``--work``."""
+    args.work.mkdir(parents=True, exist_ok=True)
+    if args.left is not None:
+        return args.left, args.right
+    return make_clip_pair(pair_paths(DATA_DIR), args.work, (1920, 1080), 5.0)
+
+
+def main() -> int:
+    parser = clip_parser(__doc__.split("\n")[0], "out/frame_kernel_floor")
     parser.add_argument("--calls", type=int, default=20)
     parser.add_argument("--frames", type=int, default=40)
     args = parser.parse_args()
     cfg = resolve_config(Config(device="cpu"))
-    if args.left is None:
-        args.work.mkdir(parents=True, exist_ok=True)
-        args.left, args.right = make_clip_pair(pair_paths(DATA_DIR), args.work, (1920, 1080), 5.0)
+    args.left, args.right = clip_pair(args)
     with FrameReader(args.left) as reader_l, FrameReader(args.right) as reader_r:
         pairs = list(zip(islice(reader_l, args.frames), islice(reader_r, args.frames)))
     compositor = SenaFrameCompositor.from_videos(
