@@ -42,7 +42,6 @@ from fractions import Fraction
 from itertools import islice
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -57,6 +56,7 @@ from sena_warp.stitch import estimate_maps  # noqa: E402
 from sena_warp.video.estimate import screening_config  # noqa: E402
 from sena_warp.video.reader import FrameReader  # noqa: E402
 from sena_warp.video.stitch import SenaFrameCompositor  # noqa: E402
+from sena_warp.video.working import axis_scales, shrunk, small_matches, working_scale  # noqa: E402
 from sena_warp.video.writer import VideoWriter  # noqa: E402
 
 FIRST_FRAME_IMPORTS = "import numpy, cv2, onnxruntime, av; import sena_warp.features, sena_warp.video.reader"
@@ -82,12 +82,11 @@ def first_pair_s(left: Path, right: Path, threads: int) -> tuple[float, tuple]:
 
 def small_estimate_s(bgr: tuple[np.ndarray, np.ndarray], matches: Matches, side: int, cfg: Config,
                      repeats: int) -> float:
-    """Wall seconds (least of ``repeats``) of an estimate's steps 1-9 on ``bgr`` resized to a long side of
-    ``side``, with ``matches`` (of the full-size pair) scaled to it."""
-    scale = side / max(bgr[0].shape[:2])
-    small = tuple(cv2.resize(img, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA) for img in bgr)
-    scaled = Matches(matches.pts_a * scale, matches.pts_b * scale, matches.scores, matches.n_keypoints_a,
-                     matches.n_keypoints_b)
+    """Wall seconds (least of ``repeats``) of an estimate's steps 1-9 on ``bgr`` made as small as a long side
+    of ``side`` (as ``video/working.py`` makes them), with ``matches`` (of the full-size pair) carried to it."""
+    scale = working_scale(tuple(img.shape for img in bgr), side)
+    small = tuple(shrunk(img, scale) for img in bgr)
+    scaled = small_matches(matches, *(axis_scales(full.shape, img.shape) for full, img in zip(bgr, small)))
     return min(wall_s(lambda: estimate_maps(*small, cfg, matches=scaled)) for _ in range(repeats))
 
 
@@ -140,20 +139,24 @@ def main() -> int:
         pairs = list(zip(islice(reader_l, args.frames), islice(reader_r, args.frames)))
     compositor = SenaFrameCompositor.from_videos(
         args.left, args.right, 0.0, cfg.replace(video_estimate_pairs=1, video_drift_check_s=0.0), "auto")
-    first_composite = wall_s(lambda: compositor.composite_yuv(*(p for f in pairs[0] for p in (f.y, f.u, f.v))))
+    def composited(pair: tuple) -> tuple[np.ndarray, ...]:
+        return tuple(np.array(p) for p in compositor.composite_yuv(*(p for f in pair for p in (f.y, f.u, f.v))))
+
+    start = time.perf_counter()
+    stitched = [composited(pairs[0])]
+    first_composite = time.perf_counter() - start
     start = time.process_time()
-    stitched = [tuple(np.array(p) for p in compositor.composite_yuv(*(p for f in pair for p in (f.y, f.u, f.v))))
-                for pair in pairs]
-    composite_ms = (time.process_time() - start) / len(pairs) * 1e3
+    stitched += [composited(pair) for pair in pairs[1:]]
+    composite_ms = (time.process_time() - start) / max(1, len(pairs) - 1) * 1e3
     y_floor = y_floor_ms(compositor, *pairs[-1], cfg, args.repeats * 5)
     compositor.close()
     side_by_side = SideBySide(*pairs[0])
     sbs = [side_by_side.composite_yuv(l.y, l.u, l.v, r.y, r.u, r.v) for l, r in pairs]
 
-    decode_ms = cpu_per_frame_ms(lambda: decode(args.left, args.right, args.frames, cfg.cpu_threads), args.frames)
+    decode_ms = cpu_per_frame_ms(lambda: decode(args.left, args.right, len(pairs), cfg.cpu_threads), len(pairs))
     with tempfile.TemporaryDirectory(dir=args.work) as temp:
-        encode_canvas_ms = cpu_per_frame_ms(lambda: encode(stitched, Path(temp) / "canvas.mp4", cfg), args.frames)
-        encode_sbs_ms = cpu_per_frame_ms(lambda: encode(sbs, Path(temp) / "sbs.mp4", cfg), args.frames)
+        encode_canvas_ms = cpu_per_frame_ms(lambda: encode(stitched, Path(temp) / "canvas.mp4", cfg), len(pairs))
+        encode_sbs_ms = cpu_per_frame_ms(lambda: encode(sbs, Path(temp) / "sbs.mp4", cfg), len(pairs))
         baseline = transcode_baseline(args.left, args.right, Path(temp) / "baseline.mp4", cfg)
     cores = cpu_threads(0)
     stitch_cpu_ms = decode_ms + encode_canvas_ms + y_floor
@@ -170,7 +173,7 @@ def main() -> int:
     print(f"  the rest of an estimate at {screen.xfeat_max_side} px: {small_estimate:.3f} s")
     print(f"  first composite: {first_composite:.3f} s")
     print(f"  floor: {floor:.2f} s ({floor_overlapped:.2f} s with Warp's imports overlapped)")
-    print(f"whole-run ceiling ({args.frames} frame pairs, process CPU a frame pair):")
+    print(f"whole-run ceiling ({len(pairs)} frame pairs, process CPU a frame pair):")
     print(f"  decode both: {decode_ms:.1f} ms; encode the canvas: {encode_canvas_ms:.1f} ms; "
           f"Y pass floor: {y_floor:.1f} ms; together {stitch_cpu_ms:.1f} ms")
     print(f"  (the transcode's encode of {sbs[0][0].shape[1]}x{sbs[0][0].shape[0]}: {encode_sbs_ms:.1f} ms)")
@@ -180,7 +183,7 @@ def main() -> int:
     short = baseline["seconds"] / (floor + clip_frames / stitch_fps_max)
     print(f"  this clip with the set-up floor: whole / transcode <= {short:.2f} (issue 17: >= 0.9 on 5 s)")
     today_fps = cores * 1e3 / (decode_ms + encode_canvas_ms + composite_ms)
-    print(f"  with today's composite_yuv ({composite_ms:.1f} ms, the first {args.frames} frames): stitch at most "
+    print(f"  with today's composite_yuv ({composite_ms:.1f} ms, frames 1-{len(pairs) - 1}): stitch at most "
           f"{today_fps:.1f} fps, whole / transcode <= {today_fps / baseline['fps']:.2f}")
     return 0
 

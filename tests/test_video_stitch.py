@@ -24,7 +24,7 @@ from sena_warp.video import estimate
 from sena_warp.video.estimate import best_first_estimate, rejection_reason
 from sena_warp.composite import SeamLayout
 from sena_warp.video.maps import (PlaneMaps, chroma_positions, chroma_seam, lerp_maps, map_change_px, seam_change_px,
-                                 target_map)
+                                 seam_per_target_line, target_map)
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import YuvFrame
 from sena_warp.video.stitch import SenaFrameCompositor, stitch_videos
@@ -234,6 +234,17 @@ def test_copy_at_another_frame_rate_is_paired_by_time_and_stitched(clips, tmp_pa
     out_frames, in_24 = decoded_frames(out), decoded_frames(right_24)
     for k in (10, 45):
         assert target_region_diff(out_frames[k], in_24[round(0.8 * k)], report, FAST) < 3.0
+
+
+def test_the_prior_seam_of_a_re_estimate_is_per_target_row_and_unknown_above_a_cropped_canvas():
+    """A moving rig's re-estimate stays near the current seam, given per target row: the canvas lines
+    from the target's top on, less its x offset; a cropped canvas that starts 3 rows inside the target
+    knows no seam for those 3 rows."""
+    positions = np.array([10.0, 11.0, 12.0, 13.0, 14.0], np.float32)
+    assert np.array_equal(seam_per_target_line(positions, np.array([4.0, 2.0])), [8.0, 9.0, 10.0])
+    cropped = seam_per_target_line(positions, np.array([4.0, -3.0]))
+    assert len(cropped) == 8 and np.isnan(cropped[:3]).all()
+    assert np.array_equal(cropped[3:], positions - 4.0)
 
 
 def test_chroma_map_samples_the_luma_map_at_the_chroma_centre():

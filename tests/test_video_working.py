@@ -55,9 +55,9 @@ def test_a_prior_seam_is_carried_to_the_smaller_target():
 
 @pytest.fixture(scope="module", params=[False, True], ids=["horizontal", "turned"])
 def rooftop_pair(bundled_dir, request):
-    """Frame 10 of the rooftop clips (480x270, portrait) made twice as large: frames above the working
-    side, as 1080p ones are above 1024 px. Turned by 90 degrees, the left camera is on top: a
-    vertical rig, whose working frame is transposed."""
+    """Frame 10 of the rooftop clips (270x480 px, portrait) made twice as large, then estimated at half
+    that: frames above the working side, as 4K ones are above the default 1920 px. Turned by 90
+    degrees, the left camera is on top: a vertical rig, whose working frame is transposed."""
     def doubled(plane: np.ndarray) -> np.ndarray:
         plane = np.ascontiguousarray(plane.T) if request.param else plane
         return cv2.resize(plane, (2 * plane.shape[1], 2 * plane.shape[0]), interpolation=cv2.INTER_CUBIC)

@@ -73,7 +73,7 @@ def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: 
     scales = tuple(axis_scales(full.shape, img.shape) for full, img in zip(bgr, small))
     maps = estimate_maps(*small, cfg, reference, small_matches(matches, *scales), prior_to_small(prior_seam_tgt, scale))
     scale_src, scale_tgt = maps.rig.pick(*scales)
-    return scaled_up(maps, scale_src, scale_tgt, maps.rig.pick(*bgr)[1].shape[:2])
+    return scaled_up(maps, scale_src, scale_tgt, maps.rig.pick(*bgr)[1].shape[:2], cfg)
 
 
 def screening_config(cfg: Config, shapes: tuple[tuple[int, int], ...]) -> Config:

@@ -189,6 +189,18 @@ def seam_on_canvas(seam_x_working: np.ndarray, rig: Rig, shift_xy: np.ndarray, s
     return seam[:, 0] - np.float32(round(dx))
 
 
+def seam_per_target_line(positions: np.ndarray, offset_working: np.ndarray) -> np.ndarray:
+    """A canvas seam (L,) per working-frame canvas line as x per working-frame target row, in target
+    pixels; ``offset_working`` (ox, oy): the target's canvas offset in the working frame. Target rows
+    above the canvas (a cropped canvas starts inside the target) are NaN: no seam known there."""
+    ox, oy = offset_working
+    first = int(round(oy))
+    seam = np.asarray(positions, np.float64)
+    if first < 0:
+        seam = np.concatenate([np.full(-first, np.nan), seam])
+    return seam[max(first, 0):] - ox
+
+
 def drifted_maps(maps: PlaneMaps, shift_src: np.ndarray, shift_tgt: np.ndarray) -> PlaneMaps:
     """``maps`` after the source camera's content moved by ``shift_src`` (x, y) in its Y plane and the
     target's by ``shift_tgt`` (``drift.py``): the target is never warped, so its content moves by

@@ -41,7 +41,7 @@ from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_video
 from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, chroma_lines, drifted_maps, lerp_maps, map_change_px,
-                   plane_maps, sampled_mask, seam_change_px, target_offset)
+                   plane_maps, sampled_mask, seam_change_px, seam_per_target_line, target_offset)
 from .reader import YuvFrame, probe_video
 from .writer import even_size
 
@@ -323,8 +323,8 @@ class SenaFrameCompositor:
     def _prior_seam_tgt(self) -> np.ndarray:
         """The current seam per working-frame target row, in target pixels: where a re-estimate's seam
         should stay (``stitch.estimate_maps``'s ``prior_seam_tgt``)."""
-        ox, oy = self._offset_tgt[::-1] if self._rig.vertical else self._offset_tgt
-        return self._seam.positions[int(round(oy)):].astype(np.float64) - ox
+        offset = self._offset_tgt[::-1] if self._rig.vertical else self._offset_tgt
+        return seam_per_target_line(self._seam.positions, offset)
 
     def _submit(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         self._last_estimate_s = float(frame_l.time_s)

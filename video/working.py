@@ -25,13 +25,17 @@ from dataclasses import replace
 
 import cv2
 import numpy as np
+import warp as wp
 
 from ..composite import SeamLayout
+from ..config import Config
 from ..features import Matches
-from ..partition import BorderOffsets, SeamMaps
+from ..partition import BorderOffsets, SeamMaps, SeamOffsets
 from ..rig import map_from_working
 from ..stitch import StitchMaps
 from .maps import target_map
+from sena_warp.kernels import runtime
+from sena_warp.kernels.composite import seam_weights_kernel
 
 
 def working_scale(shapes: tuple[tuple[int, ...], ...], max_side: int) -> float:
@@ -54,7 +58,8 @@ def axis_scales(full: tuple[int, ...], small: tuple[int, ...]) -> np.ndarray:
 
 
 def to_small(pts: np.ndarray, scale) -> np.ndarray:
-    """Full-frame positions (..., 2) or values along an axis, ``scale`` (sx, sy) or one factor."""
+    """Full-frame positions (..., 2), or values along one axis, as positions in the frame made ``scale``
+    ((sx, sy) or one factor) times smaller."""
     return (np.asarray(pts, np.float64) + 0.5) / scale - 0.5
 
 
@@ -86,21 +91,35 @@ def at_positions(values: np.ndarray, positions: np.ndarray, axis: int = 0) -> np
 
 def prior_to_small(prior_seam_tgt: np.ndarray | None, scale: float) -> np.ndarray | None:
     """A seam to stay near (x per working-frame target row, target pixels; ``stitch.estimate_seam``) on the
-    target made ``scale`` times smaller (its rows as many fewer)."""
+    target made ``scale`` times smaller (its rows as many fewer): the nominal scale for both axes, within
+    0.05 % of each axis's own, close enough for a seam to stay near."""
     if prior_seam_tgt is None:
         return None
     rows_full = to_full(np.arange(max(1, round(len(prior_seam_tgt) / scale))), scale)
     return to_small(at_positions(np.asarray(prior_seam_tgt, np.float64), rows_full), scale)
 
 
-def scaled_up(maps: StitchMaps, scale_src: np.ndarray, scale_tgt: np.ndarray, shape_tgt: tuple[int, int]) -> StitchMaps:
-    """``maps`` estimated on frames made (sx, sy) ``scale_src`` / ``scale_tgt`` smaller (input frame) as
-    the full frames' maps; ``shape_tgt`` (rows, cols) of the full target (input frame).
+def seam_alpha(seam_x: np.ndarray, shape: tuple[int, int], layout: SeamLayout, cfg: Config) -> np.ndarray:
+    """(H, W) float32 source weight of a seam at ``seam_x`` (H,) per row, across ``layout``'s transition
+    (``kernels/composite.py``'s ``seam_weights_kernel``: the rule ``partition.seam_maps`` gives its alpha)."""
+    alpha = wp.empty(shape, dtype=float, device=cfg.device)
+    lf = wp.empty(shape, dtype=float, device=cfg.device)
+    inputs = [wp.array(np.ascontiguousarray(seam_x, np.float32), dtype=float, device=cfg.device), 1,
+              float(layout.transition_px), float(layout.smooth_sigma_px), 0.0, alpha, lf]
+    runtime.launch_rows(seam_weights_kernel, *shape, inputs, cfg.device, cfg.cpu_threads)
+    return alpha.numpy()
 
-    At full resolution: the input-frame maps and alpha, the seam's layout (its lf fade scaled with the
-    canvas; transition and band stay the settings', in full pixels, as the frames are composited) and
-    the seam's maps and border blend. The rest (``warp``, ``matches``, the seam's path, zone, gains and
-    offsets) stays at the working resolution; ``seconds`` gains ``scale_up``.
+
+def scaled_up(maps: StitchMaps, scale_src: np.ndarray, scale_tgt: np.ndarray, shape_tgt: tuple[int, int],
+              cfg: Config) -> StitchMaps:
+    """``maps`` estimated on frames made (sx, sy) ``scale_src`` / ``scale_tgt`` smaller (input frame) as
+    the full frames' maps; ``shape_tgt`` (rows, cols) of the full target (input frame); ``cfg.device``
+    resolved.
+
+    At full resolution: the input-frame maps, the seam's layout (its lf fade scaled with the canvas;
+    transition and band stay the settings', in full pixels, as the frames are composited) and the
+    alpha it gives, and the seam's path, maps, offsets and border blend. ``warp``, ``matches`` and the
+    seam's zone stay at the working resolution; ``seconds`` gains ``scale_up``.
     """
     t0 = time.perf_counter()
     rig, seam = maps.rig, maps.seam
@@ -119,35 +138,40 @@ def scaled_up(maps: StitchMaps, scale_src: np.ndarray, scale_tgt: np.ndarray, sh
     def canvas_x(x_small: np.ndarray) -> np.ndarray:
         return to_full(x_small - o[0], s_tgt[0]) + big_o[0]
 
-    def resampled(field: np.ndarray) -> np.ndarray:
-        return cv2.warpAffine(np.ascontiguousarray(field, np.float32), full_to_small, (width, height),
-                              flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
-
-    map_src = resampled(seam.maps.map_src_canvas)
-    map_src += np.float32(0.5)  # to_full in place, in float32: the map is the largest array here
-    map_src *= s_src.astype(np.float32)
-    map_src -= np.float32(0.5)
-    map_tgt = target_map((height, width), big_o)
-    alpha = resampled(seam.maps.alpha_canvas)
-    seam_x = canvas_x(at_positions(seam.maps.seam_x_canvas.astype(np.float64), u_y)).astype(np.float32)
+    def along_rows(x_small: np.ndarray) -> np.ndarray:
+        """A position x per working canvas row as one per full canvas row (float32)."""
+        return canvas_x(at_positions(np.asarray(x_small, np.float64), u_y)).astype(np.float32)
 
     def anchors(pts: np.ndarray) -> np.ndarray:
         pts = np.asarray(pts, np.float64).reshape(-1, 2)
         return np.stack([canvas_x(pts[:, 0]), to_full(pts[:, 1] - o[1], s_tgt[1]) + big_o[1]], axis=1)
 
-    seam_maps = SeamMaps(map_src, map_tgt, alpha, seam_x, anchors(seam.maps.anchors_src_canvas),
-                         anchors(seam.maps.anchors_tgt_canvas))
+    # Each channel alone: OpenCV's 2-channel warp rounds positions to 1/32 px, its 1-channel one does not.
+    map_src = np.stack([cv2.warpAffine(np.ascontiguousarray(seam.maps.map_src_canvas[:, :, k]), full_to_small,
+                                       (width, height), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                       borderMode=cv2.BORDER_REPLICATE) for k in range(2)], axis=-1)
+    map_src += np.float32(0.5)  # to_full in place, in float32: the map is the largest array here
+    map_src *= s_src.astype(np.float32)
+    map_src -= np.float32(0.5)
+    seam_x = along_rows(seam.path.seam_x_canvas)
+    seam_input = replace(maps.seam_input, positions=seam_x, lf_px=float(maps.seam_input.lf_px * s_tgt[0]))
+    alpha = seam_alpha(seam_x, (height, width), seam_input, cfg)
+    path = replace(seam.path, seam_x_canvas=seam_x, coarse_x_canvas=along_rows(seam.path.coarse_x_canvas),
+                   rows=tuple(int(np.clip(round(to_full(r - o[1], s_tgt[1]) + big_o[1]), 0, height - 1))
+                              for r in seam.path.rows),
+                   anchors_src_canvas=anchors(seam.path.anchors_src_canvas),
+                   anchors_tgt_canvas=anchors(seam.path.anchors_tgt_canvas))
+    seam_maps = SeamMaps(map_src, target_map((height, width), big_o), alpha, seam_x,
+                         anchors(seam.maps.anchors_src_canvas), anchors(seam.maps.anchors_tgt_canvas))
+    offsets = SeamOffsets(at_positions(seam.offsets.src, u_y).astype(np.float32),
+                          at_positions(seam.offsets.tgt, u_y).astype(np.float32), seam_input.lf_px)
     border = seam.border
     if border.on:
         lines = tuple(float(to_full(line - o[1], s_tgt[1]) + big_o[1]) for line in border.lines)
         border = BorderOffsets(lines, at_positions(border.src, u_x, axis=1).astype(np.float32),
                                at_positions(border.tgt, u_x, axis=1).astype(np.float32), True)
-    path_x = canvas_x(at_positions(seam.path.seam_x_canvas.astype(np.float64), u_y)).astype(np.float32)
-    layout = maps.seam_input
-    seam_input = SeamLayout(positions=path_x, lines_are_rows=layout.lines_are_rows, band_px=layout.band_px,
-                            transition_px=layout.transition_px, smooth_sigma_px=layout.smooth_sigma_px,
-                            lf_px=float(layout.lf_px * s_tgt[0]))
-    return replace(maps, map_src_input=map_from_working(map_src, rig), map_tgt_input=map_from_working(map_tgt, rig),
+    return replace(maps, map_src_input=map_from_working(map_src, rig),
+                   map_tgt_input=map_from_working(seam_maps.map_tgt_canvas, rig),
                    alpha_input=map_from_working(alpha, rig), seam_input=seam_input,
-                   seam=replace(seam, maps=seam_maps, border=border),
+                   seam=replace(seam, path=path, maps=seam_maps, offsets=offsets, border=border),
                    seconds={**maps.seconds, "scale_up": time.perf_counter() - t0})
