@@ -56,7 +56,7 @@ from sena_warp.stitch import estimate_maps  # noqa: E402
 from sena_warp.video.estimate import screening_config  # noqa: E402
 from sena_warp.video.reader import FrameReader  # noqa: E402
 from sena_warp.video.stitch import SenaFrameCompositor  # noqa: E402
-from sena_warp.video.working import axis_scales, shrunk, small_matches, working_scale  # noqa: E402
+from sena_warp.video.working import shrunk_pair, small_matches, working_scale  # noqa: E402
 from sena_warp.video.writer import VideoWriter  # noqa: E402
 
 FIRST_FRAME_IMPORTS = "import numpy, cv2, onnxruntime, av; import sena_warp.features, sena_warp.video.reader"
@@ -84,9 +84,8 @@ def small_estimate_s(bgr: tuple[np.ndarray, np.ndarray], matches: Matches, side:
                      repeats: int) -> float:
     """Wall seconds (least of ``repeats``) of an estimate's steps 1-9 on ``bgr`` made as small as a long side
     of ``side`` (as ``video/working.py`` makes them), with ``matches`` (of the full-size pair) carried to it."""
-    scale = working_scale(tuple(img.shape for img in bgr), side)
-    small = tuple(shrunk(img, scale) for img in bgr)
-    scaled = small_matches(matches, *(axis_scales(full.shape, img.shape) for full, img in zip(bgr, small)))
+    small, scales = shrunk_pair(bgr, working_scale(tuple(img.shape for img in bgr), side))
+    scaled = small_matches(matches, *scales)
     return min(wall_s(lambda: estimate_maps(*small, cfg, matches=scaled)) for _ in range(repeats))
 
 
@@ -167,7 +166,8 @@ def main() -> int:
     rows, cols = stitched[0][0].shape
     print(f"{args.left.name}: canvas {cols}x{rows}, {cores} cores")
     print("set-up floor, process start to the first frame (issue 17: <= 0.8 s):")
-    print(f"  imports for a first frame: {imports:.3f} s; with Warp, the loop and the cached kernels: {imports_warp:.3f} s")
+    print(f"  imports for a first frame: {imports:.3f} s; "
+          f"with Warp, the loop and the cached kernels: {imports_warp:.3f} s")
     print(f"  first pair opened and decoded: {decode_first:.3f} s")
     print(f"  matching at {screen.xfeat_max_side} px: {match_cold:.3f} s first call ({match_warm:.3f} s warm)")
     print(f"  the rest of an estimate at {screen.xfeat_max_side} px: {small_estimate:.3f} s")

@@ -23,7 +23,7 @@ from ..xfeat import working_size
 from .maps import PlaneMaps, map_change_px
 from .pairing import pair_by_time
 from .reader import FrameReader, YuvFrame, probe_video
-from .working import axis_scales, prior_to_small, scaled_up, shrunk, small_matches, working_scale
+from .working import prior_to_small, scaled_up, shrunk_pair, small_matches, working_scale
 
 MEDIAN_PERCENTILE = 50.0  # the rejection test compares the median map change
 FAILED_SCREENING = -1  # the rank of a pair whose screening failed: after every screened one
@@ -69,8 +69,7 @@ def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: 
     scale = working_scale((frame_l.y.shape, frame_r.y.shape), cfg.video_estimate_max_side)
     if scale == 1.0:
         return estimate_maps(*bgr, cfg, reference, matches, prior_seam_tgt)
-    small = tuple(shrunk(img, scale) for img in bgr)
-    scales = tuple(axis_scales(full.shape, img.shape) for full, img in zip(bgr, small))
+    small, scales = shrunk_pair(bgr, scale)
     maps = estimate_maps(*small, cfg, reference, small_matches(matches, *scales), prior_to_small(prior_seam_tgt, scale))
     scale_src, scale_tgt = maps.rig.pick(*scales)
     return scaled_up(maps, scale_src, scale_tgt, maps.rig.pick(*bgr)[1].shape[:2], cfg)

@@ -2,9 +2,10 @@
 
 An estimate's dear stages work per canvas pixel (the warp map, the views, the gains, the seam). Above
 ``video_estimate_max_side`` the frames are made that small for it (XFeat sees them at ``xfeat_max_side``
-anyway), and what the video composites with is scaled up to the full frames: the source map and the
-alpha by bilinear interpolation (the maps are smooth), the seam and the border blend along their lines.
-The target stays unwarped: its map on the full canvas is exact, at a whole-pixel offset.
+anyway), and what the video composites with is scaled up to the full frames: the source map by
+bilinear interpolation (it is smooth), the seam, its anchors and offsets and the border blend along
+their lines; the alpha is made anew from the scaled seam by the seam's rule. The target stays
+unwarped: its map on the full canvas is exact, at a whole-pixel offset.
 
 The default side, 1920 px, leaves frames up to 1080p as they were: the estimate's settings are in
 pixels, and a smaller working side lands on another model and seam, better on some recordings and
@@ -55,6 +56,13 @@ def shrunk(img: np.ndarray, scale: float) -> np.ndarray:
 def axis_scales(full: tuple[int, ...], small: tuple[int, ...]) -> np.ndarray:
     """(sx, sy) float64: full pixels per working pixel of a frame of shape ``full`` made ``small``."""
     return np.array([full[1] / small[1], full[0] / small[0]], np.float64)
+
+
+def shrunk_pair(images: tuple[np.ndarray, np.ndarray], scale: float
+                ) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """Both images made ``scale`` times smaller (:func:`shrunk`), and each one's (sx, sy) (:func:`axis_scales`)."""
+    small = tuple(shrunk(img, scale) for img in images)
+    return small, tuple(axis_scales(full.shape, img.shape) for full, img in zip(images, small))
 
 
 def to_small(pts: np.ndarray, scale) -> np.ndarray:
@@ -138,13 +146,16 @@ def scaled_up(maps: StitchMaps, scale_src: np.ndarray, scale_tgt: np.ndarray, sh
     def canvas_x(x_small: np.ndarray) -> np.ndarray:
         return to_full(x_small - o[0], s_tgt[0]) + big_o[0]
 
+    def canvas_y(y_small: np.ndarray) -> np.ndarray:
+        return to_full(y_small - o[1], s_tgt[1]) + big_o[1]
+
     def along_rows(x_small: np.ndarray) -> np.ndarray:
         """A position x per working canvas row as one per full canvas row (float32)."""
         return canvas_x(at_positions(np.asarray(x_small, np.float64), u_y)).astype(np.float32)
 
     def anchors(pts: np.ndarray) -> np.ndarray:
         pts = np.asarray(pts, np.float64).reshape(-1, 2)
-        return np.stack([canvas_x(pts[:, 0]), to_full(pts[:, 1] - o[1], s_tgt[1]) + big_o[1]], axis=1)
+        return np.stack([canvas_x(pts[:, 0]), canvas_y(pts[:, 1])], axis=1)
 
     # Each channel alone: OpenCV's 2-channel warp rounds positions to 1/32 px, its 1-channel one does not.
     map_src = np.stack([cv2.warpAffine(np.ascontiguousarray(seam.maps.map_src_canvas[:, :, k]), full_to_small,
@@ -157,17 +168,16 @@ def scaled_up(maps: StitchMaps, scale_src: np.ndarray, scale_tgt: np.ndarray, sh
     seam_input = replace(maps.seam_input, positions=seam_x, lf_px=float(maps.seam_input.lf_px * s_tgt[0]))
     alpha = seam_alpha(seam_x, (height, width), seam_input, cfg)
     path = replace(seam.path, seam_x_canvas=seam_x, coarse_x_canvas=along_rows(seam.path.coarse_x_canvas),
-                   rows=tuple(int(np.clip(round(to_full(r - o[1], s_tgt[1]) + big_o[1]), 0, height - 1))
-                              for r in seam.path.rows),
+                   rows=tuple(int(np.clip(round(canvas_y(r)), 0, height - 1)) for r in seam.path.rows),
                    anchors_src_canvas=anchors(seam.path.anchors_src_canvas),
                    anchors_tgt_canvas=anchors(seam.path.anchors_tgt_canvas))
-    seam_maps = SeamMaps(map_src, target_map((height, width), big_o), alpha, seam_x,
-                         anchors(seam.maps.anchors_src_canvas), anchors(seam.maps.anchors_tgt_canvas))
+    seam_maps = SeamMaps(map_src, target_map((height, width), big_o), alpha, seam_x, path.anchors_src_canvas,
+                         path.anchors_tgt_canvas)  # partition.seam_maps takes its anchors from the path too
     offsets = SeamOffsets(at_positions(seam.offsets.src, u_y).astype(np.float32),
                           at_positions(seam.offsets.tgt, u_y).astype(np.float32), seam_input.lf_px)
     border = seam.border
     if border.on:
-        lines = tuple(float(to_full(line - o[1], s_tgt[1]) + big_o[1]) for line in border.lines)
+        lines = tuple(float(canvas_y(line)) for line in border.lines)
         border = BorderOffsets(lines, at_positions(border.src, u_x, axis=1).astype(np.float32),
                                at_positions(border.tgt, u_x, axis=1).astype(np.float32), True)
     return replace(maps, map_src_input=map_from_working(map_src, rig),
