@@ -13,21 +13,26 @@ untimed call) of:
 
 - the Y pass's frame kernel as the loop launches it (``Compositor.composite``: seam, gains with the
   knee, seam and border blends);
-- :func:`sample_only_kernel`: the same launch and plan words, but each pixel is only its one side's
-  bilinear tap, gained, stored: no seam, no blend, no offsets. No frame kernel on this plan can cost
-  less than this floor;
-- the UV pass's frame kernel (two channels at half resolution).
+- :func:`sample_only_kernel`: the same launch, plan words and copy runs, but each pixel outside the
+  runs is only its one side's bilinear tap, gained, stored: no seam, no blend, no offsets. No frame
+  kernel on this plan can cost less than this floor;
+- the UV pass's frame kernel (two channels at half resolution);
+- both passes once more with and without their copy runs, call by call in turn (every pixel by the
+  full rule when without): the median process CPU time of each, so that what the runs buy is
+  measured under the same load (this machine's speed drifts between runs).
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import time
 from itertools import islice
 from pathlib import Path
 
 import warp as wp
 
+from sena_warp.composite import Compositor
 from sena_warp.config import Config
 from sena_warp.evaluation.bench import DATA_DIR, make_clip_pair, pair_paths
 from sena_warp.kernels import runtime
@@ -44,13 +49,19 @@ WARMUP_FRAMES = 10  # not timed: the seam's background model and the exposure se
 @wp.kernel
 def sample_only_kernel(row0: int, col_step: int, width: int, img_src: wp.array(dtype=wp.uint8),
                        img_tgt: wp.array(dtype=wp.uint8), steps: wp.vec4i, plan: wp.array(dtype=wp.int64),
-                       plan_tgt: wp.array(dtype=wp.int64), gain: wp.vec4i, bias: wp.vec4i, tone: wp.vec2i,
+                       plan_tgt: wp.array(dtype=wp.int64), runs: wp.array(dtype=wp.vec3i),
+                       table: wp.array(dtype=wp.uint8), gain: wp.vec4i, bias: wp.vec4i, tone: wp.vec2i,
                        out: wp.array(dtype=wp.uint8)):
-    """One channel: per pixel of row ``row0 + i``, columns j, j + col_step, ..., its plan word's side alone."""
+    """One channel: per pixel of row ``row0 + i``, columns j, j + col_step, ..., its plan word's side
+    alone, or in the row's copy run its target element through ``table``."""
     i, j = wp.tid()
     y = row0 + i
+    run = runs[y]
     for x in range(j, width, col_step):
         q = y * width + x
+        if x >= run[0] and x < run[1]:
+            out[q] = table[int(img_tgt[run[2] + x - run[0]])]
+            continue
         word = plan[q]
         kind = int(word & wp.int64(3))
         if kind == KIND_FILL:
@@ -82,9 +93,27 @@ def y_floor_ms(compositor: SenaFrameCompositor, frame_l, frame_r, cfg: Config, c
     out = wp.zeros(rows * cols, dtype=wp.uint8, device="cpu")
     luma.load(y_src, y_tgt)
     buf, channels, _ = luma._loaded
-    floor_inputs = [*buf.frame_inputs, *luma._gains[channels][:2], luma.tone, out]
+    luma.composite()  # the copy runs and the gains' table, as the frame kernel has them
+    floor_inputs = [*buf.frame_inputs, buf.runs, buf.table, *luma._gains[channels][:2], luma.tone, out]
     return cpu_ms(lambda: runtime.launch_row_loops(sample_only_kernel, rows, cols, floor_inputs, "cpu", cfg.cpu_threads),
                   calls)
+
+
+def with_and_without_runs_ms(compositor: Compositor, calls: int) -> tuple[float, float]:
+    """Median process CPU ms of ``compositor.composite`` on its loaded pair with its copy runs and with
+    none (every pixel by the full rule), ``calls`` each, in turn."""
+    buf, _, _ = compositor._loaded
+    with_runs, without = [], []
+    for _ in range(calls + 1):
+        for runs, times in ((True, with_runs), (False, without)):
+            buf.runs_ready = runs
+            if not runs:
+                buf.runs.zero_()  # (0, 0, 0): an empty run on every row
+            start = time.process_time()
+            compositor.composite()
+            times.append(time.process_time() - start)
+        buf.runs_ready = False
+    return statistics.median(with_runs[1:]) * 1e3, statistics.median(without[1:]) * 1e3
 
 
 def clip_parser(description: str, work: str) -> argparse.ArgumentParser:
@@ -126,6 +155,9 @@ def main() -> int:
     uv_src, uv_tgt = ((frame.u, frame.v) for frame in compositor.source_target(frame_l, frame_r))
     chroma.load_planes(uv_src, uv_tgt)
     uv_pass = cpu_ms(chroma.composite, args.calls)
+    chroma_runs = with_and_without_runs_ms(chroma, args.calls)
+    luma.load(*(frame.y for frame in compositor.source_target(frame_l, frame_r)))
+    luma_runs = with_and_without_runs_ms(luma, args.calls)
     compositor.close()
     rows, cols = luma.canvas_shape
     print(f"{args.left.name}: canvas {cols}x{rows}, {runtime.cpu_threads(cfg.cpu_threads)} row bands")
@@ -134,6 +166,8 @@ def main() -> int:
     print(f"  Y pass, frame kernel: {y_pass:.2f} ms CPU a call")
     print(f"  Y pass, sample only (the floor): {floor:.2f} ms CPU a call")
     print(f"  UV pass, frame kernel: {uv_pass:.2f} ms CPU a call")
+    print(f"  in turn, median: Y pass {luma_runs[0]:.2f} ms with its copy runs, {luma_runs[1]:.2f} without; "
+          f"UV pass {chroma_runs[0]:.2f} with, {chroma_runs[1]:.2f} without")
     return 0
 
 

@@ -18,6 +18,12 @@ which side, tap positions, sub-pixel fractions, coverage) is worked out once per
 A plan word: bits 0-1 the kind (KIND_*), bits 2-12 fx and 13-23 fy (bilinear fractions in
 1/1024 px, 0..1024), bits 24+ the flat element offset of the top-left tap in the image of the side
 shown (the source for a band pixel, whose target word, same layout, is in ``plan_tgt``).
+
+Copy runs. Most of a video's canvas is the unwarped target far from the seam and the borders: there a
+pixel is its target element through the frame's gains, the same value for the same grey level. Per
+canvas row ``copy_runs_kernel`` finds, once per plan, the longest run of such pixels (whatever the
+frame's seam within its band does), and per frame ``gain_table_kernel`` tabulates the gains; the frame
+kernel copies a run through the table instead of working out each pixel's seam, offsets and gains.
 """
 
 from __future__ import annotations
@@ -193,6 +199,89 @@ def adjusted(sample: int, gain: int, bias: int, offset: int, tone: wp.vec2i) -> 
     return v + offset
 
 
+@wp.func
+def copies_target(word: wp.int64, d: float, clear_px: float, border: wp.vec2, border_tgt: wp.array(dtype=int), bo: int,
+                  second: int, channels: int) -> bool:
+    """Whether a pixel of plan word ``word``, at distance ``d`` from the static seam, shows its target
+    element unchanged but for the gains whatever the frame: the target alone at a whole pixel, at
+    least ``clear_px`` from the static seam, and each border's offset zero or not reaching it
+    (``border``: its weights there; ``bo``: the position's first element in ``border_tgt``)."""
+    if int(word & wp.int64(3)) != KIND_TARGET or word_fx(word) != 0 or word_fy(word) != 0:
+        return False
+    if not (wp.abs(d) >= clear_px):  # a NaN seam line copies nothing
+        return False
+    for c in range(channels):
+        if border[0] > 0.0 and border_tgt[bo + c] != 0:
+            return False
+        if border[1] > 0.0 and border_tgt[bo + second + c] != 0:
+            return False
+    return True
+
+
+@wp.kernel
+def copy_runs_kernel(
+    row0: int,
+    width: int,
+    plan: wp.array(dtype=wp.int64),
+    seam: wp.array(dtype=float),
+    lines_are_rows: int,
+    clear_px: float,
+    lf_px: float,
+    border_on: int,
+    border_lines: wp.vec2,
+    second: int,
+    border_tgt: wp.array(dtype=int),
+    channels: int,
+    runs: wp.array(dtype=wp.vec3i),
+):
+    """Per canvas row y = row0 + i: (a, b, element offset of column a in the target) of the longest run
+    of columns [a, b) that ``copies_target`` with consecutive target elements; (0, 0, 0) when none.
+
+    ``seam``: the static seam; ``clear_px``: how far from it the frame's seam offsets cannot reach
+    (``lf_px`` beyond the band the frame's seam stays in); the border as the frame kernel takes it."""
+    i, _ = wp.tid()
+    y = row0 + i
+    bw_row = border_weights(y, border_lines, border_on, lf_px)
+    best = wp.vec3i(0, 0, 0)
+    start = int(-1)
+    start_offset = int(0)
+    for x in range(width):
+        word = plan[y * width + x]
+        lp = line_and_position(x, y, lines_are_rows)
+        bw = bw_row
+        if lines_are_rows == 0:
+            bw = border_weights(lp[0], border_lines, border_on, lf_px)
+        ok = copies_target(word, float(lp[1]) - seam[lp[0]], clear_px, bw, border_tgt, lp[1] * channels, second,
+                           channels)
+        if ok and start >= 0 and word_offset(word) != start_offset + (x - start) * channels:
+            start = -1  # the target jumps (a cropped or shifted canvas): a new run
+        if ok and start < 0:
+            start = x
+            start_offset = word_offset(word)
+        if not ok:
+            start = -1
+        if start >= 0 and x + 1 - start > best[1] - best[0]:
+            best = wp.vec3i(start, x + 1, start_offset)
+    runs[y] = best
+
+
+@wp.kernel
+def gain_table_kernel(gain: wp.vec4i, bias: wp.vec4i, tone: wp.vec2i, table: wp.array(dtype=wp.uint8)):
+    """table[c * 256 + v]: grey level v of channel c through the gain, bias and knee, with no offset:
+    what the frame kernel makes of an unwarped target element in a copy run."""
+    t = wp.tid()
+    c = t / 256
+    table[t] = grey_level(adjusted((t - c * 256) << (2 * FRAC_BITS), gain[c], bias[c], 0, tone))
+
+
+@wp.func
+def first_column(j: int, start: int, col_step: int) -> int:
+    """The first of a thread's columns j, j + col_step, ... at or after ``start``."""
+    if j >= start:
+        return j
+    return j + (start - j + col_step - 1) / col_step * col_step
+
+
 def _composite_frame_kernel(channels: int):
     """The frame kernel for images of ``channels`` (1 to 4) channels, its channel loops unrolled.
 
@@ -211,6 +300,8 @@ def _composite_frame_kernel(channels: int):
         steps: wp.vec4i,
         plan: wp.array(dtype=wp.int64),
         plan_tgt: wp.array(dtype=wp.int64),
+        runs: wp.array(dtype=wp.vec3i),
+        table: wp.array(dtype=wp.uint8),
         seam: wp.array(dtype=float),
         lines_are_rows: int,
         transition_px: float,
@@ -237,69 +328,88 @@ def _composite_frame_kernel(channels: int):
 
         Flat arrays: ``img_*`` (H, W, C), ``out`` (Hc, Wc, C), ``plan*`` (Hc, Wc), ``lf_*`` (lines, C) and
         ``border_*`` (2, positions, C) in 1/2**20 grey levels; gains in 1/2**12, biases in 1/2**20 grey
-        levels. ``steps`` = (src x step, src y step, tgt x step, tgt y step) in elements. Thread (i, j) does row ``row0 + i``,
-        columns j, j + col_step, ... (see ``runtime.launch_row_loops``).
+        levels. ``steps`` = (src x step, src y step, tgt x step, tgt y step) in elements. ``runs``: each
+        row's copy run (``copy_runs_kernel``), copied through ``table`` (``gain_table_kernel`` of the
+        target's gains). Thread (i, j) does row ``row0 + i``, columns j, j + col_step, ... (see
+        ``runtime.launch_row_loops``): those before the row's copy run, in it, after it.
         """
         i, j = wp.tid()
         y = row0 + i
         bw_row = border_weights(y, border_lines, border_on, lf_px)  # a row's, where the lines are rows
-        for x in range(j, width, col_step):
-            q = y * width + x
-            o = q * wp.static(channels)
-            word = plan[q]
-            kind = int(word & wp.int64(3))
-            if kind == KIND_FILL:
-                for c in range(wp.static(channels)):
-                    out[o + c] = wp.uint8(fill[c])
+        run = runs[y]
+        for part in range(3):
+            begin = int(0)
+            end = run[0]
+            if part == 1:
+                begin = run[0]
+                end = run[1]
+            elif part == 2:
+                begin = run[1]
+                end = width
+            if part == 1:
+                for x in range(first_column(j, begin, col_step), end, col_step):
+                    o = (y * width + x) * wp.static(channels)
+                    p = run[2] + (x - begin) * wp.static(channels)
+                    for c in range(wp.static(channels)):
+                        out[o + c] = table[c * 256 + int(img_tgt[p + c])]
                 continue
-            lp = line_and_position(x, y, lines_are_rows)
-            d = float(lp[1]) - seam[lp[0]]
-            lf = lf_weight(d, lf_px)
-            lo = lp[0] * wp.static(channels)
-            bw = bw_row
-            if lines_are_rows == 0:
-                bw = border_weights(lp[0], border_lines, border_on, lf_px)
-            bo = lp[1] * wp.static(channels)
-            a = float(1.0)
-            if kind == KIND_TARGET:
-                a = 0.0
-            elif kind == KIND_BAND:
-                # The smoothed ramp's tails never reach 0 or 1 exactly: one side alone beyond 1e-4, which
-                # they pass well within ALPHA_TAIL_SIGMAS of the ramp's ends (no erf or exp there).
-                if wp.abs(d) >= 0.5 * transition_px + ALPHA_TAIL_SIGMAS * smooth_sigma_px:
-                    a = wp.where(d > 0.0, 0.0, 1.0)
+            for x in range(first_column(j, begin, col_step), end, col_step):
+                q = y * width + x
+                o = q * wp.static(channels)
+                word = plan[q]
+                kind = int(word & wp.int64(3))
+                if kind == KIND_FILL:
+                    for c in range(wp.static(channels)):
+                        out[o + c] = wp.uint8(fill[c])
+                    continue
+                lp = line_and_position(x, y, lines_are_rows)
+                d = float(lp[1]) - seam[lp[0]]
+                lf = lf_weight(d, lf_px)
+                lo = lp[0] * wp.static(channels)
+                bw = bw_row
+                if lines_are_rows == 0:
+                    bw = border_weights(lp[0], border_lines, border_on, lf_px)
+                bo = lp[1] * wp.static(channels)
+                a = float(1.0)
+                if kind == KIND_TARGET:
+                    a = 0.0
+                elif kind == KIND_BAND:
+                    # The smoothed ramp's tails never reach 0 or 1 exactly: one side alone beyond 1e-4, which
+                    # they pass well within ALPHA_TAIL_SIGMAS of the ramp's ends (no erf or exp there).
+                    if wp.abs(d) >= 0.5 * transition_px + ALPHA_TAIL_SIGMAS * smooth_sigma_px:
+                        a = wp.where(d > 0.0, 0.0, 1.0)
+                    else:
+                        a = source_alpha(d, transition_px, smooth_sigma_px)
+                        a = wp.where(a > 0.9999, 1.0, wp.where(a < 0.0001, 0.0, a))
+                p = word_offset(word)
+                fx = word_fx(word)
+                fy = word_fy(word)
+                if a >= 1.0:
+                    for c in range(wp.static(channels)):
+                        off = side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second)
+                        v = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], off, tone)
+                        out[o + c] = grey_level(v)
+                elif a <= 0.0:
+                    if kind == KIND_BAND:
+                        word = plan_tgt[q]
+                        p = word_offset(word)
+                        fx = word_fx(word)
+                        fy = word_fy(word)
+                    for c in range(wp.static(channels)):
+                        off = side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second)
+                        v = adjusted(sample_fixed(img_tgt, p + c, fx, fy, steps[2], steps[3]), gain_tgt[c], bias_tgt[c], off, tone)
+                        out[o + c] = grey_level(v)
                 else:
-                    a = source_alpha(d, transition_px, smooth_sigma_px)
-                    a = wp.where(a > 0.9999, 1.0, wp.where(a < 0.0001, 0.0, a))
-            p = word_offset(word)
-            fx = word_fx(word)
-            fy = word_fy(word)
-            if a >= 1.0:
-                for c in range(wp.static(channels)):
-                    off = side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second)
-                    v = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], off, tone)
-                    out[o + c] = grey_level(v)
-            elif a <= 0.0:
-                if kind == KIND_BAND:
-                    word = plan_tgt[q]
-                    p = word_offset(word)
-                    fx = word_fx(word)
-                    fy = word_fy(word)
-                for c in range(wp.static(channels)):
-                    off = side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second)
-                    v = adjusted(sample_fixed(img_tgt, p + c, fx, fy, steps[2], steps[3]), gain_tgt[c], bias_tgt[c], off, tone)
-                    out[o + c] = grey_level(v)
-            else:
-                word_t = plan_tgt[q]
-                p_t = word_offset(word_t)
-                fx_t = word_fx(word_t)
-                fy_t = word_fy(word_t)
-                for c in range(wp.static(channels)):
-                    vs = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c],
-                                  side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second), tone)
-                    vt = adjusted(sample_fixed(img_tgt, p_t + c, fx_t, fy_t, steps[2], steps[3]), gain_tgt[c], bias_tgt[c],
-                                  side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second), tone)
-                    out[o + c] = grey_level(int(a * float(vs) + (1.0 - a) * float(vt)))
+                    word_t = plan_tgt[q]
+                    p_t = word_offset(word_t)
+                    fx_t = word_fx(word_t)
+                    fy_t = word_fy(word_t)
+                    for c in range(wp.static(channels)):
+                        vs = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c],
+                                      side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second), tone)
+                        vt = adjusted(sample_fixed(img_tgt, p_t + c, fx_t, fy_t, steps[2], steps[3]), gain_tgt[c], bias_tgt[c],
+                                      side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second), tone)
+                        out[o + c] = grey_level(int(a * float(vs) + (1.0 - a) * float(vt)))
 
     return composite_frame
 
