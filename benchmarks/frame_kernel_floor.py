@@ -17,7 +17,7 @@ untimed call) of:
   runs is only its one side's bilinear tap, gained, stored: no seam, no blend, no offsets. No frame
   kernel on this plan can cost less than this floor;
 - the UV pass's frame kernel (two channels at half resolution);
-- both passes once more with and without their copy runs, call by call in turn (every pixel by the
+- both passes once more with and without their runs, call by call in turn (every pixel by the
   full rule when without): the median process CPU time of each, so that what the runs buy is
   measured under the same load (this machine's speed drifts between runs).
 """
@@ -36,7 +36,7 @@ from sena_warp.composite import Compositor
 from sena_warp.config import Config
 from sena_warp.evaluation.bench import DATA_DIR, make_clip_pair, pair_paths
 from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import (KIND_FILL, KIND_TARGET, adjusted, grey_level, sample_fixed, word_fx,
+from sena_warp.kernels.composite import (KIND_FILL, KIND_TARGET, RowRuns, adjusted, grey_level, sample_fixed, word_fx,
                                          word_fy, word_offset)
 from sena_warp.kernels.runtime import resolve_config
 from sena_warp.video.reader import FrameReader
@@ -49,7 +49,7 @@ WARMUP_FRAMES = 10  # not timed: the seam's background model and the exposure se
 @wp.kernel
 def sample_only_kernel(row0: int, col_step: int, width: int, img_src: wp.array(dtype=wp.uint8),
                        img_tgt: wp.array(dtype=wp.uint8), steps: wp.vec4i, plan: wp.array(dtype=wp.int64),
-                       plan_tgt: wp.array(dtype=wp.int64), runs: wp.array(dtype=wp.vec3i),
+                       plan_tgt: wp.array(dtype=wp.int64), runs: wp.array(dtype=RowRuns),
                        table: wp.array(dtype=wp.uint8), gain: wp.vec4i, bias: wp.vec4i, tone: wp.vec2i,
                        out: wp.array(dtype=wp.uint8)):
     """One channel: per pixel of row ``row0 + i``, columns j, j + col_step, ..., its plan word's side
@@ -100,15 +100,15 @@ def y_floor_ms(compositor: SenaFrameCompositor, frame_l, frame_r, cfg: Config, c
 
 
 def with_and_without_runs_ms(compositor: Compositor, calls: int) -> tuple[float, float]:
-    """Median process CPU ms of ``compositor.composite`` on its loaded pair with its copy runs and with
-    none (every pixel by the full rule), ``calls`` each, in turn."""
+    """Median process CPU ms of ``compositor.composite`` on its loaded pair with its runs and with none
+    (every pixel by the full rule), ``calls`` each, in turn."""
     buf, _, _ = compositor._loaded
     with_runs, without = [], []
     for _ in range(calls + 1):
         for runs, times in ((True, with_runs), (False, without)):
             buf.runs_ready = runs
             if not runs:
-                buf.runs.zero_()  # (0, 0, 0): an empty run on every row
+                buf.runs.zero_()  # empty runs on every row
             start = time.process_time()
             compositor.composite()
             times.append(time.process_time() - start)
@@ -166,7 +166,7 @@ def main() -> int:
     print(f"  Y pass, frame kernel: {y_pass:.2f} ms CPU a call")
     print(f"  Y pass, sample only (the floor): {floor:.2f} ms CPU a call")
     print(f"  UV pass, frame kernel: {uv_pass:.2f} ms CPU a call")
-    print(f"  in turn, median: Y pass {luma_runs[0]:.2f} ms with its copy runs, {luma_runs[1]:.2f} without; "
+    print(f"  in turn, median: Y pass {luma_runs[0]:.2f} ms with its runs, {luma_runs[1]:.2f} without; "
           f"UV pass {chroma_runs[0]:.2f} with, {chroma_runs[1]:.2f} without")
     return 0
 

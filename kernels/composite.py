@@ -19,11 +19,12 @@ A plan word: bits 0-1 the kind (KIND_*), bits 2-12 fx and 13-23 fy (bilinear fra
 1/1024 px, 0..1024), bits 24+ the flat element offset of the top-left tap in the image of the side
 shown (the source for a band pixel, whose target word, same layout, is in ``plan_tgt``).
 
-Copy runs. Most of a video's canvas is the unwarped target far from the seam and the borders: there a
-pixel is its target element through the frame's gains, the same value for the same grey level. Per
-canvas row ``copy_runs_kernel`` finds, once per plan, the longest run of such pixels (whatever the
-frame's seam within its band does), and per frame ``gain_table_kernel`` tabulates the gains; the frame
-kernel copies a run through the table instead of working out each pixel's seam, offsets and gains.
+Runs. Most of a video's canvas is one side alone, further from the seam and the borders than any
+offset reaches (whatever the frame's seam within its band does). Per canvas row ``row_runs_kernel``
+finds, once per plan, the longest run of each side there. The target's run is the unwarped target
+at whole pixels: each pixel is its target element through the frame's gains, which
+``gain_table_kernel`` tabulates per frame, so the frame kernel copies it through the table. The
+source's run is sampled and gained without working out each pixel's seam, blend and offsets.
 """
 
 from __future__ import annotations
@@ -200,26 +201,37 @@ def adjusted(sample: int, gain: int, bias: int, offset: int, tone: wp.vec2i) -> 
 
 
 @wp.func
-def copies_target(word: wp.int64, d: float, clear_px: float, border: wp.vec2, border_tgt: wp.array(dtype=int), bo: int,
-                  second: int, channels: int) -> bool:
-    """Whether a pixel of plan word ``word``, at distance ``d`` from the static seam, shows its target
-    element unchanged but for the gains whatever the frame: the target alone at a whole pixel, at
-    least ``clear_px`` from the static seam, and each border's offset zero or not reaching it
-    (``border``: its weights there; ``bo``: the position's first element in ``border_tgt``)."""
-    if int(word & wp.int64(3)) != KIND_TARGET or word_fx(word) != 0 or word_fy(word) != 0:
-        return False
-    if not (wp.abs(d) >= clear_px):  # a NaN seam line copies nothing
+def clear_of_offsets(d: float, clear_px: float, border: wp.vec2, border_side: wp.array(dtype=int), bo: int, second: int,
+                     channels: int) -> bool:
+    """Whether no offset of a side reaches a pixel whatever the frame: at distance ``d`` from the static
+    seam, at least ``clear_px`` from it, and each border's offset of the side zero or not reaching it
+    (``border``: the borders' weights there; ``bo``: the position's first element in ``border_side``)."""
+    if not (wp.abs(d) >= clear_px):  # a NaN seam line is clear of nothing
         return False
     for c in range(channels):
-        if border[0] > 0.0 and border_tgt[bo + c] != 0:
+        if border[0] > 0.0 and border_side[bo + c] != 0:
             return False
-        if border[1] > 0.0 and border_tgt[bo + second + c] != 0:
+        if border[1] > 0.0 and border_side[bo + second + c] != 0:
             return False
     return True
 
 
+@wp.func
+def longer_run(best: wp.vec3i, start: int, x: int, start_offset: int) -> wp.vec3i:
+    """``best`` (a, b, offset), or the run [start, x + 1) from ``start_offset`` when that is longer."""
+    if start >= 0 and x + 1 - start > best[1] - best[0]:
+        return wp.vec3i(start, x + 1, start_offset)
+    return best
+
+
+RowRuns = wp.types.vector(length=5, dtype=int)  # (copy a, copy b, target element at copy a, sample a, sample b)
+RUN_NONE = wp.constant(0)  # the frame kernel's parts of a row: the full rule,
+RUN_COPY = wp.constant(1)  # the target's element through the gains' table,
+RUN_SAMPLE = wp.constant(2)  # the source sampled with its gains
+
+
 @wp.kernel
-def copy_runs_kernel(
+def row_runs_kernel(
     row0: int,
     width: int,
     plan: wp.array(dtype=wp.int64),
@@ -230,39 +242,52 @@ def copy_runs_kernel(
     border_on: int,
     border_lines: wp.vec2,
     second: int,
+    border_src: wp.array(dtype=int),
     border_tgt: wp.array(dtype=int),
     channels: int,
-    runs: wp.array(dtype=wp.vec3i),
+    runs: wp.array(dtype=RowRuns),
 ):
-    """Per canvas row y = row0 + i: (a, b, element offset of column a in the target) of the longest run
-    of columns [a, b) that ``copies_target`` with consecutive target elements; (0, 0, 0) when none.
+    """Per canvas row y = row0 + i, the longest run of columns of each kind that no offset reaches
+    (``clear_of_offsets``), as (copy a, copy b, target element at copy a, sample a, sample b), empty runs
+    (0, 0): a copy run [a, b) shows the target alone at whole pixels, consecutive elements; a sample run
+    the source alone.
 
     ``seam``: the static seam; ``clear_px``: how far from it the frame's seam offsets cannot reach
     (``lf_px`` beyond the band the frame's seam stays in); the border as the frame kernel takes it."""
     i, _ = wp.tid()
     y = row0 + i
     bw_row = border_weights(y, border_lines, border_on, lf_px)
-    best = wp.vec3i(0, 0, 0)
-    start = int(-1)
-    start_offset = int(0)
+    copy = wp.vec3i(0, 0, 0)
+    sample = wp.vec3i(0, 0, 0)
+    copy_start = int(-1)
+    copy_offset = int(0)
+    sample_start = int(-1)
     for x in range(width):
         word = plan[y * width + x]
+        kind = int(word & wp.int64(3))
         lp = line_and_position(x, y, lines_are_rows)
         bw = bw_row
         if lines_are_rows == 0:
             bw = border_weights(lp[0], border_lines, border_on, lf_px)
-        ok = copies_target(word, float(lp[1]) - seam[lp[0]], clear_px, bw, border_tgt, lp[1] * channels, second,
-                           channels)
-        if ok and start >= 0 and word_offset(word) != start_offset + (x - start) * channels:
-            start = -1  # the target jumps (a cropped or shifted canvas): a new run
-        if ok and start < 0:
-            start = x
-            start_offset = word_offset(word)
-        if not ok:
-            start = -1
-        if start >= 0 and x + 1 - start > best[1] - best[0]:
-            best = wp.vec3i(start, x + 1, start_offset)
-    runs[y] = best
+        d = float(lp[1]) - seam[lp[0]]
+        bo = lp[1] * channels
+        copies = kind == KIND_TARGET and word_fx(word) == 0 and word_fy(word) == 0
+        copies = copies and clear_of_offsets(d, clear_px, bw, border_tgt, bo, second, channels)
+        if copies and copy_start >= 0 and word_offset(word) != copy_offset + (x - copy_start) * channels:
+            copy_start = -1  # the target jumps (a cropped or shifted canvas): a new run
+        if copies and copy_start < 0:
+            copy_start = x
+            copy_offset = word_offset(word)
+        if not copies:
+            copy_start = -1
+        copy = longer_run(copy, copy_start, x, copy_offset)
+        samples = kind == KIND_SOURCE and clear_of_offsets(d, clear_px, bw, border_src, bo, second, channels)
+        if samples and sample_start < 0:
+            sample_start = x
+        if not samples:
+            sample_start = -1
+        sample = longer_run(sample, sample_start, x, 0)
+    runs[y] = RowRuns(copy[0], copy[1], copy[2], sample[0], sample[1])
 
 
 @wp.kernel
@@ -300,7 +325,7 @@ def _composite_frame_kernel(channels: int):
         steps: wp.vec4i,
         plan: wp.array(dtype=wp.int64),
         plan_tgt: wp.array(dtype=wp.int64),
-        runs: wp.array(dtype=wp.vec3i),
+        runs: wp.array(dtype=RowRuns),
         table: wp.array(dtype=wp.uint8),
         seam: wp.array(dtype=float),
         lines_are_rows: int,
@@ -329,29 +354,55 @@ def _composite_frame_kernel(channels: int):
         Flat arrays: ``img_*`` (H, W, C), ``out`` (Hc, Wc, C), ``plan*`` (Hc, Wc), ``lf_*`` (lines, C) and
         ``border_*`` (2, positions, C) in 1/2**20 grey levels; gains in 1/2**12, biases in 1/2**20 grey
         levels. ``steps`` = (src x step, src y step, tgt x step, tgt y step) in elements. ``runs``: each
-        row's copy run (``copy_runs_kernel``), copied through ``table`` (``gain_table_kernel`` of the
-        target's gains). Thread (i, j) does row ``row0 + i``, columns j, j + col_step, ... (see
-        ``runtime.launch_row_loops``): those before the row's copy run, in it, after it.
+        row's runs (``row_runs_kernel``): the copy run's pixels through ``table`` (``gain_table_kernel``
+        of the target's gains), the sample run's with the source's gains alone. Thread (i, j) does row
+        ``row0 + i``, columns j, j + col_step, ... (see ``runtime.launch_row_loops``), five parts of
+        the row in turn: before the first run, the first, between them, the second, after it.
         """
         i, j = wp.tid()
         y = row0 + i
         bw_row = border_weights(y, border_lines, border_on, lf_px)  # a row's, where the lines are rows
         run = runs[y]
-        for part in range(3):
+        first = wp.vec3i(run[0], run[1], RUN_COPY)
+        later = wp.vec3i(run[3], run[4], RUN_SAMPLE)
+        if run[3] < run[0]:
+            first = later
+            later = wp.vec3i(run[0], run[1], RUN_COPY)
+        for part in range(5):
             begin = int(0)
-            end = run[0]
+            end = first[0]
+            how = RUN_NONE
             if part == 1:
-                begin = run[0]
-                end = run[1]
+                begin = first[0]
+                end = first[1]
+                how = first[2]
             elif part == 2:
-                begin = run[1]
+                begin = first[1]
+                end = later[0]
+            elif part == 3:
+                begin = later[0]
+                end = later[1]
+                how = later[2]
+            elif part == 4:
+                begin = later[1]
                 end = width
-            if part == 1:
+            if how == RUN_COPY:
                 for x in range(first_column(j, begin, col_step), end, col_step):
                     o = (y * width + x) * wp.static(channels)
                     p = run[2] + (x - begin) * wp.static(channels)
                     for c in range(wp.static(channels)):
                         out[o + c] = table[c * 256 + int(img_tgt[p + c])]
+                continue
+            if how == RUN_SAMPLE:
+                for x in range(first_column(j, begin, col_step), end, col_step):
+                    q = y * width + x
+                    word = plan[q]
+                    p = word_offset(word)
+                    fx = word_fx(word)
+                    fy = word_fy(word)
+                    for c in range(wp.static(channels)):
+                        v = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], 0, tone)
+                        out[q * wp.static(channels) + c] = grey_level(v)
                 continue
             for x in range(first_column(j, begin, col_step), end, col_step):
                 q = y * width + x

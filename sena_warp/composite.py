@@ -17,8 +17,8 @@ import warp as wp
 
 from sena_warp.config import Config
 from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import (COMPOSITE_FRAME_KERNELS, MAX_CHANNELS, band_difference_kernel,
-                                        composite_plan_kernel, copy_runs_kernel, gain_table_kernel,
+from sena_warp.kernels.composite import (COMPOSITE_FRAME_KERNELS, MAX_CHANNELS, RowRuns, band_difference_kernel,
+                                        composite_plan_kernel, gain_table_kernel, row_runs_kernel,
                                         seam_weights_kernel)
 from sena_warp.warp_map import as_channels
 
@@ -51,7 +51,7 @@ def lf_weights(distance: np.ndarray, lf_px: float) -> np.ndarray:
     frame kernel's ``lf_weight`` on the host (1 there, linearly 0 at ``lf_px`` > 0)."""
     return np.maximum(0.0, 1.0 - np.abs(distance) / lf_px)
 GAIN_ONE = 1 << 12  # kernel gains in 1/4096
-COPY_MARGIN_PX = 1.0  # copy runs keep this much further from the seam's reach than its offsets: float32 rounding
+RUN_MARGIN_PX = 1.0  # runs keep this much further from the seam's reach than its offsets: float32 rounding
 LEVEL = 1 << 20  # kernel biases and offsets in 1/2**20 grey levels
 
 
@@ -68,7 +68,7 @@ class _Buffers:
         self.plan = wp.empty(pixels, dtype=wp.int64, device=device)
         self.plan_tgt = wp.empty(pixels, dtype=wp.int64, device=device)  # read for band pixels only
         self.plan_ready = False
-        self.runs = wp.empty(canvas_shape[0], dtype=wp.vec3i, device=device)  # each row's copy run
+        self.runs = wp.empty(canvas_shape[0], dtype=RowRuns, device=device)  # each row's runs
         self.runs_ready = False  # made anew with the plan and with the border blend
         self.table = wp.empty(channels * 256, dtype=wp.uint8, device=device)  # the target's gains, per frame
         steps = wp.vec4i(
@@ -199,18 +199,18 @@ class Compositor:
             buf.runs_ready = False
         return buf
 
-    def _copy_runs(self, buf: _Buffers, channels: int) -> wp.array:
-        """``buf``'s copy run per canvas row (``copy_runs_kernel``), made anew after the plan or the
-        border blend changed: the frame's seam stays within ``band_px - transition_px / 2`` of the static
-        seam (:meth:`set_seam`), so its offsets, ``lf_px`` wide, never reach beyond that plus ``lf_px``."""
+    def _row_runs(self, buf: _Buffers, channels: int) -> wp.array:
+        """``buf``'s runs per canvas row (``row_runs_kernel``), made anew after the plan or the border
+        blend changed: the frame's seam stays within ``band_px - transition_px / 2`` of the static seam
+        (:meth:`set_seam`), so its offsets, ``lf_px`` wide, never reach beyond that plus ``lf_px``."""
         if not buf.runs_ready:
             layout = self.layout
             reach = max(layout.band_px - 0.5 * layout.transition_px, 0.0)
-            border_on, border_lines, second, _, border_tgt = self._border[channels]
+            border_on, border_lines, second, border_src, border_tgt = self._border[channels]
             inputs = [self.canvas_shape[1], buf.plan, self.seam_static, int(layout.lines_are_rows),
-                      float(reach + max(layout.lf_px, 0.0) + COPY_MARGIN_PX), float(layout.lf_px), border_on, border_lines,
-                      second, border_tgt, channels, buf.runs]
-            runtime.launch_rows(copy_runs_kernel, self.canvas_shape[0], 1, inputs, self.device, self.threads)
+                      float(reach + max(layout.lf_px, 0.0) + RUN_MARGIN_PX), float(layout.lf_px), border_on,
+                      border_lines, second, border_src, border_tgt, channels, buf.runs]
+            runtime.launch_rows(row_runs_kernel, self.canvas_shape[0], 1, inputs, self.device, self.threads)
             buf.runs_ready = True
         return buf.runs
 
@@ -218,13 +218,14 @@ class Compositor:
         """(Hc, Wc) uint8 255 where at least one side of images of these shapes is sampled, else 0."""
         return self._buffers_for(tuple(shape_src), tuple(shape_tgt)).coverage.numpy()
 
-    def copy_runs(self, shape_src: tuple, shape_tgt: tuple) -> np.ndarray:
-        """(Hc, 3) int32: per canvas row, the columns [a, b) the frame kernel copies from the target
-        through its gains alone, and the target element at a (``copy_runs_kernel``; a = b where none),
-        for images of these shapes with the current border blend."""
+    def row_runs(self, shape_src: tuple, shape_tgt: tuple) -> np.ndarray:
+        """(Hc, 5) int32 per canvas row for images of these shapes with the current border blend, as
+        ``row_runs_kernel`` finds them: columns [a, b) the frame kernel copies from the target through
+        its gains alone, the target element at a, and columns [a, b) it samples from the source with its
+        gains alone (a = b where a row has none)."""
         channels = shape_src[2]
         self._ensure_defaults(channels)
-        return self._copy_runs(self._buffers_for(tuple(shape_src), tuple(shape_tgt)), channels).numpy()
+        return self._row_runs(self._buffers_for(tuple(shape_src), tuple(shape_tgt)), channels).numpy()
 
     def seam_positions(self) -> np.ndarray:
         """(L,) float32: the seam per line as the next :meth:`composite` uses it (after ``set_seam``'s clip)."""
@@ -353,7 +354,7 @@ class Compositor:
         _, _, gain_tgt, bias_tgt = self._gains[channels]
         wp.launch(gain_table_kernel, dim=channels * 256, inputs=[gain_tgt, bias_tgt, self.tone, buf.table],
                   device=self.device)
-        inputs = [*buf.frame_inputs, self._copy_runs(buf, channels), buf.table, self.seam,
+        inputs = [*buf.frame_inputs, self._row_runs(buf, channels), buf.table, self.seam,
                   int(self.layout.lines_are_rows), float(self.layout.transition_px),
                   float(self.layout.smooth_sigma_px), float(self.layout.lf_px), lf_src, lf_tgt, *self._border[channels],
                   *self._gains[channels], self.tone,

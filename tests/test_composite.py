@@ -141,21 +141,26 @@ def test_the_frame_seam_moves_within_its_band_without_a_new_plan(scene, device, 
     assert np.all(alpha[rows, edge - 12] > 0.99) and np.all(alpha[rows, edge + 12] < 0.01)
 
 
-def copied_mask(comp: Compositor, shape_src: tuple, shape_tgt: tuple) -> tuple[np.ndarray, np.ndarray]:
-    """((Hc, Wc) bool: the pixels in their row's copy run, (Hc, 3) the runs)."""
-    runs = comp.copy_runs(shape_src, shape_tgt)
+def run_masks(comp: Compositor, shape_src: tuple, shape_tgt: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """((Hc, Wc) bool the pixels in their row's copy run, the same of its sample run, (Hc, 5) the runs)."""
+    runs = comp.row_runs(shape_src, shape_tgt)
     cols = np.arange(comp.canvas_shape[1])[None, :]
-    return (cols >= runs[:, :1]) & (cols < runs[:, 1:2]), runs
+    return ((cols >= runs[:, :1]) & (cols < runs[:, 1:2]), (cols >= runs[:, 3:4]) & (cols < runs[:, 4:5]), runs)
+
+
+def copied_mask(comp: Compositor, shape_src: tuple, shape_tgt: tuple) -> np.ndarray:
+    return run_masks(comp, shape_src, shape_tgt)[0]
 
 
 @pytest.mark.parametrize("lines_are_rows", [True, False])
-def test_copy_runs_hold_only_the_unwarped_target_beyond_the_seams_reach(scene, lines_are_rows, warp_device):  # noqa: F811
-    """Each row's copy run is target pixels at whole positions, consecutive, where neither the seam
-    (wherever the frame puts it in its band) nor a border's offsets reach; most such pixels are in one."""
+def test_runs_hold_one_side_alone_beyond_the_seams_reach(scene, lines_are_rows, warp_device):  # noqa: F811
+    """Each row's copy run is target pixels at whole positions, consecutive, and its sample run source
+    pixels, where neither the seam (wherever the frame puts it in its band) nor a border's offsets
+    reach; most such pixels are in one."""
     img_src, img_tgt, map_src, map_tgt, _ = scene
     seam = layout(scene, lines_are_rows)
     comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
-    copied, runs = copied_mask(comp, img_src.shape, img_tgt.shape)
+    copied, sampled, runs = run_masks(comp, img_src.shape, img_tgt.shape)
     height, width = comp.canvas_shape
     line, position = np.mgrid[:height, :width] if lines_are_rows else np.mgrid[:height, :width][::-1]
     distance = position - seam.positions[line]
@@ -171,32 +176,36 @@ def test_copy_runs_hold_only_the_unwarped_target_beyond_the_seams_reach(scene, l
     first_y = map_tgt[..., 1][np.arange(height), runs[:, 0]]
     np.testing.assert_array_equal(runs[rows, 2], ((first_y * img_tgt.shape[1] + expected_x) * 3)[rows])
     assert copied.sum() >= 0.9 * (exact & (np.abs(distance) > reach + 1.0)).sum()
+    shown_src = ok_src & (~ok_tgt | (distance < -seam.band_px))
+    assert sampled.any() and np.all((shown_src & clear)[sampled])
+    assert sampled.sum() >= 0.9 * (shown_src & (np.abs(distance) > reach + 1.0)).sum()
 
 
-def test_copy_runs_leave_the_borders_offsets_and_a_resampled_target_to_the_full_rule(scene, warp_device):  # noqa: F811
-    """Rows a border's nonzero offsets reach copy nothing there; a target map off whole pixels copies nothing."""
+def test_runs_leave_the_borders_offsets_and_a_resampled_target_to_the_full_rule(scene, warp_device):  # noqa: F811
+    """Where a border's nonzero offsets reach, rows copy and sample nothing; a target map off whole pixels
+    copies nothing."""
     img_src, img_tgt, map_src, map_tgt, _ = scene
     seam = layout(scene)
     comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
     lines = len(seam.positions)
-    before, _ = copied_mask(comp, img_src.shape, img_tgt.shape)
+    before = np.stack(run_masks(comp, img_src.shape, img_tgt.shape)[:2])
     along = np.zeros((2, map_src.shape[1], 3), np.float32)
     along[0, : map_src.shape[1] * 3 // 4] = 5.0  # border 0 has offsets on the left three quarters
     comp.set_border_offsets((10.5, lines - 20.5), along, along)
-    after, _ = copied_mask(comp, img_src.shape, img_tgt.shape)
+    after = np.stack(run_masks(comp, img_src.shape, img_tgt.shape)[:2])
     near = np.abs(np.arange(lines) - 10.5) < seam.lf_px
-    cols = np.arange(map_src.shape[1])
-    assert before[near][:, cols < map_src.shape[1] * 3 // 4].any()
-    assert not after[near][:, cols < map_src.shape[1] * 3 // 4].any()
-    assert np.array_equal(after[~near], before[~near])
+    offset_cols = np.arange(map_src.shape[1]) < map_src.shape[1] * 3 // 4
+    assert before[0][near][:, offset_cols].any() and before[1][near][:, offset_cols].any()
+    assert not after[:, near][:, :, offset_cols].any()
+    assert np.array_equal(after[:, ~near], before[:, ~near])
     shifted = Compositor(map_src, map_tgt + np.float32(0.25), seam, Config(device=warp_device, cpu_threads=2))
-    assert not copied_mask(shifted, img_src.shape, img_tgt.shape)[0].any()
+    assert not copied_mask(shifted, img_src.shape, img_tgt.shape).any()
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_copied_pixels_take_the_gains_and_knee_as_the_full_rule_does(scene, device, warp_device):  # noqa: F811
-    """With the frame's seam at the edge of its band on the target's side and strong offsets, the copy
-    runs still match the reference (rounded): the offsets never reach them, the gains and knee do."""
+def test_run_pixels_take_the_gains_and_knee_as_the_full_rule_does(scene, device, warp_device):  # noqa: F811
+    """With the frame's seam at the edge of its band on either side and strong offsets, the runs still
+    match the reference (copies to its rounding): the offsets never reach them, the gains and knee do."""
     img_src, img_tgt, map_src, map_tgt, _ = scene
     seam = layout(scene, band_px=20.0)
     comp = Compositor(map_src, map_tgt, seam, Config(device=device, cpu_threads=2))
@@ -206,10 +215,14 @@ def test_copied_pixels_take_the_gains_and_knee_as_the_full_rule_does(scene, devi
     comp.set_offsets(np.full((lines, 3), 30.0, np.float32), np.full((lines, 3), -30.0, np.float32))
     out = comp.apply(img_src, img_tgt)
     expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt)
-    copied, _ = copied_mask(comp, img_src.shape, img_tgt.shape)
-    assert copied.mean() > 0.2
+    copied, sampled, _ = run_masks(comp, img_src.shape, img_tgt.shape)
+    assert copied.mean() > 0.2 and sampled.mean() > 0.2
     assert np.abs(out[copied].astype(np.float64) - expected[copied]).max() <= 0.5 + 1e-6
     assert (out[copied] == 255).any()  # the knee is met: the gain of 1.3 would clip
+    comp.set_seam(seam.positions - 100.0)  # the source's side: its sample runs keep the gains alone
+    out = comp.apply(img_src, img_tgt)
+    expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt)
+    assert np.abs(out[sampled].astype(np.float64) - expected[sampled]).max() <= 1.0
 
 
 @pytest.mark.parametrize("cell", [1, 2])
