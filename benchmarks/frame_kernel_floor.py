@@ -60,7 +60,7 @@ def sample_only_kernel(row0: int, col_step: int, width: int, img_src: wp.array(d
     for x in range(j, width, col_step):
         q = y * width + x
         if x >= run[0] and x < run[1]:
-            out[q] = table[int(img_tgt[run[2] + x - run[0]])]
+            out[q] = table[int(img_tgt[run[2] + x])]
             continue
         word = plan[q]
         kind = int(word & wp.int64(3))
@@ -93,8 +93,8 @@ def y_floor_ms(compositor: SenaFrameCompositor, frame_l, frame_r, cfg: Config, c
     out = wp.zeros(rows * cols, dtype=wp.uint8, device="cpu")
     luma.load(y_src, y_tgt)
     buf, channels, _ = luma._loaded
-    luma.composite()  # the copy runs and the gains' table, as the frame kernel has them
-    floor_inputs = [*buf.frame_inputs, buf.runs, buf.table, *luma._gains[channels][:2], luma.tone, out]
+    luma.composite()  # the runs and the gains' table, as the frame kernel has them
+    floor_inputs = [*buf.frame_inputs, buf.frame_runs, buf.table, *luma._gains[channels][:2], luma.tone, out]
     return cpu_ms(lambda: runtime.launch_row_loops(sample_only_kernel, rows, cols, floor_inputs, "cpu", cfg.cpu_threads),
                   calls)
 

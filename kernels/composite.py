@@ -224,7 +224,7 @@ def longer_run(best: wp.vec3i, start: int, x: int, start_offset: int) -> wp.vec3
     return best
 
 
-RowRuns = wp.types.vector(length=5, dtype=int)  # (copy a, copy b, target element at copy a, sample a, sample b)
+RowRuns = wp.types.vector(length=5, dtype=int)  # (copy a, copy b, the copy's target element at column 0, sample a, sample b)
 RUN_NONE = wp.constant(0)  # the frame kernel's parts of a row: the full rule,
 RUN_COPY = wp.constant(1)  # the target's element through the gains' table,
 RUN_SAMPLE = wp.constant(2)  # the source sampled with its gains
@@ -248,12 +248,13 @@ def row_runs_kernel(
     runs: wp.array(dtype=RowRuns),
 ):
     """Per canvas row y = row0 + i, the longest run of columns of each kind that no offset reaches
-    (``clear_of_offsets``), as (copy a, copy b, target element at copy a, sample a, sample b), empty runs
-    (0, 0): a copy run [a, b) shows the target alone at whole pixels, consecutive elements; a sample run
-    the source alone.
+    (``clear_of_offsets``), as (copy a, copy b, the copy's target element at column 0, sample a, sample
+    b), empty runs (0, 0): a copy run [a, b) shows the target alone at whole pixels, consecutive
+    elements; a sample run the source alone.
 
     ``seam``: the static seam; ``clear_px``: how far from it the frame's seam offsets cannot reach
-    (``lf_px`` beyond the band the frame's seam stays in); the border as the frame kernel takes it."""
+    (``lf_px`` beyond the band the frame's seam stays in; 0 where ``frame_runs_kernel`` cuts each row
+    around the frame's seam instead); the border as the frame kernel takes it."""
     i, _ = wp.tid()
     y = row0 + i
     bw_row = border_weights(y, border_lines, border_on, lf_px)
@@ -287,7 +288,38 @@ def row_runs_kernel(
         if not samples:
             sample_start = -1
         sample = longer_run(sample, sample_start, x, 0)
-    runs[y] = RowRuns(copy[0], copy[1], copy[2], sample[0], sample[1])
+    runs[y] = RowRuns(copy[0], copy[1], copy[2] - copy[0] * channels, sample[0], sample[1])
+
+
+@wp.func
+def clear_part(a: int, b: int, seam: float, cut_px: float) -> wp.vec2i:
+    """The longer part of columns [a, b) at least ``cut_px`` from ``seam`` on a row, (0, 0) if none."""
+    if not (seam == seam):  # no seam on this row: nothing is known to be clear
+        return wp.vec2i(0, 0)
+    left = wp.vec2i(a, wp.min(b, int(wp.floor(seam - cut_px)) + 1))
+    right = wp.vec2i(wp.max(a, int(wp.ceil(seam + cut_px))), b)
+    part = left
+    if right[1] - right[0] > left[1] - left[0]:
+        part = right
+    if part[1] <= part[0]:
+        return wp.vec2i(0, 0)
+    return part
+
+
+@wp.kernel
+def frame_runs_kernel(row0: int, runs: wp.array(dtype=RowRuns), seam: wp.array(dtype=float), lines_are_rows: int,
+                      cut_px: float, frame_runs: wp.array(dtype=RowRuns)):
+    """Per canvas row: its runs for this frame. Where the lines are rows, the plan's runs hold one side
+    alone anywhere beyond the band, and the part ``cut_px`` (the seam offsets' reach) from the frame's
+    seam ``seam`` is kept; else they are already clear of any frame's seam (``row_runs_kernel``)."""
+    i, _ = wp.tid()
+    y = row0 + i
+    run = runs[y]
+    if lines_are_rows != 0:
+        copy = clear_part(run[0], run[1], seam[y], cut_px)
+        sample = clear_part(run[3], run[4], seam[y], cut_px)
+        run = RowRuns(copy[0], copy[1], run[2], sample[0], sample[1])
+    frame_runs[y] = run
 
 
 @wp.kernel
@@ -354,7 +386,7 @@ def _composite_frame_kernel(channels: int):
         Flat arrays: ``img_*`` (H, W, C), ``out`` (Hc, Wc, C), ``plan*`` (Hc, Wc), ``lf_*`` (lines, C) and
         ``border_*`` (2, positions, C) in 1/2**20 grey levels; gains in 1/2**12, biases in 1/2**20 grey
         levels. ``steps`` = (src x step, src y step, tgt x step, tgt y step) in elements. ``runs``: each
-        row's runs (``row_runs_kernel``): the copy run's pixels through ``table`` (``gain_table_kernel``
+        row's runs for this frame (``frame_runs_kernel``): the copy run's pixels through ``table`` (``gain_table_kernel``
         of the target's gains), the sample run's with the source's gains alone. Thread (i, j) does row
         ``row0 + i``, columns j, j + col_step, ... (see ``runtime.launch_row_loops``), five parts of
         the row in turn: before the first run, the first, between them, the second, after it.
@@ -389,7 +421,7 @@ def _composite_frame_kernel(channels: int):
             if how == RUN_COPY:
                 for x in range(first_column(j, begin, col_step), end, col_step):
                     o = (y * width + x) * wp.static(channels)
-                    p = run[2] + (x - begin) * wp.static(channels)
+                    p = run[2] + x * wp.static(channels)
                     for c in range(wp.static(channels)):
                         out[o + c] = table[c * 256 + int(img_tgt[p + c])]
                 continue

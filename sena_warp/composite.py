@@ -18,8 +18,8 @@ import warp as wp
 from sena_warp.config import Config
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import (COMPOSITE_FRAME_KERNELS, MAX_CHANNELS, RowRuns, band_difference_kernel,
-                                        composite_plan_kernel, gain_table_kernel, row_runs_kernel,
-                                        seam_weights_kernel)
+                                        composite_plan_kernel, frame_runs_kernel, gain_table_kernel,
+                                        row_runs_kernel, seam_weights_kernel)
 from sena_warp.warp_map import as_channels
 
 
@@ -70,6 +70,8 @@ class _Buffers:
         self.plan_ready = False
         self.runs = wp.empty(canvas_shape[0], dtype=RowRuns, device=device)  # each row's runs
         self.runs_ready = False  # made anew with the plan and with the border blend
+        self.runs_clear_px = 0.0  # how far from the static seam the runs were made to keep
+        self.frame_runs = wp.empty(canvas_shape[0], dtype=RowRuns, device=device)  # this frame's
         self.table = wp.empty(channels * 256, dtype=wp.uint8, device=device)  # the target's gains, per frame
         steps = wp.vec4i(
             channels * min(1, shape_src[1] - 1), channels * shape_src[1] * min(1, shape_src[0] - 1),
@@ -113,6 +115,7 @@ class Compositor:
         self.seam_static = wp.array(np.ascontiguousarray(seam.positions, np.float32), dtype=float, device=device)
         self.seam = wp.clone(self.seam_static)
         self._lf = {}
+        self._lf_reaches: set[int] = set()  # channel counts whose seam offsets have been nonzero
         self._border = {}
         self._gains = {}
         self._buffers: dict[tuple, _Buffers] = {}
@@ -166,8 +169,11 @@ class Compositor:
         if arrays is None:
             arrays = self._lf[channels] = (wp.zeros(self.lines * channels, dtype=int, device=self.device),
                                            wp.zeros(self.lines * channels, dtype=int, device=self.device))
-        arrays[0].assign(np.rint(np.ascontiguousarray(lf_src, np.float64).ravel() * LEVEL).astype(np.int32))
-        arrays[1].assign(np.rint(np.ascontiguousarray(lf_tgt, np.float64).ravel() * LEVEL).astype(np.int32))
+        values = [np.rint(np.ascontiguousarray(v, np.float64).ravel() * LEVEL).astype(np.int32) for v in (lf_src, lf_tgt)]
+        arrays[0].assign(values[0])
+        arrays[1].assign(values[1])
+        if values[0].any() or values[1].any():
+            self._lf_reaches.add(channels)
 
     def set_border_offsets(self, border_lines: tuple[float, float], border_src: np.ndarray,
                            border_tgt: np.ndarray) -> None:
@@ -199,33 +205,44 @@ class Compositor:
             buf.runs_ready = False
         return buf
 
-    def _row_runs(self, buf: _Buffers, channels: int) -> wp.array:
-        """``buf``'s runs per canvas row (``row_runs_kernel``), made anew after the plan or the border
-        blend changed: the frame's seam stays within ``band_px - transition_px / 2`` of the static seam
-        (:meth:`set_seam`), so its offsets, ``lf_px`` wide, never reach beyond that plus ``lf_px``."""
-        if not buf.runs_ready:
-            layout = self.layout
-            reach = max(layout.band_px - 0.5 * layout.transition_px, 0.0)
+    def _offsets_reach_px(self, channels: int) -> float:
+        """How far from the frame's seam its offsets may change a pixel: ``lf_px`` once they have been
+        nonzero, nothing while they are all zero (a chroma pass); plus a pixel for float32 rounding."""
+        return (max(self.layout.lf_px, 0.0) if channels in self._lf_reaches else 0.0) + RUN_MARGIN_PX
+
+    def _frame_runs(self, buf: _Buffers, channels: int) -> wp.array:
+        """``buf``'s runs per canvas row for the current seam (``frame_runs_kernel``) from the plan's
+        (``row_runs_kernel``), which are made anew after the plan or the border blend changed.
+
+        Where the lines are rows, the plan's runs ignore the seam and each frame's are cut around its
+        seam. Else the plan's runs keep clear of wherever the frame's seam may be: it stays within
+        ``band_px - transition_px / 2`` of the static seam (:meth:`set_seam`), its offsets reach
+        :meth:`_offsets_reach_px` beyond that."""
+        layout = self.layout
+        reach_px = self._offsets_reach_px(channels)
+        clear_px = 0.0 if layout.lines_are_rows else max(layout.band_px - 0.5 * layout.transition_px, 0.0) + reach_px
+        if not buf.runs_ready or buf.runs_clear_px != clear_px:
             border_on, border_lines, second, border_src, border_tgt = self._border[channels]
-            inputs = [self.canvas_shape[1], buf.plan, self.seam_static, int(layout.lines_are_rows),
-                      float(reach + max(layout.lf_px, 0.0) + RUN_MARGIN_PX), float(layout.lf_px), border_on,
-                      border_lines, second, border_src, border_tgt, channels, buf.runs]
+            inputs = [self.canvas_shape[1], buf.plan, self.seam_static, int(layout.lines_are_rows), clear_px,
+                      float(layout.lf_px), border_on, border_lines, second, border_src, border_tgt, channels, buf.runs]
             runtime.launch_rows(row_runs_kernel, self.canvas_shape[0], 1, inputs, self.device, self.threads)
-            buf.runs_ready = True
-        return buf.runs
+            buf.runs_ready, buf.runs_clear_px = True, clear_px
+        inputs = [buf.runs, self.seam, int(layout.lines_are_rows), reach_px, buf.frame_runs]
+        runtime.launch_rows(frame_runs_kernel, self.canvas_shape[0], 1, inputs, self.device, 1)
+        return buf.frame_runs
 
     def coverage(self, shape_src: tuple, shape_tgt: tuple) -> np.ndarray:
         """(Hc, Wc) uint8 255 where at least one side of images of these shapes is sampled, else 0."""
         return self._buffers_for(tuple(shape_src), tuple(shape_tgt)).coverage.numpy()
 
     def row_runs(self, shape_src: tuple, shape_tgt: tuple) -> np.ndarray:
-        """(Hc, 5) int32 per canvas row for images of these shapes with the current border blend, as
-        ``row_runs_kernel`` finds them: columns [a, b) the frame kernel copies from the target through
-        its gains alone, the target element at a, and columns [a, b) it samples from the source with its
+        """(Hc, 5) int32 per canvas row for images of these shapes, as the next :meth:`composite` takes
+        them (``frame_runs_kernel``): columns [a, b) it copies from the target through the gains alone,
+        the copy's target element at column 0, and columns [a, b) it samples from the source with its
         gains alone (a = b where a row has none)."""
         channels = shape_src[2]
         self._ensure_defaults(channels)
-        return self._row_runs(self._buffers_for(tuple(shape_src), tuple(shape_tgt)), channels).numpy()
+        return self._frame_runs(self._buffers_for(tuple(shape_src), tuple(shape_tgt)), channels).numpy().copy()
 
     def seam_positions(self) -> np.ndarray:
         """(L,) float32: the seam per line as the next :meth:`composite` uses it (after ``set_seam``'s clip)."""
@@ -354,7 +371,7 @@ class Compositor:
         _, _, gain_tgt, bias_tgt = self._gains[channels]
         wp.launch(gain_table_kernel, dim=channels * 256, inputs=[gain_tgt, bias_tgt, self.tone, buf.table],
                   device=self.device)
-        inputs = [*buf.frame_inputs, self._row_runs(buf, channels), buf.table, self.seam,
+        inputs = [*buf.frame_inputs, self._frame_runs(buf, channels), buf.table, self.seam,
                   int(self.layout.lines_are_rows), float(self.layout.transition_px),
                   float(self.layout.smooth_sigma_px), float(self.layout.lf_px), lf_src, lf_tgt, *self._border[channels],
                   *self._gains[channels], self.tone,

@@ -155,30 +155,35 @@ def copied_mask(comp: Compositor, shape_src: tuple, shape_tgt: tuple) -> np.ndar
 @pytest.mark.parametrize("lines_are_rows", [True, False])
 def test_runs_hold_one_side_alone_beyond_the_seams_reach(scene, lines_are_rows, warp_device):  # noqa: F811
     """Each row's copy run is target pixels at whole positions, consecutive, and its sample run source
-    pixels, where neither the seam (wherever the frame puts it in its band) nor a border's offsets
-    reach; most such pixels are in one."""
+    pixels, where neither the frame's seam nor a border's offsets reach; most such pixels are in one."""
     img_src, img_tgt, map_src, map_tgt, _ = scene
     seam = layout(scene, lines_are_rows)
     comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
+    lines = len(seam.positions)
+    comp.set_offsets(np.full((lines, 3), 30.0, np.float32), np.full((lines, 3), -30.0, np.float32))
+    comp.set_seam(seam.positions + 7.0)
     copied, sampled, runs = run_masks(comp, img_src.shape, img_tgt.shape)
     height, width = comp.canvas_shape
     line, position = np.mgrid[:height, :width] if lines_are_rows else np.mgrid[:height, :width][::-1]
     distance = position - seam.positions[line]
-    reach = seam.band_px - 0.5 * seam.transition_px + seam.lf_px
+    distance_frame = position - comp.seam_positions()[line]
     _, ok_src = remap_reference(img_src, map_src)
     _, ok_tgt = remap_reference(img_tgt, map_tgt)
     shown_tgt = ok_tgt & (~ok_src | (distance > seam.band_px))  # the target alone, whatever the frame's seam
     exact = shown_tgt & np.all(map_tgt == np.round(map_tgt), axis=2)
-    clear = np.abs(distance) > reach  # beyond the seam's offsets
+    clear = np.abs(distance_frame) >= seam.lf_px  # the frame's seam offsets do not reach
     assert copied.any() and np.all((exact & clear)[copied])
-    expected_x = map_tgt[..., 0][np.arange(height), runs[:, 0]]
-    rows = runs[:, 1] > runs[:, 0]
-    first_y = map_tgt[..., 1][np.arange(height), runs[:, 0]]
-    np.testing.assert_array_equal(runs[rows, 2], ((first_y * img_tgt.shape[1] + expected_x) * 3)[rows])
-    assert copied.sum() >= 0.9 * (exact & (np.abs(distance) > reach + 1.0)).sum()
+    cols = np.arange(width)[None, :]
+    element = (map_tgt[..., 1] * img_tgt.shape[1] + map_tgt[..., 0]) * 3 - cols * 3  # the runs' element at column 0
+    np.testing.assert_array_equal(np.broadcast_to(runs[:, 2:3], copied.shape)[copied], element[copied])
+    # Where the lines are rows each frame's runs come up to its seam's offsets; else they keep clear of
+    # where any frame's might reach.
+    reach = seam.lf_px + 1.0 if lines_are_rows else seam.band_px - 0.5 * seam.transition_px + seam.lf_px + 1.0
+    within = (np.abs(distance_frame) if lines_are_rows else np.abs(distance)) > reach
+    assert copied.sum() >= 0.9 * (exact & within).sum()
     shown_src = ok_src & (~ok_tgt | (distance < -seam.band_px))
     assert sampled.any() and np.all((shown_src & clear)[sampled])
-    assert sampled.sum() >= 0.9 * (shown_src & (np.abs(distance) > reach + 1.0)).sum()
+    assert sampled.sum() >= 0.9 * (shown_src & within).sum()
 
 
 def test_runs_leave_the_borders_offsets_and_a_resampled_target_to_the_full_rule(scene, warp_device):  # noqa: F811
@@ -223,6 +228,37 @@ def test_run_pixels_take_the_gains_and_knee_as_the_full_rule_does(scene, device,
     out = comp.apply(img_src, img_tgt)
     expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt)
     assert np.abs(out[sampled].astype(np.float64) - expected[sampled]).max() <= 1.0
+
+
+def test_runs_reach_the_band_while_the_seam_offsets_are_zero(scene, warp_device):  # noqa: F811
+    """Without seam offsets (a chroma pass) nothing of the seam reaches beyond the band, so the runs go
+    up to it; once offsets are set they keep their reach, and both composite as the reference does."""
+    img_src, img_tgt, map_src, map_tgt, _ = scene
+    seam = layout(scene, band_px=20.0)
+    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
+    comp.set_gains(3, [1.1, 0.9, 1.0], [-3.0, 2.0, 0.0], [1.3, 0.8, 1.0], [6.0, -5.0, 4.0])
+    comp.set_seam(seam.positions + 100.0)
+    out = comp.apply(img_src, img_tgt)
+    expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt)
+    copied, sampled, runs = run_masks(comp, img_src.shape, img_tgt.shape)
+    distance = np.arange(map_src.shape[1])[None, :] - comp.seam_positions()[:, None]
+    near = np.abs(distance) < seam.lf_px
+    assert copied[near].any() and sampled[near].any()  # within the offsets' reach, had there been any
+    # Beyond the band the plan shows one side where the reference's smoothed ramp has a tail left.
+    alpha, _ = comp.seam_weights()
+    both = (copied | sampled) & ((alpha < 1e-4) | (alpha > 1 - 1e-4))
+    assert both.mean() > 0.5
+    assert np.abs(out[both].astype(np.float64) - expected[both]).max() <= 1.0
+    lines = len(seam.positions)
+    comp.set_offsets(np.full((lines, 3), 30.0, np.float32), np.full((lines, 3), -30.0, np.float32))
+    out = comp.apply(img_src, img_tgt)
+    expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt)
+    copied, sampled, _ = run_masks(comp, img_src.shape, img_tgt.shape)
+    assert not (copied | sampled)[near].any()
+    both = copied | sampled
+    assert np.abs(out[both].astype(np.float64) - expected[both]).max() <= 1.0
+    comp.set_offsets(*np.zeros((2, lines, 3), np.float32))  # zero again: the runs keep their reach
+    np.testing.assert_array_equal(run_masks(comp, img_src.shape, img_tgt.shape)[0], copied)
 
 
 @pytest.mark.parametrize("cell", [1, 2])
