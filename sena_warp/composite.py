@@ -70,6 +70,7 @@ class _Buffers:
         self.plan_ready = False
         self.runs = wp.empty(canvas_shape[0], dtype=RowRuns, device=device)  # each row's runs
         self.runs_ready = False  # made anew with the plan and with the border blend
+        self.plan_frames = 0  # frames composited with the plan since it was made
         self.runs_clear_px = 0.0  # how far from the static seam the runs were made to keep
         self.frame_runs = wp.empty(canvas_shape[0], dtype=RowRuns, device=device)  # this frame's
         self.table = wp.empty(channels * 256, dtype=wp.uint8, device=device)  # the target's gains, per frame
@@ -203,6 +204,7 @@ class Compositor:
             runtime.launch_rows(composite_plan_kernel, *self.canvas_shape, inputs, self.device, self.threads)
             buf.plan_ready = True
             buf.runs_ready = False
+            buf.plan_frames = 0
         return buf
 
     def _offsets_reach_px(self, channels: int) -> float:
@@ -210,17 +212,23 @@ class Compositor:
         nonzero, nothing while they are all zero (a chroma pass); plus a pixel for float32 rounding."""
         return (max(self.layout.lf_px, 0.0) if channels in self._lf_reaches else 0.0) + RUN_MARGIN_PX
 
-    def _frame_runs(self, buf: _Buffers, channels: int) -> wp.array:
+    def _frame_runs(self, buf: _Buffers, channels: int, at_once: bool = False) -> wp.array:
         """``buf``'s runs per canvas row for the current seam (``frame_runs_kernel``) from the plan's
         (``row_runs_kernel``), which are made anew after the plan or the border blend changed.
 
         Where the lines are rows, the plan's runs ignore the seam and each frame's are cut around its
         seam. Else the plan's runs keep clear of wherever the frame's seam may be: it stays within
         ``band_px - transition_px / 2`` of the static seam (:meth:`set_seam`), its offsets reach
-        :meth:`_offsets_reach_px` beyond that."""
+        :meth:`_offsets_reach_px` beyond that.
+
+        A plan's runs are looked for once it has served a frame (or ``at_once``), none before: a plan
+        made anew every frame (maps being blended in) would cost more to scan than its runs save."""
         layout = self.layout
         reach_px = self._offsets_reach_px(channels)
         clear_px = 0.0 if layout.lines_are_rows else max(layout.band_px - 0.5 * layout.transition_px, 0.0) + reach_px
+        if not buf.runs_ready and buf.plan_frames == 0 and not at_once:
+            buf.frame_runs.zero_()
+            return buf.frame_runs
         if not buf.runs_ready or buf.runs_clear_px != clear_px:
             border_on, border_lines, second, border_src, border_tgt = self._border[channels]
             inputs = [self.canvas_shape[1], buf.plan, self.seam_static, int(layout.lines_are_rows), clear_px,
@@ -236,13 +244,14 @@ class Compositor:
         return self._buffers_for(tuple(shape_src), tuple(shape_tgt)).coverage.numpy()
 
     def row_runs(self, shape_src: tuple, shape_tgt: tuple) -> np.ndarray:
-        """(Hc, 5) int32 per canvas row for images of these shapes, as the next :meth:`composite` takes
-        them (``frame_runs_kernel``): columns [a, b) it copies from the target through the gains alone,
-        the copy's target element at column 0, and columns [a, b) it samples from the source with its
-        gains alone (a = b where a row has none)."""
+        """(Hc, 5) int32 per canvas row for images of these shapes, as :meth:`composite` takes them for
+        the current seam once the plan has served a frame (``frame_runs_kernel``): columns [a, b) it
+        copies from the target through the gains alone, the copy's target element at column 0, and
+        columns [a, b) it samples from the source with its gains alone (a = b where a row has none)."""
         channels = shape_src[2]
         self._ensure_defaults(channels)
-        return self._frame_runs(self._buffers_for(tuple(shape_src), tuple(shape_tgt)), channels).numpy().copy()
+        buf = self._buffers_for(tuple(shape_src), tuple(shape_tgt))
+        return self._frame_runs(buf, channels, at_once=True).numpy().copy()
 
     def seam_positions(self) -> np.ndarray:
         """(L,) float32: the seam per line as the next :meth:`composite` uses it (after ``set_seam``'s clip)."""
@@ -378,6 +387,7 @@ class Compositor:
                   wp.vec4i(*values, *[0] * (MAX_CHANNELS - channels)), buf.out_flat]
         runtime.launch_row_loops(COMPOSITE_FRAME_KERNELS[channels], *self.canvas_shape, inputs, self.device,
                                  self.threads)
+        buf.plan_frames += 1
         out = buf.out.numpy()
         return out[:, :, 0] if planes else out
 
