@@ -108,6 +108,8 @@ def line_and_position(x: int, y: int, lines_are_rows: int) -> wp.vec2i:
 @wp.kernel
 def composite_plan_kernel(
     row0: int,
+    col_step: int,
+    width: int,
     map_src: wp.array2d(dtype=wp.vec2),
     map_tgt: wp.array2d(dtype=wp.vec2),
     seam: wp.array(dtype=float),
@@ -122,32 +124,35 @@ def composite_plan_kernel(
     """Per canvas pixel q = y * Wc + x: plan[q], plan_tgt[q] for band pixels, coverage 255 / 0.
 
     Where both sides are valid, pixels within ``band_px`` of the seam are band pixels (the frame
-    decides the side); the others show the source below the seam and the target above it.
+    decides the side); the others show the source below the seam and the target above it. Thread
+    (i, j) does row ``row0 + i``, columns j, j + col_step, ... (``runtime.launch_row_loops``): a
+    blended-in map makes a plan every frame.
     """
-    i, x = wp.tid()
+    i, j = wp.tid()
     y = row0 + i
-    q = y * map_src.shape[1] + x
-    p_src = map_src[y, x]
-    p_tgt = map_tgt[y, x]
-    ok_src = inside(p_src, shape_src)
-    ok_tgt = inside(p_tgt, shape_tgt)
-    lp = line_and_position(x, y, lines_are_rows)
-    d = float(lp[1]) - seam[lp[0]]
-    word = wp.int64(KIND_FILL)
-    if ok_src and ok_tgt:
-        if wp.abs(d) <= band_px:
-            word = plan_word(KIND_BAND, p_src, shape_src)
-            plan_tgt[q] = plan_word(KIND_TARGET, p_tgt, shape_tgt)
-        elif d < 0.0:
+    for x in range(j, width, col_step):
+        q = y * width + x
+        p_src = map_src[y, x]
+        p_tgt = map_tgt[y, x]
+        ok_src = inside(p_src, shape_src)
+        ok_tgt = inside(p_tgt, shape_tgt)
+        lp = line_and_position(x, y, lines_are_rows)
+        d = float(lp[1]) - seam[lp[0]]
+        word = wp.int64(KIND_FILL)
+        if ok_src and ok_tgt:
+            if wp.abs(d) <= band_px:
+                word = plan_word(KIND_BAND, p_src, shape_src)
+                plan_tgt[q] = plan_word(KIND_TARGET, p_tgt, shape_tgt)
+            elif d < 0.0:
+                word = plan_word(KIND_SOURCE, p_src, shape_src)
+            else:
+                word = plan_word(KIND_TARGET, p_tgt, shape_tgt)
+        elif ok_src:
             word = plan_word(KIND_SOURCE, p_src, shape_src)
-        else:
+        elif ok_tgt:
             word = plan_word(KIND_TARGET, p_tgt, shape_tgt)
-    elif ok_src:
-        word = plan_word(KIND_SOURCE, p_src, shape_src)
-    elif ok_tgt:
-        word = plan_word(KIND_TARGET, p_tgt, shape_tgt)
-    plan[q] = word
-    coverage[y, x] = wp.where(ok_src or ok_tgt, wp.uint8(255), wp.uint8(0))
+        plan[q] = word
+        coverage[y, x] = wp.where(ok_src or ok_tgt, wp.uint8(255), wp.uint8(0))
 
 
 @wp.func

@@ -201,7 +201,7 @@ class Compositor:
             inputs = [self.map_src, self.map_tgt, self.seam_static, int(self.layout.lines_are_rows),
                       float(self.layout.band_px), wp.vec3i(*shape_src), wp.vec3i(*shape_tgt),
                       buf.plan, buf.plan_tgt, buf.coverage]
-            runtime.launch_rows(composite_plan_kernel, *self.canvas_shape, inputs, self.device, self.threads)
+            runtime.launch_row_loops(composite_plan_kernel, *self.canvas_shape, inputs, self.device, self.threads)
             buf.plan_ready = True
             buf.runs_ready = False
             buf.plan_frames = 0

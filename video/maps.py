@@ -222,8 +222,11 @@ def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
     def lerp(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         if a is b:
             return a
-        mixed = a + np.float32(weight) * (b - a)
-        return np.where(np.isnan(a) | np.isnan(b), b, mixed).astype(np.float32)
+        mixed = b - a  # in place from here: a blend step a frame
+        mixed *= np.float32(weight)
+        mixed += a
+        np.copyto(mixed, b, where=np.isnan(mixed))  # NaN where either is (the maps hold no infinities)
+        return mixed.astype(np.float32, copy=False)
 
     return PlaneMaps(
         map_src_luma=lerp(start.map_src_luma, goal.map_src_luma),
