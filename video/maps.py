@@ -268,5 +268,6 @@ def map_change_px(before: PlaneMaps, after: PlaneMaps, shape_src: tuple[int, int
         both &= sampled_mask(after.map_tgt_luma[::stride, ::stride], shape_tgt)
     if not both.any():
         return 0.0
-    change = np.linalg.norm(map_after[both] - map_before[both], axis=1)
+    delta = map_after - map_before  # the whole strided grid first: gathering (N, 2) rows was 3x dearer
+    change = np.sqrt(delta[:, :, 0] * delta[:, :, 0] + delta[:, :, 1] * delta[:, :, 1])[both]
     return float(np.percentile(change, percentile))

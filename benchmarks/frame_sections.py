@@ -1,0 +1,97 @@
+"""Where a clip's per-frame path spends its CPU time, part by part: maps' updates, plans, runs, the seam.
+
+Usage (from the repository root)::
+
+    .venv/bin/python benchmarks/frame_sections.py [--left L --right R] [--work DIR] [--frames 300]
+        [--set FIELD=VALUE ...]
+
+Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p clip pair in ``--work``
+(the bench's 60 s clip, whose slow pan a static rig's drift watch follows, is the one that blends
+maps in: ``--work`` of ``sena-warp bench --seconds 60``). The compositor is made as ``sena-warp video``
+makes it; each of the first ``--frames`` pairs is updated and composited as the frame loop does, with
+the parts below wrapped in process CPU timers (a part called inside another counts in both). Prints
+ms CPU a frame over all the frames, the calls, and ms a call.
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+from itertools import islice
+from pathlib import Path
+
+from frame_kernel_floor import clip_pair, clip_parser
+from output_digest import setting_values
+from sena_warp.composite import Compositor
+from sena_warp.config import Config
+from sena_warp.errors import InputError
+from sena_warp.kernels.runtime import resolve_config
+from sena_warp.video import stitch
+from sena_warp.video.drift import DriftWatch
+from sena_warp.video.exposure import ExposureTracker
+from sena_warp.video.frame_seam import FrameSeam
+from sena_warp.video.reader import FrameReader
+
+PARTS = (
+    (stitch.SenaFrameCompositor, "update", "update (all of it)"),
+    (stitch.SenaFrameCompositor, "composite_yuv", "composite_yuv (all of it)"),
+    (stitch, "lerp_maps", "lerp_maps (a blend step)"),
+    (stitch, "drifted_maps", "drifted_maps (a drift move)"),
+    (stitch, "map_change_px", "map_change_px (the jitter figure)"),
+    (DriftWatch, "shifts", "DriftWatch.shifts"),
+    (ExposureTracker, "set_maps", "ExposureTracker.set_maps"),
+    (ExposureTracker, "update", "ExposureTracker.update"),
+    (FrameSeam, "next", "FrameSeam.next"),
+    (Compositor, "_buffers_for", "Compositor plans (made when due)"),
+    (Compositor, "_frame_runs", "Compositor runs"),
+)
+
+
+def timed(owner, name: str, label: str, seconds: dict, calls: collections.Counter) -> None:
+    """Wrap ``owner.name`` so that its process CPU time and calls add up under ``label``."""
+    original = getattr(owner, name)
+
+    def wrapper(*args, **kwargs):
+        start = time.process_time()
+        try:
+            return original(*args, **kwargs)
+        finally:
+            seconds[label] += time.process_time() - start
+            calls[label] += 1
+
+    setattr(owner, name, wrapper)
+
+
+def main() -> int:
+    parser = clip_parser(__doc__.split("\n")[0], "out/frame_sections")
+    parser.add_argument("--frames", type=int, default=300)
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE")
+    args = parser.parse_args()
+    left, right = clip_pair(args)
+    cfg = resolve_config(Config(device="cpu").replace(**setting_values(args.set)))
+    compositor = stitch.SenaFrameCompositor.from_videos(left, right, 0.0, cfg, "auto")
+    seconds: dict[str, float] = collections.defaultdict(float)
+    calls: collections.Counter = collections.Counter()
+    for owner, name, label in PARTS:
+        timed(owner, name, label, seconds, calls)
+    frames = 0
+    start = time.process_time()
+    with FrameReader(left) as reader_l, FrameReader(right) as reader_r:
+        for frame_l, frame_r in islice(zip(reader_l, reader_r), args.frames):
+            compositor.update(frame_l, frame_r)
+            compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
+            frames += 1
+    total = time.process_time() - start
+    compositor.close()
+    print(f"{left.name}: {frames} frames, {total / frames * 1e3:.1f} ms CPU a frame in all (decoding included)")
+    for label, spent in sorted(seconds.items(), key=lambda item: -item[1]):
+        print(f"  {label:36s} {spent / frames * 1e3:7.2f} ms a frame, {calls[label]:5d} calls, "
+              f"{spent / calls[label] * 1e3:7.2f} ms a call")
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        raise SystemExit(main())
+    except InputError as exc:  # a bad --set, or a clip that cannot be read: one line
+        raise SystemExit(f"{Path(__file__).name}: {exc}") from None

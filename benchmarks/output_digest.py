@@ -1,0 +1,68 @@
+"""One MD5 over every composited frame of a clip pair: a change meant for speed alone must leave it as it was.
+
+Usage (from the repository root)::
+
+    .venv/bin/python benchmarks/output_digest.py [--left L --right R] [--work DIR] [--frames 150]
+        [--set video_rig=moving --set video_estimate_workers=0 ...]
+
+Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p clip pair in ``--work``.
+The compositor is made as ``sena-warp video`` makes it (offset 0, the first pairs screened); each of
+the first ``--frames`` pairs is updated (drift checks, re-estimates, blends) and composited, and the
+digest takes its Y, U and V planes in turn. ``--set`` changes ``Config`` fields (a moving rig's
+re-estimates give the same frames every run only on the loop's thread: ``video_estimate_workers=0``).
+Run it with another tree's package first on ``PYTHONPATH`` to compare two versions.
+"""
+
+from __future__ import annotations
+
+import ast
+import hashlib
+from itertools import islice
+from pathlib import Path
+
+from frame_kernel_floor import clip_pair, clip_parser
+from sena_warp.config import Config
+from sena_warp.errors import InputError
+from sena_warp.config_file import check_settings
+from sena_warp.kernels.runtime import resolve_config
+from sena_warp.video.reader import FrameReader
+from sena_warp.video.stitch import SenaFrameCompositor
+
+
+def setting_values(items: list[str]) -> dict:
+    """Checked ``Config`` changes from ``--set FIELD=VALUE`` items; a value is a Python literal (``0``,
+    ``1.5``, ``'moving'``), else the text itself (``moving``)."""
+    def value(text: str):
+        try:
+            return ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            return text
+    return check_settings({name: value(text) for name, text in (item.split("=", 1) for item in items)}, "--set")
+
+
+def main() -> int:
+    parser = clip_parser(__doc__.split("\n")[0], "out/output_digest")
+    parser.add_argument("--frames", type=int, default=150)
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE")
+    args = parser.parse_args()
+    left, right = clip_pair(args)
+    cfg = resolve_config(Config(device="cpu").replace(**setting_values(args.set)))
+    compositor = SenaFrameCompositor.from_videos(left, right, 0.0, cfg, "auto")
+    digest = hashlib.md5()
+    frames = 0
+    with FrameReader(left) as reader_l, FrameReader(right) as reader_r:
+        for frame_l, frame_r in islice(zip(reader_l, reader_r), args.frames):
+            compositor.update(frame_l, frame_r)
+            for plane in compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v):
+                digest.update(plane.tobytes())
+            frames += 1
+    compositor.close()
+    print(f"{left.name} + {right.name}, {frames} frames: {digest.hexdigest()}")
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        raise SystemExit(main())
+    except InputError as exc:  # a bad --set, or a clip that cannot be read: one line
+        raise SystemExit(f"{Path(__file__).name}: {exc}") from None
