@@ -21,7 +21,8 @@ shown (the source for a band pixel, whose target word, same layout, is in ``plan
 
 Runs. Most of a video's canvas is one side alone, further from the seam and the borders than any
 offset reaches (whatever the frame's seam within its band does). Per canvas row ``row_runs_kernel``
-finds, once per plan, the longest run of each side there. The target's run is the unwarped target
+finds from the plan the longest run of each side there (again when the border blend or the offsets'
+reach changes), and ``frame_runs_kernel`` fits them to each frame's seam. The target's run is the unwarped target
 at whole pixels: each pixel is its target element through the frame's gains, which
 ``gain_table_kernel`` tabulates per frame, so the frame kernel copies it through the table. The
 source's run is sampled and gained without working out each pixel's seam, blend and offsets.
@@ -257,9 +258,10 @@ def row_runs_kernel(
     b), empty runs (0, 0): a copy run [a, b) shows the target alone at whole pixels, consecutive
     elements; a sample run the source alone.
 
-    ``seam``: the static seam; ``clear_px``: how far from it the frame's seam offsets cannot reach
-    (``lf_px`` beyond the band the frame's seam stays in; 0 where ``frame_runs_kernel`` cuts each row
-    around the frame's seam instead); the border as the frame kernel takes it."""
+    ``seam``: the static seam; ``clear_px``: how far from it no frame's seam offsets reach (the reach
+    of its offsets beyond the band the frame's seam stays in, ``Compositor._frame_runs``; 0 where
+    ``frame_runs_kernel`` cuts each row around the frame's seam instead); the border as the frame
+    kernel takes it."""
     i, _ = wp.tid()
     y = row0 + i
     bw_row = border_weights(y, border_lines, border_on, lf_px)
@@ -337,6 +339,15 @@ def gain_table_kernel(gain: wp.vec4i, bias: wp.vec4i, tone: wp.vec2i, table: wp.
 
 
 @wp.func
+def placed_run(a: int, b: int, how: int, width: int) -> wp.vec3i:
+    """(a, b, how) of a row's run, an empty one placed at the row's end (width, width): the five parts
+    of the row then cover each column once whichever runs it has."""
+    if b <= a:
+        return wp.vec3i(width, width, how)
+    return wp.vec3i(a, b, how)
+
+
+@wp.func
 def first_column(j: int, start: int, col_step: int) -> int:
     """The first of a thread's columns j, j + col_step, ... at or after ``start``."""
     if j >= start:
@@ -400,11 +411,11 @@ def _composite_frame_kernel(channels: int):
         y = row0 + i
         bw_row = border_weights(y, border_lines, border_on, lf_px)  # a row's, where the lines are rows
         run = runs[y]
-        first = wp.vec3i(run[0], run[1], RUN_COPY)
-        later = wp.vec3i(run[3], run[4], RUN_SAMPLE)
-        if run[3] < run[0]:
+        first = placed_run(run[0], run[1], RUN_COPY, width)
+        later = placed_run(run[3], run[4], RUN_SAMPLE, width)
+        if later[0] < first[0]:
             first = later
-            later = wp.vec3i(run[0], run[1], RUN_COPY)
+            later = placed_run(run[0], run[1], RUN_COPY, width)
         for part in range(5):
             begin = int(0)
             end = first[0]

@@ -82,7 +82,7 @@ def resolve_config(cfg: Config) -> Config:
 
 
 CORES = os.cpu_count() or 1  # asked once: a launch's thread count is worked out on every frame
-BAND_THREADS = 1  # the per-frame seam's band kernels: the band is small, a second CPU thread costs more than it saves
+BAND_THREADS = 1  # small per-frame kernels (the seam's band, a row's runs): a second CPU thread costs more than it saves
 
 
 def cpu_threads(threads: int) -> int:

@@ -208,8 +208,9 @@ class Compositor:
         return buf
 
     def _offsets_reach_px(self, channels: int) -> float:
-        """How far from the frame's seam its offsets may change a pixel: ``lf_px`` once they have been
-        nonzero, nothing while they are all zero (a chroma pass); plus a pixel for float32 rounding."""
+        """How far from the frame's seam its offsets may change a pixel: ``lf_px`` once they have ever been
+        nonzero (kept after, so that the runs are not scanned anew each time they flip), nothing until then
+        (a chroma pass); plus a pixel for float32 rounding."""
         return (max(self.layout.lf_px, 0.0) if channels in self._lf_reaches else 0.0) + RUN_MARGIN_PX
 
     def _frame_runs(self, buf: _Buffers, channels: int, at_once: bool = False) -> wp.array:
@@ -236,7 +237,7 @@ class Compositor:
             runtime.launch_rows(row_runs_kernel, self.canvas_shape[0], 1, inputs, self.device, self.threads)
             buf.runs_ready, buf.runs_clear_px = True, clear_px
         inputs = [buf.runs, self.seam, int(layout.lines_are_rows), reach_px, buf.frame_runs]
-        runtime.launch_rows(frame_runs_kernel, self.canvas_shape[0], 1, inputs, self.device, 1)
+        runtime.launch_rows(frame_runs_kernel, self.canvas_shape[0], 1, inputs, self.device, runtime.BAND_THREADS)
         return buf.frame_runs
 
     def coverage(self, shape_src: tuple, shape_tgt: tuple) -> np.ndarray:

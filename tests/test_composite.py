@@ -153,11 +153,22 @@ def copied_mask(comp: Compositor, shape_src: tuple, shape_tgt: tuple) -> np.ndar
 
 
 def with_runs(comp: Compositor, img_src, img_tgt) -> np.ndarray:
-    """The pair composited once the plan has served a frame, so with its runs: the same as the frame
-    before them, composited by the full rule everywhere."""
-    first = comp.apply(img_src, img_tgt)
+    """The pair composited with its runs (once the plan has served a frame), checked to be the same as
+    the pair composited by the full rule everywhere (the compositor with every row's runs empty)."""
+    comp.apply(img_src, img_tgt)
     out = comp.apply(img_src, img_tgt)
-    np.testing.assert_array_equal(out, first)
+    assert (comp.row_runs(img_src.shape, img_tgt.shape)[:, [1, 4]] > 0).any()
+
+    def no_runs(buf, channels, at_once=False):
+        buf.frame_runs.zero_()
+        return buf.frame_runs
+
+    comp._frame_runs = no_runs
+    try:
+        full_rule = comp.apply(img_src, img_tgt)
+    finally:
+        del comp._frame_runs
+    np.testing.assert_array_equal(out, full_rule)
     return out
 
 
