@@ -17,20 +17,14 @@ from __future__ import annotations
 
 import collections
 import time
-from itertools import islice
-from pathlib import Path
 
-from frame_kernel_floor import clip_pair, clip_parser
-from output_digest import setting_values
+from frame_kernel_floor import clip_parser
+from output_digest import clip_compositor, composited, run
 from sena_warp.composite import Compositor
-from sena_warp.config import Config
-from sena_warp.errors import InputError
-from sena_warp.kernels.runtime import resolve_config
 from sena_warp.video import stitch
 from sena_warp.video.drift import DriftWatch
 from sena_warp.video.exposure import ExposureTracker
 from sena_warp.video.frame_seam import FrameSeam
-from sena_warp.video.reader import FrameReader
 
 PARTS = (
     (stitch.SenaFrameCompositor, "update", "update (all of it)"),
@@ -67,20 +61,13 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=300)
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE")
     args = parser.parse_args()
-    left, right = clip_pair(args)
-    cfg = resolve_config(Config(device="cpu").replace(**setting_values(args.set)))
-    compositor = stitch.SenaFrameCompositor.from_videos(left, right, 0.0, cfg, "auto")
+    left, right, compositor = clip_compositor(args)
     seconds: dict[str, float] = collections.defaultdict(float)
     calls: collections.Counter = collections.Counter()
     for owner, name, label in PARTS:
         timed(owner, name, label, seconds, calls)
-    frames = 0
     start = time.process_time()
-    with FrameReader(left) as reader_l, FrameReader(right) as reader_r:
-        for frame_l, frame_r in islice(zip(reader_l, reader_r), args.frames):
-            compositor.update(frame_l, frame_r)
-            compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
-            frames += 1
+    frames = sum(1 for _ in composited(compositor, left, right, args.frames))
     total = time.process_time() - start
     compositor.close()
     print(f"{left.name}: {frames} frames, {total / frames * 1e3:.1f} ms CPU a frame in all (decoding included)")
@@ -91,7 +78,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    try:
-        raise SystemExit(main())
-    except InputError as exc:  # a bad --set, or a clip that cannot be read: one line
-        raise SystemExit(f"{Path(__file__).name}: {exc}") from None
+    run(main, __file__)

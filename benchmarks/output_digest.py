@@ -15,15 +15,17 @@ Run it with another tree's package first on ``PYTHONPATH`` to compare two versio
 
 from __future__ import annotations
 
+import argparse
 import ast
 import hashlib
+from collections.abc import Callable, Iterator
 from itertools import islice
 from pathlib import Path
 
 from frame_kernel_floor import clip_pair, clip_parser
 from sena_warp.config import Config
-from sena_warp.errors import InputError
 from sena_warp.config_file import check_settings
+from sena_warp.errors import InputError
 from sena_warp.kernels.runtime import resolve_config
 from sena_warp.video.reader import FrameReader
 from sena_warp.video.stitch import SenaFrameCompositor
@@ -40,29 +42,47 @@ def setting_values(items: list[str]) -> dict:
     return check_settings({name: value(text) for name, text in (item.split("=", 1) for item in items)}, "--set")
 
 
+def clip_compositor(args: argparse.Namespace) -> tuple[Path, Path, SenaFrameCompositor]:
+    """(left, right, compositor) of a script's ``clip_parser`` arguments and ``--set`` items: the
+    compositor as ``sena-warp video`` makes it (offset 0, the first pairs screened), on the CPU."""
+    cfg = resolve_config(Config(device="cpu").replace(**setting_values(args.set)))
+    left, right = clip_pair(args)
+    return left, right, SenaFrameCompositor.from_videos(left, right, 0.0, cfg, "auto")
+
+
+def composited(compositor: SenaFrameCompositor, left: Path, right: Path, frames: int) -> Iterator[tuple]:
+    """The (y, u, v) output planes of the first ``frames`` pairs, each updated and composited as the
+    frame loop does (valid until the next one)."""
+    with FrameReader(left) as reader_l, FrameReader(right) as reader_r:
+        for frame_l, frame_r in islice(zip(reader_l, reader_r), frames):
+            compositor.update(frame_l, frame_r)
+            yield compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
+
+
+def run(main: Callable[[], int], script: str) -> None:
+    """Exit with ``main()``'s status; a bad ``--set`` or a clip that cannot be read in one line."""
+    try:
+        raise SystemExit(main())
+    except InputError as exc:
+        raise SystemExit(f"{Path(script).name}: {exc}") from None
+
+
 def main() -> int:
     parser = clip_parser(__doc__.split("\n")[0], "out/output_digest")
     parser.add_argument("--frames", type=int, default=150)
     parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE")
     args = parser.parse_args()
-    left, right = clip_pair(args)
-    cfg = resolve_config(Config(device="cpu").replace(**setting_values(args.set)))
-    compositor = SenaFrameCompositor.from_videos(left, right, 0.0, cfg, "auto")
+    left, right, compositor = clip_compositor(args)
     digest = hashlib.md5()
     frames = 0
-    with FrameReader(left) as reader_l, FrameReader(right) as reader_r:
-        for frame_l, frame_r in islice(zip(reader_l, reader_r), args.frames):
-            compositor.update(frame_l, frame_r)
-            for plane in compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v):
-                digest.update(plane.tobytes())
-            frames += 1
+    for planes in composited(compositor, left, right, args.frames):
+        for plane in planes:
+            digest.update(plane.tobytes())
+        frames += 1
     compositor.close()
     print(f"{left.name} + {right.name}, {frames} frames: {digest.hexdigest()}")
     return 0
 
 
 if __name__ == "__main__":
-    try:
-        raise SystemExit(main())
-    except InputError as exc:  # a bad --set, or a clip that cannot be read: one line
-        raise SystemExit(f"{Path(__file__).name}: {exc}") from None
+    run(main, __file__)
