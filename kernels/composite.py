@@ -314,19 +314,18 @@ def clear_part(a: int, b: int, seam: float, cut_px: float) -> wp.vec2i:
 
 
 @wp.kernel
-def frame_runs_kernel(row0: int, runs: wp.array(dtype=RowRuns), seam: wp.array(dtype=float), lines_are_rows: int,
-                      cut_px: float, frame_runs: wp.array(dtype=RowRuns)):
-    """Per canvas row: its runs for this frame. Where the lines are rows, the plan's runs hold one side
-    alone anywhere beyond the band, and the part ``cut_px`` (the seam offsets' reach) from the frame's
-    seam ``seam`` is kept; else they are already clear of any frame's seam (``row_runs_kernel``)."""
+def frame_runs_kernel(row0: int, runs: wp.array(dtype=RowRuns), seam: wp.array(dtype=float), cut_px: float,
+                      frame_runs: wp.array(dtype=RowRuns)):
+    """Per canvas row, where the lines are rows: its runs for this frame. The plan's runs hold one side
+    alone anywhere beyond the band; the part ``cut_px`` (the seam offsets' reach) from the frame's seam
+    ``seam`` is kept. (Where the lines are columns the plan's runs already keep clear of any frame's
+    seam, ``row_runs_kernel``, and serve every frame as they are.)"""
     i, _ = wp.tid()
     y = row0 + i
     run = runs[y]
-    if lines_are_rows != 0:
-        copy = clear_part(run[0], run[1], seam[y], cut_px)
-        sample = clear_part(run[3], run[4], seam[y], cut_px)
-        run = RowRuns(copy[0], copy[1], run[2], sample[0], sample[1])
-    frame_runs[y] = run
+    copy = clear_part(run[0], run[1], seam[y], cut_px)
+    sample = clear_part(run[3], run[4], seam[y], cut_px)
+    frame_runs[y] = RowRuns(copy[0], copy[1], run[2], sample[0], sample[1])
 
 
 @wp.kernel

@@ -218,9 +218,9 @@ class Compositor:
         (``row_runs_kernel``), which are made anew after the plan or the border blend changed.
 
         Where the lines are rows, the plan's runs ignore the seam and each frame's are cut around its
-        seam. Else the plan's runs keep clear of wherever the frame's seam may be: it stays within
-        ``band_px - transition_px / 2`` of the static seam (:meth:`set_seam`), its offsets reach
-        :meth:`_offsets_reach_px` beyond that.
+        seam. Else the plan's runs keep clear of wherever the frame's seam may be, and serve every frame
+        as they are: it stays within ``band_px - transition_px / 2`` of the static seam
+        (:meth:`set_seam`), its offsets reach :meth:`_offsets_reach_px` beyond that.
 
         A plan's runs are looked for once it has served a frame (or ``at_once``), none before: a plan
         made anew every frame (maps being blended in) would cost more to scan than its runs save."""
@@ -236,7 +236,9 @@ class Compositor:
                       float(layout.lf_px), border_on, border_lines, second, border_src, border_tgt, channels, buf.runs]
             runtime.launch_rows(row_runs_kernel, self.canvas_shape[0], 1, inputs, self.device, self.threads)
             buf.runs_ready, buf.runs_clear_px = True, clear_px
-        inputs = [buf.runs, self.seam, int(layout.lines_are_rows), reach_px, buf.frame_runs]
+        if not layout.lines_are_rows:
+            return buf.runs
+        inputs = [buf.runs, self.seam, reach_px, buf.frame_runs]
         runtime.launch_rows(frame_runs_kernel, self.canvas_shape[0], 1, inputs, self.device, runtime.BAND_THREADS)
         return buf.frame_runs
 
