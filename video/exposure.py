@@ -29,6 +29,22 @@ def nearest_taps(map_canvas: np.ndarray, mask: np.ndarray, plane_shape: tuple[in
     return xy[:, 1] * plane_shape[1] + xy[:, 0]
 
 
+def overlap_taps(maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[int, int], stride: int
+                 ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """Flat indices of the nearest taps, in the source's and the target's Y planes of (rows, cols)
+    ``shape_src`` / ``shape_tgt``, of every ``stride``-th canvas pixel where ``maps`` sample both; and
+    in their U/V planes, every ``stride // 2``-th pixel of the chroma canvas."""
+    chroma_src = ((shape_src[0] + 1) // 2, (shape_src[1] + 1) // 2)
+    chroma_tgt = ((shape_tgt[0] + 1) // 2, (shape_tgt[1] + 1) // 2)
+    luma_src, luma_tgt = maps.map_src_luma[::stride, ::stride], maps.map_tgt_luma[::stride, ::stride]
+    both = sampled_mask(luma_src, shape_src) & sampled_mask(luma_tgt, shape_tgt)
+    half = max(1, stride // 2)
+    uv_src, uv_tgt = maps.map_src_chroma[::half, ::half], maps.map_tgt_chroma[::half, ::half]
+    both_uv = sampled_mask(uv_src, chroma_src) & sampled_mask(uv_tgt, chroma_tgt)
+    return ((nearest_taps(luma_src, both, shape_src), nearest_taps(luma_tgt, both, shape_tgt)),
+            (nearest_taps(uv_src, both_uv, chroma_src), nearest_taps(uv_tgt, both_uv, chroma_tgt)))
+
+
 class ExposureTracker:
     """Smoothed per-plane gains of the two views of one fixed canvas.
 
@@ -49,27 +65,28 @@ class ExposureTracker:
         self.set_maps(maps, shape_src, shape_tgt)
 
     def set_maps(self, maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[int, int]) -> None:
-        """Sample positions for new maps (a re-estimate); the gains themselves carry on."""
-        stride = max(1, self.cfg.video_gain_stride_px)
-        chroma_src = ((shape_src[0] + 1) // 2, (shape_src[1] + 1) // 2)
-        chroma_tgt = ((shape_tgt[0] + 1) // 2, (shape_tgt[1] + 1) // 2)
-        luma_src, luma_tgt = maps.map_src_luma[::stride, ::stride], maps.map_tgt_luma[::stride, ::stride]
-        both = sampled_mask(luma_src, shape_src) & sampled_mask(luma_tgt, shape_tgt)
-        self._luma_taps = (nearest_taps(luma_src, both, shape_src), nearest_taps(luma_tgt, both, shape_tgt))
-        half = max(1, stride // 2)
-        uv_src, uv_tgt = maps.map_src_chroma[::half, ::half], maps.map_tgt_chroma[::half, ::half]
-        both_uv = sampled_mask(uv_src, chroma_src) & sampled_mask(uv_tgt, chroma_tgt)
-        self._chroma_taps = (nearest_taps(uv_src, both_uv, chroma_src), nearest_taps(uv_tgt, both_uv, chroma_tgt))
+        """New maps (a re-estimate, a blend step); the gains themselves carry on. Their sample positions
+        are worked out when the next measurement needs them: a blend sets maps on every frame, and a
+        measurement comes every ``period_frames``."""
+        self._maps = (maps, shape_src, shape_tgt)
+        self._taps: tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+
+    def _current_taps(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+        """((luma source, luma target), (chroma source, chroma target)) flat plane indices of the
+        overlap's samples under the current maps (made once per maps)."""
+        if self._taps is None:
+            self._taps = overlap_taps(*self._maps, max(1, self.cfg.video_gain_stride_px))
+        return self._taps
 
     def measure(self, y_src, y_tgt, u_src, u_tgt, v_src, v_tgt) -> np.ndarray | None:
         """(g_src, g_tgt, u_src, u_tgt, v_src, v_tgt) measured on one frame pair, or None (too few pixels)."""
-        ys, yt = y_src.ravel()[self._luma_taps[0]], y_tgt.ravel()[self._luma_taps[1]]
+        (luma_src, luma_tgt), (cs, ct) = self._current_taps()
+        ys, yt = y_src.ravel()[luma_src], y_tgt.ravel()[luma_tgt]
         keep = agreeing_pixels(ys[:, None], yt[:, None], self.cfg)
         if keep.sum() < self.cfg.gain_min_pixels // 4:
             return None
         (g_src,), (g_tgt,) = brown_lowe_gains(np.array([ys[keep].mean() - BLACK_Y]),
                                              np.array([yt[keep].mean() - BLACK_Y]), self.cfg)
-        cs, ct = self._chroma_taps
         du = float(u_src.ravel()[cs].astype(np.float64).mean() - u_tgt.ravel()[ct].mean()) if cs.size else 0.0
         dv = float(v_src.ravel()[cs].astype(np.float64).mean() - v_tgt.ravel()[ct].mean()) if cs.size else 0.0
         self._level = float(ys[keep].mean() - BLACK_Y)
