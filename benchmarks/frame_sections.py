@@ -25,11 +25,13 @@ from sena_warp.video import stitch
 from sena_warp.video.drift import DriftWatch
 from sena_warp.video.exposure import ExposureTracker
 from sena_warp.video.frame_seam import FrameSeam
+from sena_warp.video.maps import MapsBlend
 
 PARTS = (
     (stitch.SenaFrameCompositor, "update", "update (all of it)"),
     (stitch.SenaFrameCompositor, "composite_yuv", "composite_yuv (all of it)"),
-    (stitch, "lerp_maps", "lerp_maps (a blend step)"),
+    (MapsBlend, "__init__", "MapsBlend (a blend begins)"),
+    (MapsBlend, "at", "MapsBlend.at (a blend step)"),
     (stitch, "drifted_maps", "drifted_maps (a drift move)"),
     (stitch, "map_change_px", "map_change_px (the jitter figure)"),
     (DriftWatch, "shifts", "DriftWatch.shifts"),

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from fractions import Fraction
 from pathlib import Path
 
@@ -23,8 +24,8 @@ from sena_warp.errors import GeometryError
 from sena_warp.video import estimate
 from sena_warp.video.estimate import best_first_estimate, rejection_reason
 from sena_warp.composite import SeamLayout
-from sena_warp.video.maps import (PlaneMaps, chroma_positions, chroma_seam, lerp_maps, map_change_px, seam_change_px,
-                                 seam_per_target_line, target_map)
+from sena_warp.video.maps import (MapsBlend, PlaneMaps, chroma_positions, chroma_seam, lerp_maps, map_change_px,
+                                 seam_change_px, seam_per_target_line, target_map)
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import YuvFrame
 from sena_warp.video.stitch import SenaFrameCompositor, stitch_videos
@@ -323,6 +324,27 @@ def test_blend_moves_maps_and_seam_linearly_and_takes_the_goal_where_the_start_h
     np.testing.assert_allclose(half.seam_luma.positions, 34.0)
     assert map_change_px(start, half, (40, 60), 99.0) == pytest.approx(4.0)
     assert half.inliers == 320
+
+
+def test_a_blends_steps_are_the_four_pass_lerp_bit_for_bit():
+    """``MapsBlend`` works out ``goal - start`` once per blend; each step must still be exactly
+    ``start + w * (goal - start)`` in float32, the goal where either side is NaN, and keep what both share."""
+    rng = np.random.default_rng(3)
+    start, goal = synthetic_maps(0.0, 300), synthetic_maps(8.0, 320)
+    goal = replace(goal, map_tgt_luma=start.map_tgt_luma)  # as in a drift: the target map is shared
+    for maps in (start, goal):
+        maps.map_src_luma[:] += rng.normal(scale=3.0, size=maps.map_src_luma.shape).astype(np.float32)
+        maps.map_src_luma[rng.random(maps.shape) < 0.2] = np.nan
+    blend = MapsBlend(start, goal)
+    for weight in (1 / 7, 0.5, 5 / 7, 1.0):
+        step = blend.at(weight)
+        a, b = start.map_src_luma, goal.map_src_luma
+        expected = (b - a) * np.float32(weight) + a
+        expected[np.isnan(expected)] = b[np.isnan(expected)]
+        np.testing.assert_array_equal(step.map_src_luma, expected)
+        assert step.map_src_luma.dtype == np.float32 and step.map_tgt_luma is start.map_tgt_luma
+        assert step.inliers == 320 and step.seam_luma.band_px == goal.seam_luma.band_px
+    assert not np.shares_memory(blend.at(0.5).map_src_luma, blend.at(0.5).map_src_luma)  # each step a new array
 
 
 def test_the_office_rig_gets_the_border_blend_on_its_y_plane(clips):

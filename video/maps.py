@@ -216,31 +216,51 @@ def drifted_maps(maps: PlaneMaps, shift_src: np.ndarray, shift_tgt: np.ndarray) 
     return replace(maps, map_src_luma=map_src, map_src_chroma=chroma_positions(map_src))
 
 
-def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
-    """``start + weight * (goal - start)`` for every map; where either side is NaN, ``goal``'s value; a
-    map the two share (a drift moves only the source's) is kept as it is."""
-    def lerp(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        if a is b:
-            return a
-        mixed = b - a  # in place from here: a blend step a frame
-        mixed *= np.float32(weight)
-        mixed += a
-        np.copyto(mixed, b, where=np.isnan(mixed))  # NaN where either is (the maps hold no infinities)
+class ArrayLerp:
+    """``a + weight * (b - a)`` in float32 for any weight, and ``b`` where either is NaN (the maps hold no
+    infinities): ``b - a`` and where ``a`` alone is NaN are worked out once, so that a step of a blend
+    costs two passes over the array instead of four. An array ``a`` and ``b`` share is kept as it is."""
+
+    def __init__(self, a: np.ndarray, b: np.ndarray):
+        self.a, self.b = a, b
+        if a is not b:
+            self.difference = b - a
+            self.goal_only = np.flatnonzero(np.isnan(a) & ~np.isnan(b))
+            self.goal_values = b.reshape(-1)[self.goal_only]
+
+    def at(self, weight: float) -> np.ndarray:
+        if self.a is self.b:
+            return self.a
+        mixed = self.difference * np.float32(weight)  # a new array: the compositor keeps the last one
+        mixed += self.a
+        mixed.reshape(-1)[self.goal_only] = self.goal_values
         return mixed.astype(np.float32, copy=False)
 
-    return PlaneMaps(
-        map_src_luma=lerp(start.map_src_luma, goal.map_src_luma),
-        map_tgt_luma=lerp(start.map_tgt_luma, goal.map_tgt_luma),
-        alpha_luma=lerp(start.alpha_luma, goal.alpha_luma),
-        map_src_chroma=lerp(start.map_src_chroma, goal.map_src_chroma),
-        map_tgt_chroma=lerp(start.map_tgt_chroma, goal.map_tgt_chroma),
-        alpha_chroma=lerp(start.alpha_chroma, goal.alpha_chroma),
-        seam_luma=replace(goal.seam_luma, positions=lerp(start.seam_luma.positions, goal.seam_luma.positions)),
-        seam_chroma=replace(goal.seam_chroma, positions=lerp(start.seam_chroma.positions, goal.seam_chroma.positions)),
-        seam_x_working=lerp(start.seam_x_working, goal.seam_x_working),
-        inliers=goal.inliers,
-        border_luma=goal.border_luma,
-    )
+
+class MapsBlend:
+    """Maps between ``start`` and ``goal``: :meth:`at` ``weight`` is ``start + weight * (goal - start)``
+    for every map, ``goal``'s value where either side is NaN; ``goal``'s inliers and border blend."""
+
+    MAPS = ("map_src_luma", "map_tgt_luma", "alpha_luma", "map_src_chroma", "map_tgt_chroma", "alpha_chroma",
+            "seam_x_working")
+
+    def __init__(self, start: PlaneMaps, goal: PlaneMaps):
+        self.goal = goal
+        self._maps = {name: ArrayLerp(getattr(start, name), getattr(goal, name)) for name in self.MAPS}
+        self._seams = (ArrayLerp(start.seam_luma.positions, goal.seam_luma.positions),
+                       ArrayLerp(start.seam_chroma.positions, goal.seam_chroma.positions))
+
+    def at(self, weight: float) -> PlaneMaps:
+        luma, chroma = (lerp.at(weight) for lerp in self._seams)
+        return replace(self.goal, **{name: lerp.at(weight) for name, lerp in self._maps.items()},
+                       seam_luma=replace(self.goal.seam_luma, positions=luma),
+                       seam_chroma=replace(self.goal.seam_chroma, positions=chroma))
+
+
+def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
+    """``start + weight * (goal - start)`` for every map; where either side is NaN, ``goal``'s value; a
+    map the two share (a drift moves only the source's) is kept as it is (:class:`MapsBlend`)."""
+    return MapsBlend(start, goal).at(weight)
 
 
 def sampled_mask(map_canvas: np.ndarray, plane_shape: tuple[int, int]) -> np.ndarray:

@@ -40,8 +40,8 @@ from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_rea
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_video
-from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, chroma_lines, drifted_maps, lerp_maps, map_change_px,
-                   plane_maps, sampled_mask, seam_change_px, seam_per_target_line, target_offset)
+from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, MapsBlend, PlaneMaps, chroma_lines, drifted_maps, lerp_maps,
+                   map_change_px, plane_maps, sampled_mask, seam_change_px, seam_per_target_line, target_offset)
 from .reader import YuvFrame, probe_video
 from .writer import even_size
 
@@ -185,7 +185,7 @@ class SenaFrameCompositor:
         self._first_inliers = self._maps.inliers
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": self._first_inliers, "seconds": round(sum(first.seconds.values()), 4)}
-        self._blend: tuple[PlaneMaps, PlaneMaps, int, int] | None = None  # (start, goal, frames done, frames)
+        self._blend: tuple[MapsBlend, int, int] | None = None  # (start to goal, frames done, frames)
         self._workers = ThreadPoolExecutor(cfg.video_estimate_workers, thread_name_prefix="estimate") \
             if self._reestimate_s is not None and cfg.video_estimate_workers > 0 else None
         # With a worker, re-estimates start this many frames ahead (``look_ahead``) and land on their frame.
@@ -374,14 +374,14 @@ class SenaFrameCompositor:
 
     def _blend_to(self, goal: PlaneMaps, frames: int) -> None:
         """Start blending from the maps of the moment to ``goal`` over ``frames`` frames (at least one)."""
-        self._blend = (self._maps, goal, 0, max(1, frames))
+        self._blend = (MapsBlend(self._maps, goal), 0, max(1, frames))
         self._advance_blend()
 
     def _advance_blend(self) -> None:
-        start, goal, done, frames = self._blend
+        blend, done, frames = self._blend
         done += 1
-        self._maps = lerp_maps(start, goal, done / frames)
-        self._blend = None if done >= frames else (start, goal, done, frames)
+        self._maps = blend.at(done / frames)
+        self._blend = None if done >= frames else (blend, done, frames)
         t0 = time.perf_counter()
         # The target maps never change on the fixed canvas; only the source map and the seam move.
         self._luma.set_maps(self._maps.map_src_luma, self._maps.seam_luma.positions)
