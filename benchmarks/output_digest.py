@@ -1,5 +1,9 @@
 """One MD5 over every composited frame of a clip pair: a change meant for speed alone must leave it as it was.
 
+A second MD5 is over the compositor's report (the jitter, seam and exposure figures, the drift moves)
+without its times (``timing_s``, the first estimate's seconds): the figures a user reads must not
+move either.
+
 Usage (from the repository root)::
 
     .venv/bin/python benchmarks/output_digest.py [--left L --right R] [--work DIR] [--frames 150]
@@ -18,6 +22,7 @@ from __future__ import annotations
 import argparse
 import ast
 import hashlib
+import json
 from collections.abc import Callable, Iterator
 from itertools import islice
 from pathlib import Path
@@ -80,7 +85,10 @@ def main() -> int:
             digest.update(plane.tobytes())
         frames += 1
     compositor.close()
-    print(f"{left.name} + {right.name}, {frames} frames: {digest.hexdigest()}")
+    report = compositor.report()
+    del report["timing_s"], report["first_estimate"]["seconds"]
+    figures = hashlib.md5(json.dumps(report, sort_keys=True).encode()).hexdigest()
+    print(f"{left.name} + {right.name}, {frames} frames: {digest.hexdigest()}, report {figures}")
     return 0
 
 
