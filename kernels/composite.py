@@ -34,6 +34,8 @@ import warp as wp
 
 from sena_warp.kernels.seam import source_alpha
 
+wp.set_module_options({"enable_backward": False})  # see the package docstring
+
 KIND_FILL = wp.constant(0)  # no side covers the pixel: the fill value
 KIND_SOURCE = wp.constant(1)  # the source alone
 KIND_TARGET = wp.constant(2)  # the target alone
@@ -362,7 +364,7 @@ def _composite_frame_kernel(channels: int):
     multiply inside ``lf_px`` of the seam.
     """
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module="unique", module_options={"enable_backward": False})
     def composite_frame(
         row0: int,
         col_step: int,

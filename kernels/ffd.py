@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import warp as wp
 
+wp.set_module_options({"enable_backward": False})  # see the package docstring
+
 
 @wp.func
 def lattice_node_canvas(row: int, col: int, node_step: wp.vec2d) -> wp.vec2d:

@@ -15,6 +15,8 @@ import warp as wp
 
 from sena_warp.kernels.composite import holds_both
 
+wp.set_module_options({"enable_backward": False})  # see the package docstring
+
 
 @wp.kernel
 def background_kernel(

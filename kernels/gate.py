@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import warp as wp
 
+wp.set_module_options({"enable_backward": False})  # see the package docstring
+
 
 @wp.func
 def smootherstep(t: float) -> float:

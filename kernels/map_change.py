@@ -13,6 +13,8 @@ import warp as wp
 
 from sena_warp.kernels.composite import inside
 
+wp.set_module_options({"enable_backward": False})  # see the package docstring
+
 NOT_COUNTED = wp.constant(float("nan"))  # a pixel either map does not sample (or outside the overlap)
 
 

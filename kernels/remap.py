@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import warp as wp
 
+wp.set_module_options({"enable_backward": False})  # see the package docstring
+
 
 @wp.func
 def inside_image(img: wp.array3d(dtype=wp.uint8), p: wp.vec2) -> bool:

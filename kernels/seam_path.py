@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import warp as wp
 
+wp.set_module_options({"enable_backward": False})  # see the package docstring
+
 INF = wp.constant(1.0e30)
 
 

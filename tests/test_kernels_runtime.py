@@ -88,3 +88,17 @@ def test_prewarm_loads_every_kernel_module_and_all_that_a_stitch_launches(bundle
         assert any(module.startswith(f"sena_warp.kernels.{name}") for module in warmed_modules), name
     # Nothing the stitch or the planes launched had to be loaded (compiled) after the prewarm.
     assert seen["after"] == seen["warmed"]
+
+
+def test_every_kernel_is_built_forward_only():
+    """No kernel here is differentiated; Warp's adjoint code would more than double a first run's compile
+    (``kernels/__init__.py``). A module that forgets ``enable_backward`` False fails here."""
+    import warp as wp
+
+    runtime.prewarm("cpu")
+    modules = [module for name, module in sys.modules.items() if name.startswith("sena_warp.kernels.")]
+    kernels = [kernel for module in modules for obj in vars(module).values()
+               for kernel in (obj.values() if isinstance(obj, dict) else (obj,)) if isinstance(kernel, wp.Kernel)]
+    assert len(kernels) >= 20
+    for kernel in kernels:
+        assert kernel.module.options["enable_backward"] is False, kernel.key
