@@ -5,9 +5,10 @@ Usage (from the repository root)::
     .venv/bin/python benchmarks/frame_sections.py [--left L --right R] [--work DIR] [--frames 300]
         [--set FIELD=VALUE ...]
 
-Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p clip pair in ``--work``
-(the bench's 60 s clip, whose slow pan a static rig's drift watch follows, is the one that blends
-maps in: ``--work`` of ``sena-warp bench --seconds 60``). The compositor is made as ``sena-warp video``
+Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 5 s 1080p clip pair in
+``--work``. The bench's 60 s clip, whose slow pan a static rig's drift watch follows, is the one that
+blends maps in: pass its two files (``*_1800f_left.mp4`` and ``*_right.mp4`` in the ``--work`` of
+``sena-warp bench --seconds 60``) as ``--left`` and ``--right``. The compositor is made as ``sena-warp video``
 makes it; each of the first ``--frames`` pairs is updated and composited as the frame loop does, with
 the parts below wrapped in process CPU timers (a part called inside another counts in both). Prints
 ms CPU a frame over all the frames, the calls, and ms a call.

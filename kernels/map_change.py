@@ -1,10 +1,14 @@
 """How far a source map moved between two map sets, per canvas pixel (``video/maps.map_change_px``).
 
-The video reports, for every frame whose maps changed, a percentile of |M_s after - M_s before| over the
-canvas pixels both sample in the source (and, where asked, the target: the overlap), on a grid of every
-``stride``-th row and column. Worked out per pixel in one pass over the three maps: the strided numpy
-version took 9-12 ms a blend step at 1080p, mostly in its gathers. Float32 as numpy takes it:
-``sqrt(dx * dx + dy * dy)``.
+A percentile of |M_s after - M_s before| over the canvas pixels both sample in the source (and, where
+asked, the target: the overlap), on a grid of every ``stride``-th row and column: the video reports
+it for every frame whose maps changed (stride 4, the jitter figure), and a moving rig's re-estimate
+is rejected on its median (stride 1). Worked out per pixel in one pass over the three maps: the
+strided numpy version took 9-12 ms a blend step at 1080p, mostly in its gathers. Float32 as numpy
+takes it: ``sqrt(dx * dx + dy * dy)``.
+
+The maps are numpy arrays on the host whatever the device of the stitch, so these kernels run on
+Warp's CPU device (``DEVICE``; ``runtime.prewarm`` loads them there).
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from sena_warp.kernels.composite import inside
 
 wp.set_module_options({"enable_backward": False})  # see the package docstring
 
+DEVICE = "cpu"  # where this module's kernels always run
 NOT_COUNTED = wp.constant(float("nan"))  # a pixel either map does not sample (or outside the overlap)
 
 

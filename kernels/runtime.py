@@ -208,11 +208,13 @@ def loaded() -> frozenset[tuple[str, str]]:
 
 def prewarm(device: str) -> None:
     """Import every module of ``sena_warp.kernels`` and load (compile once, then cached) its kernels:
-    those at module level and the variants a module builds with a factory and lists in a dict."""
+    those at module level and the variants a module builds with a factory and lists in a dict. On
+    ``device``, or where a module says its kernels always run (its ``DEVICE``: work on host arrays)."""
     package = importlib.import_module("sena_warp.kernels")
     for info in pkgutil.iter_modules(package.__path__):
         module = importlib.import_module(f"sena_warp.kernels.{info.name}")
+        on = getattr(module, "DEVICE", device)
         for obj in vars(module).values():
             for kernel in obj.values() if isinstance(obj, dict) else (obj,):
                 if isinstance(kernel, wp.Kernel):
-                    _ensure_loaded(kernel, device)
+                    _ensure_loaded(kernel, on)

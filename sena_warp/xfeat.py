@@ -142,7 +142,7 @@ def sample_map(feature_map: np.ndarray, pts_work: np.ndarray, shape_work_hw: tup
     rows, wy = _cubic_taps(v)
     pad = 2  # the bicubic kernel reaches 2 cells outside the map; padding with zeros as grid_sample
     # Channels last: each tap then gathers one point's C values from one place (a third less time).
-    padded = np.ascontiguousarray(np.pad(feature_map, ((0, 0), (pad, pad), (pad, pad))).transpose(1, 2, 0))
+    padded = np.pad(feature_map.transpose(1, 2, 0), ((pad, pad), (pad, pad), (0, 0)))
     cols = np.clip(cols + pad, 0, w + 2 * pad - 1)
     rows = np.clip(rows + pad, 0, h + 2 * pad - 1)
     out = np.zeros((len(pts_work), c), np.float64)

@@ -24,8 +24,8 @@ from sena_warp.errors import GeometryError
 from sena_warp.video import estimate
 from sena_warp.video.estimate import best_first_estimate, rejection_reason
 from sena_warp.composite import SeamLayout
-from sena_warp.video.maps import (MapsBlend, PlaneMaps, chroma_positions, chroma_seam, lerp_maps, map_change_px,
-                                 seam_change_px, seam_per_target_line, target_map)
+from sena_warp.video.maps import (ArrayLerp, MapsBlend, PlaneMaps, chroma_positions, chroma_seam, lerp_maps,
+                                 map_change_px, seam_change_px, seam_per_target_line, target_map)
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import YuvFrame
 from sena_warp.video.stitch import SenaFrameCompositor, stitch_videos
@@ -345,6 +345,10 @@ def test_a_blends_steps_are_the_four_pass_lerp_bit_for_bit():
         assert step.map_src_luma.dtype == np.float32 and step.map_tgt_luma is start.map_tgt_luma
         assert step.inliers == 320 and step.seam_luma.band_px == goal.seam_luma.band_px
     assert not np.shares_memory(blend.at(0.5).map_src_luma, blend.at(0.5).map_src_luma)  # each step a new array
+    a, b = (np.asfortranarray(m.map_src_luma[:, :, 0]) for m in (start, goal))  # any memory order
+    expected = (b - a) * np.float32(0.25) + a
+    expected[np.isnan(expected)] = b[np.isnan(expected)]
+    np.testing.assert_array_equal(ArrayLerp(a, b).at(0.25), expected)
 
 
 def test_the_office_rig_gets_the_border_blend_on_its_y_plane(clips):

@@ -62,20 +62,21 @@ class ExposureTracker:
         self._state: np.ndarray | None = None  # (g_src, g_tgt, u_src, u_tgt, v_src, v_tgt)
         self._target: np.ndarray | None = None
         self._level = 100.0  # mean Y - 16 of the overlap at the last measurement: the scale of a gain's effect
-        self.set_maps(maps, shape_src, shape_tgt)
+        self._maps_shapes = (maps, shape_src, shape_tgt)  # the maps and the planes' (rows, cols) to sample
+        self._taps: tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
 
     def set_maps(self, maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[int, int]) -> None:
         """New maps (a re-estimate, a blend step); the gains themselves carry on. Their sample positions
         are worked out when the next measurement needs them: a blend sets maps on every frame, and a
         measurement comes every ``period_frames``."""
-        self._maps = (maps, shape_src, shape_tgt)
-        self._taps: tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
+        self._maps_shapes = (maps, shape_src, shape_tgt)
+        self._taps = None
 
     def _current_taps(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
         """((luma source, luma target), (chroma source, chroma target)) flat plane indices of the
         overlap's samples under the current maps (made once per maps)."""
         if self._taps is None:
-            self._taps = overlap_taps(*self._maps, max(1, self.cfg.video_gain_stride_px))
+            self._taps = overlap_taps(*self._maps_shapes, max(1, self.cfg.video_gain_stride_px))
         return self._taps
 
     def measure(self, y_src, y_tgt, u_src, u_tgt, v_src, v_tgt) -> np.ndarray | None:

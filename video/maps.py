@@ -19,8 +19,7 @@ import warp as wp
 from ..composite import SeamLayout
 from ..rig import Rig
 from ..stitch import StitchMaps
-from sena_warp.kernels import runtime
-from sena_warp.kernels.map_change import map_change_kernel
+from sena_warp.kernels import map_change, runtime
 
 # Output pixels no input covers: black in limited-range BT.601, the range H.264 decoders assume.
 BLACK_Y, BLACK_UV = 16, 128
@@ -220,42 +219,43 @@ def drifted_maps(maps: PlaneMaps, shift_src: np.ndarray, shift_tgt: np.ndarray) 
 
 
 class ArrayLerp:
-    """``a + weight * (b - a)`` in float32 for any weight, and ``b`` where either is NaN (the maps hold no
-    infinities): ``b - a`` and where ``a`` alone is NaN are worked out once, so that a step of a blend
-    costs two passes over the array instead of four. An array ``a`` and ``b`` share is kept as it is."""
+    """``a + weight * (b - a)`` for any weight, computed as before: the difference, scaled by the float32
+    weight, then added; ``b``'s value where either is NaN (the maps hold no infinities), cast to float32.
+    The difference and where ``a`` alone is NaN are worked out once, so a step of a blend makes two
+    passes over the array instead of four. An array ``a`` and ``b`` share is kept as it is."""
 
     def __init__(self, a: np.ndarray, b: np.ndarray):
-        self.a, self.b = a, b
-        if a is not b:
-            self.difference = b - a
-            self.goal_only = np.flatnonzero(np.isnan(a) & ~np.isnan(b))
-            self.goal_values = b.reshape(-1)[self.goal_only]
+        self._a, self._shared = a, a is b
+        if not self._shared:
+            self._difference = np.ascontiguousarray(b - a)  # each step's array C-ordered: its flat view below
+            self._goal_only = np.flatnonzero(np.isnan(a) & ~np.isnan(b))
+            self._goal_values = np.ravel(b)[self._goal_only]
 
     def at(self, weight: float) -> np.ndarray:
-        if self.a is self.b:
-            return self.a
-        mixed = self.difference * np.float32(weight)  # a new array: the compositor keeps the last one
-        mixed += self.a
-        mixed.reshape(-1)[self.goal_only] = self.goal_values
+        if self._shared:
+            return self._a
+        mixed = self._difference * np.float32(weight)  # a new array: the compositor keeps the last one
+        mixed += self._a
+        mixed.reshape(-1)[self._goal_only] = self._goal_values
         return mixed.astype(np.float32, copy=False)
 
 
 class MapsBlend:
-    """Maps between ``start`` and ``goal``: :meth:`at` ``weight`` is ``start + weight * (goal - start)``
-    for every map, ``goal``'s value where either side is NaN; ``goal``'s inliers and border blend."""
+    """Maps between ``start`` and ``goal``: :meth:`at` ``weight`` gives every array of the two as
+    :class:`ArrayLerp` does, and the rest (inliers, the border blend, the seams' layouts) as ``goal`` has it."""
 
-    MAPS = ("map_src_luma", "map_tgt_luma", "alpha_luma", "map_src_chroma", "map_tgt_chroma", "alpha_chroma",
-            "seam_x_working")
+    ARRAYS = ("map_src_luma", "map_tgt_luma", "alpha_luma", "map_src_chroma", "map_tgt_chroma", "alpha_chroma",
+              "seam_x_working")
 
     def __init__(self, start: PlaneMaps, goal: PlaneMaps):
         self.goal = goal
-        self._maps = {name: ArrayLerp(getattr(start, name), getattr(goal, name)) for name in self.MAPS}
+        self._arrays = {name: ArrayLerp(getattr(start, name), getattr(goal, name)) for name in self.ARRAYS}
         self._seams = (ArrayLerp(start.seam_luma.positions, goal.seam_luma.positions),
                        ArrayLerp(start.seam_chroma.positions, goal.seam_chroma.positions))
 
     def at(self, weight: float) -> PlaneMaps:
         luma, chroma = (lerp.at(weight) for lerp in self._seams)
-        return replace(self.goal, **{name: lerp.at(weight) for name, lerp in self._maps.items()},
+        return replace(self.goal, **{name: lerp.at(weight) for name, lerp in self._arrays.items()},
                        seam_luma=replace(self.goal.seam_luma, positions=luma),
                        seam_chroma=replace(self.goal.seam_chroma, positions=chroma))
 
@@ -284,16 +284,19 @@ def map_change_px(before: PlaneMaps, after: PlaneMaps, shape_src: tuple[int, int
 
     With ``shape_tgt`` (rows, cols of the target Y plane) only the overlap counts: pixels that also
     sample the target. ``stride``: every this-th canvas row and column only (a per-frame figure).
-    Per pixel by ``map_change_kernel`` on Warp's CPU device, where the maps are.
+    Per pixel by ``map_change_kernel`` on Warp's CPU device, where the maps are; the maps are float32
+    (as ``PlaneMaps`` holds them) of one canvas.
     """
+    if before.map_src_luma.shape != after.map_src_luma.shape or after.map_tgt_luma.shape != after.map_src_luma.shape:
+        raise ValueError("map_change_px: the maps are not of one canvas")
     height, width = before.map_src_luma.shape[:2]
     rows, cols = -(-height // stride), -(-width // stride)
     change = np.empty((rows, cols), np.float32)
-    arrays = [runtime.readonly_array(m, wp.vec2, "cpu") for m in (before.map_src_luma, after.map_src_luma,
-                                                                   after.map_tgt_luma)]
+    arrays = [runtime.readonly_array(m, wp.vec2, map_change.DEVICE)
+              for m in (before.map_src_luma, after.map_src_luma, after.map_tgt_luma)]
     inputs = [stride, arrays[0], arrays[1], wp.vec3i(*shape_src, 1), arrays[2],
               wp.vec3i(*(shape_tgt or (0, 0)), 1), int(shape_tgt is not None),
-              wp.array(change, dtype=float, device="cpu", copy=False)]
-    runtime.launch_rows(map_change_kernel, rows, cols, inputs, "cpu", runtime.BAND_THREADS)
+              wp.array(change, dtype=float, device=map_change.DEVICE, copy=False)]
+    runtime.launch_rows(map_change.map_change_kernel, rows, cols, inputs, map_change.DEVICE, runtime.BAND_THREADS)
     counted = change[~np.isnan(change)]
     return float(np.percentile(counted, percentile)) if counted.size else 0.0

@@ -365,6 +365,9 @@ class SenaFrameCompositor:
         self._reestimations["applied"].append({"made_on_s": round(time_s, 4), "at_s": round(float(frame_l.time_s), 4)})
         # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
         # estimation noise, which an exponential average over the accepted estimates takes out.
+        # The target maps are the fixed canvas's own, the same values in every estimate: shared, a blend
+        # keeps them as they are instead of mixing equal arrays.
+        candidate = replace(candidate, map_tgt_luma=self._maps.map_tgt_luma, map_tgt_chroma=self._maps.map_tgt_chroma)
         goal = lerp_maps(self._maps, candidate, self._cfg.video_warp_follow)
         # Over video_blend_frames at least, and slowly enough that the seam moves at most
         # video_seam_speed_px a frame.
@@ -374,6 +377,7 @@ class SenaFrameCompositor:
 
     def _blend_to(self, goal: PlaneMaps, frames: int) -> None:
         """Start blending from the maps of the moment to ``goal`` over ``frames`` frames (at least one)."""
+        self._blend = None  # the blend under way, if any, let go before the next one holds its differences
         self._blend = (MapsBlend(self._maps, goal), 0, max(1, frames))
         self._advance_blend()
 
