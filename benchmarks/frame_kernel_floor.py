@@ -44,6 +44,8 @@ from sena_warp.video.reader import FrameReader
 from sena_warp.video.stitch import SenaFrameCompositor
 
 
+wp.set_module_options({"enable_backward": False})  # forward only, as the package's kernels
+
 WARMUP_FRAMES = 10  # not timed: the seam's background model and the exposure settle
 
 

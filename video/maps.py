@@ -248,16 +248,16 @@ class MapsBlend:
               "seam_x_working")
 
     def __init__(self, start: PlaneMaps, goal: PlaneMaps):
-        self.goal = goal
+        self._goal = goal
         self._arrays = {name: ArrayLerp(getattr(start, name), getattr(goal, name)) for name in self.ARRAYS}
         self._seams = (ArrayLerp(start.seam_luma.positions, goal.seam_luma.positions),
                        ArrayLerp(start.seam_chroma.positions, goal.seam_chroma.positions))
 
     def at(self, weight: float) -> PlaneMaps:
         luma, chroma = (lerp.at(weight) for lerp in self._seams)
-        return replace(self.goal, **{name: lerp.at(weight) for name, lerp in self._arrays.items()},
-                       seam_luma=replace(self.goal.seam_luma, positions=luma),
-                       seam_chroma=replace(self.goal.seam_chroma, positions=chroma))
+        return replace(self._goal, **{name: lerp.at(weight) for name, lerp in self._arrays.items()},
+                       seam_luma=replace(self._goal.seam_luma, positions=luma),
+                       seam_chroma=replace(self._goal.seam_chroma, positions=chroma))
 
 
 def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
@@ -284,7 +284,7 @@ def map_change_px(before: PlaneMaps, after: PlaneMaps, shape_src: tuple[int, int
 
     With ``shape_tgt`` (rows, cols of the target Y plane) only the overlap counts: pixels that also
     sample the target. ``stride``: every this-th canvas row and column only (a per-frame figure).
-    Per pixel by ``map_change_kernel`` on Warp's CPU device, where the maps are; the maps are float32
+    Per pixel by ``kernels/map_change.py`` on Warp's CPU device, where the maps are; the maps are float32
     (as ``PlaneMaps`` holds them) of one canvas.
     """
     if before.map_src_luma.shape != after.map_src_luma.shape or after.map_tgt_luma.shape != after.map_src_luma.shape:

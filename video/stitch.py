@@ -363,11 +363,11 @@ class SenaFrameCompositor:
             return False
         self._reestimations["accepted"] += 1
         self._reestimations["applied"].append({"made_on_s": round(time_s, 4), "at_s": round(float(frame_l.time_s), 4)})
-        # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
-        # estimation noise, which an exponential average over the accepted estimates takes out.
         # The target maps are the fixed canvas's own, the same values in every estimate: shared, a blend
         # keeps them as they are instead of mixing equal arrays.
         candidate = replace(candidate, map_tgt_luma=self._maps.map_tgt_luma, map_tgt_chroma=self._maps.map_tgt_chroma)
+        # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
+        # estimation noise, which an exponential average over the accepted estimates takes out.
         goal = lerp_maps(self._maps, candidate, self._cfg.video_warp_follow)
         # Over video_blend_frames at least, and slowly enough that the seam moves at most
         # video_seam_speed_px a frame.
