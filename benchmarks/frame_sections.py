@@ -19,8 +19,7 @@ from __future__ import annotations
 import collections
 import time
 
-from frame_kernel_floor import clip_parser
-from output_digest import clip_compositor, composited, run
+from output_digest import clip_compositor, composited, compositor_parser, run
 from sena_warp.composite import Compositor
 from sena_warp.video import stitch
 from sena_warp.video.drift import DriftWatch
@@ -60,10 +59,7 @@ def timed(owner, name: str, label: str, seconds: dict, calls: collections.Counte
 
 
 def main() -> int:
-    parser = clip_parser(__doc__.split("\n")[0], "out/frame_sections")
-    parser.add_argument("--frames", type=int, default=300)
-    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE")
-    args = parser.parse_args()
+    args = compositor_parser(__doc__.split("\n")[0], "out/frame_sections", 300).parse_args()
     left, right, compositor = clip_compositor(args)
     seconds: dict[str, float] = collections.defaultdict(float)
     calls: collections.Counter = collections.Counter()

@@ -47,6 +47,15 @@ def setting_values(items: list[str]) -> dict:
     return check_settings({name: value(text) for name, text in (item.split("=", 1) for item in items)}, "--set")
 
 
+def compositor_parser(description: str, work: str, frames: int) -> argparse.ArgumentParser:
+    """A script's arguments for :func:`clip_compositor` and :func:`composited`: the clip pair
+    (``clip_parser``), ``--frames`` (default ``frames``) and ``--set FIELD=VALUE`` items."""
+    parser = clip_parser(description, work)
+    parser.add_argument("--frames", type=int, default=frames)
+    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE")
+    return parser
+
+
 def clip_compositor(args: argparse.Namespace) -> tuple[Path, Path, SenaFrameCompositor]:
     """(left, right, compositor) of a script's ``clip_parser`` arguments and ``--set`` items: the
     compositor as ``sena-warp video`` makes it (offset 0, the first pairs screened), on the CPU."""
@@ -73,10 +82,7 @@ def run(main: Callable[[], int], script: str) -> None:
 
 
 def main() -> int:
-    parser = clip_parser(__doc__.split("\n")[0], "out/output_digest")
-    parser.add_argument("--frames", type=int, default=150)
-    parser.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE")
-    args = parser.parse_args()
+    args = compositor_parser(__doc__.split("\n")[0], "out/output_digest", 150).parse_args()
     left, right, compositor = clip_compositor(args)
     digest = hashlib.md5()
     frames = 0

@@ -70,7 +70,7 @@ class _Buffers:
         self.plan_ready = False
         self.runs = wp.empty(canvas_shape[0], dtype=RowRuns, device=device)  # each row's runs
         self.runs_ready = False  # made anew with the plan and with the border blend
-        self.plan_frames = 0  # frames composited with the plan since it was made
+        self.plan_served = False  # whether a frame has been composited with the plan since it was made
         self.runs_clear_px = 0.0  # how far from the static seam the runs were made to keep
         self.frame_runs = wp.empty(canvas_shape[0], dtype=RowRuns, device=device)  # this frame's
         self.table = wp.empty(channels * 256, dtype=wp.uint8, device=device)  # the target's gains, per frame
@@ -204,7 +204,7 @@ class Compositor:
             runtime.launch_row_loops(composite_plan_kernel, *self.canvas_shape, inputs, self.device, self.threads)
             buf.plan_ready = True
             buf.runs_ready = False
-            buf.plan_frames = 0
+            buf.plan_served = False
         return buf
 
     def _offsets_reach_px(self, channels: int) -> float:
@@ -227,7 +227,7 @@ class Compositor:
         layout = self.layout
         reach_px = self._offsets_reach_px(channels)
         clear_px = 0.0 if layout.lines_are_rows else max(layout.band_px - 0.5 * layout.transition_px, 0.0) + reach_px
-        if not buf.runs_ready and buf.plan_frames == 0 and not at_once:
+        if not buf.runs_ready and not buf.plan_served and not at_once:
             buf.frame_runs.zero_()
             return buf.frame_runs
         if not buf.runs_ready or buf.runs_clear_px != clear_px:
@@ -390,7 +390,7 @@ class Compositor:
                   wp.vec4i(*values, *[0] * (MAX_CHANNELS - channels)), buf.out_flat]
         runtime.launch_row_loops(COMPOSITE_FRAME_KERNELS[channels], *self.canvas_shape, inputs, self.device,
                                  self.threads)
-        buf.plan_frames += 1
+        buf.plan_served = True
         out = buf.out.numpy()
         return out[:, :, 0] if planes else out
 
