@@ -149,7 +149,7 @@ def main() -> int:
     composite_ms = (time.process_time() - start) / max(1, len(pairs) - 1) * 1e3
     y_floor = y_floor_ms(compositor, *pairs[-1], cfg, args.repeats * 5)
     compositor.close()
-    side_by_side = SideBySide(*pairs[0])
+    side_by_side = SideBySide(iter(pairs))
     sbs = [side_by_side.composite_yuv(l.y, l.u, l.v, r.y, r.u, r.v) for l, r in pairs]
 
     decode_ms = cpu_per_frame_ms(lambda: decode(args.left, args.right, len(pairs), cfg.cpu_threads), len(pairs))

@@ -32,6 +32,10 @@ def full_estimates(monkeypatch) -> list:
     return seen
 
 
+def best_of(left, right, cfg):
+    return best_first_estimate(first_pairs(left, right, 0.0, cfg), cfg, "auto")
+
+
 def test_screening_caps_xfeat_working_side_only():
     hd = ((1080, 1920), (1080, 1920))
     assert screening_config(CFG, hd).xfeat_max_side == 640
@@ -44,15 +48,14 @@ def test_screening_caps_xfeat_working_side_only():
 
 def test_inputs_within_the_screening_side_reuse_the_screening_matches(clips, full_estimates):
     """The office clips (640 px wide) are screened exactly as they are estimated: one matching per pair."""
-    maps, chosen, attempts = best_first_estimate(clips / "office_cam1.mp4", clips / "office_cam2.mp4", 0.0, CFG, "auto")
+    maps, chosen, attempts = best_of(clips / "office_cam1.mp4", clips / "office_cam2.mp4", CFG)
     assert len(full_estimates) == 1 and full_estimates[0] is not None
     assert maps.warp.glob.n_inliers == next(a.inliers for a in attempts if a.pair == chosen)
 
 
 def test_a_pair_screened_smaller_is_matched_again_at_full_resolution(clips, full_estimates):
     cfg = CFG.replace(video_screen_max_side=384)
-    maps, chosen, attempts = best_first_estimate(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", 0.0, cfg,
-                                                 "auto")
+    maps, chosen, attempts = best_of(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", cfg)
     assert full_estimates == [None]
     screened = next(a.inliers for a in attempts if a.pair == chosen)
     assert maps.warp.glob.n_inliers > 1.3 * screened  # the full resolution finds more of the same model
@@ -61,7 +64,7 @@ def test_a_pair_screened_smaller_is_matched_again_at_full_resolution(clips, full
 def test_pairs_whose_screening_failed_are_still_estimated_in_full(clips, full_estimates):
     """At 384 px the office clips give too few matches on every pair; 640 px (the estimate's) is enough."""
     cfg = CFG.replace(video_screen_max_side=384)
-    maps, chosen, attempts = best_first_estimate(clips / "office_cam1.mp4", clips / "office_cam2.mp4", 0.0, cfg, "auto")
+    maps, chosen, attempts = best_of(clips / "office_cam1.mp4", clips / "office_cam2.mp4", cfg)
     assert chosen == 0 and full_estimates == [None]
     assert maps.warp.glob.n_inliers > 0
     # The report's attempts: the others' screening errors; the chosen pair's full estimate.
@@ -71,7 +74,7 @@ def test_pairs_whose_screening_failed_are_still_estimated_in_full(clips, full_es
 
 def test_a_screening_side_too_small_for_xfeat_screens_at_the_estimate_s(clips, full_estimates):
     cfg = CFG.replace(video_screen_max_side=40)  # 640x480 at 40 px would be 32 x 0 px
-    maps, chosen, attempts = best_first_estimate(clips / "office_cam1.mp4", clips / "office_cam2.mp4", 0.0, cfg, "auto")
+    maps, chosen, attempts = best_of(clips / "office_cam1.mp4", clips / "office_cam2.mp4", cfg)
     assert len(full_estimates) == 1 and full_estimates[0] is not None
     assert maps.warp.glob.n_inliers == next(a.inliers for a in attempts if a.pair == chosen)
 

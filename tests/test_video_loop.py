@@ -10,6 +10,7 @@ import json
 import logging
 import threading
 import wave
+from collections.abc import Iterator
 from fractions import Fraction
 from pathlib import Path
 
@@ -29,7 +30,8 @@ from helpers import decoded_frames, stream_spans
 class SideBySide:
     """Left frame on the left, right frame on its right, on a black canvas (a real, if simple, stitch)."""
 
-    def __init__(self, first_l: YuvFrame, first_r: YuvFrame):
+    def __init__(self, pairs: Iterator[tuple[YuvFrame, YuvFrame]]):
+        first_l, first_r = next(pairs)
         (self.h_l, self.w_l), (self.h_r, self.w_r) = first_l.y.shape, first_r.y.shape
         self.output_size = (self.w_l + self.w_r, max(self.h_l, self.h_r))
 
@@ -53,8 +55,8 @@ class FailsAt(SideBySide):
     n = 10
     error: type[BaseException] = RuntimeError
 
-    def __init__(self, first_l, first_r):
-        super().__init__(first_l, first_r)
+    def __init__(self, pairs):
+        super().__init__(pairs)
         self.calls = 0
 
     def composite_yuv(self, *planes):
@@ -105,6 +107,25 @@ def test_rooftop_side_by_side_frames_pts_audio_and_pairing(clips, tmp_path):
         half_l, half_r = out_frames[k].y[:, :270], out_frames[k].y[:, 270:]
         assert mean_abs_diff(half_l, in_l[k].y) < 3.0
         assert mean_abs_diff(half_r, in_r[k].y) < min(mean_abs_diff(half_r, in_r[j].y) for j in (k - 1, k + 1) if j < 63)
+
+
+class TakesFive(SideBySide):
+    """Builds itself from the first five pairs, as an estimate on a few of the first pairs would."""
+
+    def __init__(self, pairs):
+        super().__init__(pairs)
+        self.taken = [next(pairs) for _ in range(4)]
+
+
+def test_pairs_the_factory_took_are_composited_in_order(clips, tmp_path):
+    left, right = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4"
+    report = run_video(left, right, tmp_path / "five.mp4", TakesFive, QUIET)
+    assert report["frames_in"] == {"left": 60, "right": 63} and report["frames_out"] == 60
+    run_video(left, right, tmp_path / "one.mp4", SideBySide, QUIET)
+    five, one = decoded_frames(tmp_path / "five.mp4"), decoded_frames(tmp_path / "one.mp4")
+    assert len(five) == len(one) == 60
+    assert all(np.array_equal(a.y, b.y) and np.array_equal(a.u, b.u) for a, b in zip(five, one))
+    assert not np.array_equal(five[0].y, five[4].y)  # the rig moves: a wrong order would show
 
 
 def test_office_yuv422_is_converted_and_missing_audio_is_noted(clips, tmp_path):

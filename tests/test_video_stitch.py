@@ -22,12 +22,12 @@ from sena_warp.config import Config
 from sena_warp.video.loop import VideoOptions
 from sena_warp.errors import GeometryError
 from sena_warp.video import estimate
-from sena_warp.video.estimate import best_first_estimate, rejection_reason
+from sena_warp.video.estimate import best_first_estimate, first_pairs, rejection_reason
 from sena_warp.composite import SeamLayout
 from sena_warp.video.maps import (ArrayLerp, MapsBlend, PlaneMaps, chroma_positions, chroma_seam, lerp_maps,
                                  map_change_px, seam_change_px, seam_per_target_line, target_map)
 from sena_warp.video.pairing import pair_times
-from sena_warp.video.reader import YuvFrame
+from sena_warp.video.reader import FrameReader, YuvFrame
 from sena_warp.video.stitch import SenaFrameCompositor, stitch_videos
 from sena_warp.video.writer import VideoWriter
 from helpers import decoded_frames, stream_spans
@@ -70,6 +70,23 @@ def rooftop_static(clips, tmp_path_factory):
     report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", out, CFG,
                            VideoOptions.from_config(CFG))
     return out, report
+
+
+def test_the_first_estimate_takes_its_pairs_from_the_frame_loop(clips, tmp_path, monkeypatch):
+    """Each input is opened and decoded once: the pairs screened are the loop's, composited after."""
+    opened = []
+    real_init = FrameReader.__init__
+
+    def counting_init(self, path, *args, **kwargs):
+        opened.append(Path(path).name)
+        real_init(self, path, *args, **kwargs)
+
+    monkeypatch.setattr(FrameReader, "__init__", counting_init)
+    report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "once.mp4", CFG,
+                           VideoOptions.from_config(CFG))
+    assert opened == ["rooftop_left.mp4", "rooftop_right.mp4"]
+    assert report["frames_in"] == {"left": 60, "right": 63} and report["frames_out"] == 60
+    assert len(report["stitch"]["first_estimate"]["tried"]) == CFG.video_estimate_pairs
 
 
 def test_rooftop_frames_pts_audio(rooftop_static):
@@ -140,7 +157,7 @@ def test_first_estimate_falls_back_to_the_next_best_pair_when_the_best_fails_lat
 
     monkeypatch.setattr(estimate, "estimate_pair", estimate_pair)
     cfg = CFG.replace(video_estimate_pairs=3)
-    maps, chosen, attempts = best_first_estimate(left, right, 0.0, cfg, "auto")
+    maps, chosen, attempts = best_first_estimate(first_pairs(left, right, 0.0, cfg), cfg, "auto")
     assert len(attempts) == 3 and len(full_estimates) == 2  # screened all, fully estimated two
     ranked = sorted(attempts, key=lambda a: (-a.inliers, a.pair))
     assert ranked[0].error == "canvas too large (test)" and chosen == ranked[1].pair

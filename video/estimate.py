@@ -8,7 +8,8 @@ common). Re-estimates of a moving rig are judged against the maps in use before 
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from fractions import Fraction
 from operator import attrgetter
@@ -42,21 +43,33 @@ class Attempt:
         return {"pair": self.pair, "time_s": round(self.time_s, 4), "inliers": self.inliers, "error": self.error}
 
 
-def first_pairs(left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config
-                ) -> Iterator[tuple[int, YuvFrame, YuvFrame]]:
-    """Pairs 0, s, 2s, ... (``cfg.video_estimate_pairs`` of them, s = ``cfg.video_estimate_spacing``).
+def spaced_pairs(pairs: Iterable[tuple[YuvFrame, YuvFrame]], cfg: Config) -> Iterator[tuple[int, YuvFrame, YuvFrame]]:
+    """Pairs 0, s, 2s, ... of ``pairs`` (``cfg.video_estimate_pairs`` of them, s =
+    ``cfg.video_estimate_spacing``), as (pair index, left, right); each as soon as it is there, so the
+    caller works on one while the decoders go on to the next. The pairs in between are taken too."""
+    span = (cfg.video_estimate_pairs - 1) * cfg.video_estimate_spacing + 1
+    for i, (frame_l, frame_r) in zip(range(span), pairs):
+        if i % cfg.video_estimate_spacing == 0:
+            yield i, frame_l, frame_r
 
-    Decoded and paired by time exactly as the main loop pairs them; yields (pair index, left, right)
-    as soon as a pair is there, so the caller works on one while the decoders go on to the next.
-    """
-    span = cfg.video_estimate_pairs * cfg.video_estimate_spacing
+
+@contextmanager
+def paired_frames(left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config
+                  ) -> Iterator[Iterator[tuple[YuvFrame, YuvFrame]]]:
+    """Two videos' frames, decoded and paired by time exactly as the main loop pairs them, on decoders
+    of their own (closed on leaving)."""
     right_period_s = 1 / probe_video(right).fps
     with FrameReader(left, Fraction(0), cfg.video_queue_frames, cfg.cpu_threads) as reader_l, \
             FrameReader(right, Fraction(str(offset_s)), cfg.video_queue_frames, cfg.cpu_threads) as reader_r:
-        pairs = pair_by_time(reader_l, reader_r, right_period_s, attrgetter("time_s"))
-        for i, (frame_l, frame_r) in zip(range(span), pairs):
-            if i % cfg.video_estimate_spacing == 0:
-                yield i, frame_l, frame_r
+        yield pair_by_time(reader_l, reader_r, right_period_s, attrgetter("time_s"))
+
+
+def first_pairs(left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config
+                ) -> Iterator[tuple[int, YuvFrame, YuvFrame]]:
+    """:func:`spaced_pairs` of two videos' :func:`paired_frames` (a frame loop hands its own pairs to
+    :func:`spaced_pairs` instead, and composites them after)."""
+    with paired_frames(left, right, offset_s, cfg) as pairs:
+        yield from spaced_pairs(pairs, cfg)
 
 
 def estimate_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: str,
@@ -108,9 +121,10 @@ def screen_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: st
     return matches, fit_global_affine(pts_src, pts_tgt, screen).n_inliers
 
 
-def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
+def best_first_estimate(first: Iterable[tuple[int, YuvFrame, YuvFrame]], cfg: Config,
                         reference: str) -> tuple[StitchMaps, int, list[Attempt]]:
-    """The estimate with the most inliers among :func:`first_pairs`; (maps, its pair index, all attempts).
+    """The estimate with the most inliers among ``first`` (:func:`spaced_pairs`: pair index, left,
+    right); (maps, its pair index, all attempts).
 
     Every pair is screened by steps 0-1 (:func:`screen_pair`: the inlier count is what ranks them); the
     full estimate, ten times dearer (the gate and the seam work over the whole canvas), runs on the best
@@ -124,7 +138,7 @@ def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offse
     screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]] = []
     last_error: StitchError | None = None
     tried = []
-    for index, frame_l, frame_r in first_pairs(left, right, offset_s, cfg):  # screened while the next decodes
+    for index, frame_l, frame_r in first:  # screened while the next decodes
         tried.append((index, frame_l, frame_r))
         try:
             matches, inliers = screen_pair(frame_l, frame_r, cfg, reference)
@@ -150,7 +164,7 @@ def best_first_estimate(left: str | os.PathLike, right: str | os.PathLike, offse
             last_error = exc
             attempts = [Attempt(a.pair, a.time_s, a.inliers, str(exc)) if a.pair == index else a for a in attempts]
     if last_error is None:
-        raise VideoError(f"{left} and {right}: no frame pair to estimate the stitch from")
+        raise VideoError("no frame pair to estimate the stitch from: the videos' frames do not overlap in time")
     raise type(last_error)(no_estimate_message(tried, last_error, cfg)) from last_error
 
 

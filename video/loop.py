@@ -14,6 +14,7 @@ import queue
 import threading
 import time
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from fractions import Fraction
@@ -58,8 +59,10 @@ class FrameCompositor(Protocol):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
 
 
-CompositorFactory = Callable[[YuvFrame, YuvFrame], FrameCompositor]
-"""Builds the compositor from the first (left, right) pair of frames (e.g. by estimating maps)."""
+CompositorFactory = Callable[[Iterator[tuple[YuvFrame, YuvFrame]]], FrameCompositor]
+"""Builds the compositor from the video's first (left, right) pairs of frames (e.g. by estimating maps
+on a few of them): it takes as many as it needs from the iterator, at least one. Each pair it took is
+composited all the same, so those are held (decoded once) until then."""
 
 
 @dataclass(frozen=True)
@@ -167,7 +170,8 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
             )
         t0 = time.perf_counter()
         stage("estimating maps")
-        compositor = compositor_factory(*first)
+        held: deque[tuple[YuvFrame, YuvFrame]] = deque()
+        compositor = compositor_factory(_held_as_taken(chain([first], pairs), held))
         timing["compositor_setup"] = time.perf_counter() - t0
         width, height = compositor.output_size
         # The output clock is the left input's own time base, so every frame keeps its input time.
@@ -185,7 +189,7 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
                 _note(notes, note)
             stage("stitching frames")
             expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
-            _encode_pairs(chain([first], pairs), compositor, writer, Count("frames", expected, "fps"), timing,
+            _encode_pairs(chain(_drained(held), pairs), compositor, writer, Count("frames", expected, "fps"), timing,
                           options.queue_frames, t_run)
             readers = {"left": reader_l, "right": reader_r}
             problems += _input_problems(infos, readers)
@@ -200,6 +204,19 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
         _note(notes, note)
     return {"started": started.isoformat(timespec="microseconds"),
             **_report(infos, (reader_l, reader_r), writer, stats, timing, notes, warnings, output, audio_side)}
+
+
+def _held_as_taken(pairs: Iterator[tuple[YuvFrame, YuvFrame]], held: deque) -> Iterator[tuple[YuvFrame, YuvFrame]]:
+    """``pairs``, each also kept in ``held`` as it is taken (for the frame loop after the factory)."""
+    for pair in pairs:
+        held.append(pair)
+        yield pair
+
+
+def _drained(held: deque) -> Iterator:
+    """``held``'s items, oldest first, each let go of as it is yielded."""
+    while held:
+        yield held.popleft()
 
 
 def _note(notes: list[str], text: str) -> None:

@@ -21,6 +21,7 @@ import math
 import os
 import time
 from collections import deque
+from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Callable
@@ -36,7 +37,7 @@ from ..report import run_info
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
 from .drift import DriftWatch, overlap_boxes
-from .estimate import Attempt, best_first_estimate, estimate_pair, rejection_reason
+from .estimate import Attempt, best_first_estimate, estimate_pair, paired_frames, rejection_reason, spaced_pairs
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_video
@@ -230,15 +231,24 @@ class SenaFrameCompositor:
                        seam_chroma=replace(plane.seam_chroma, band_px=0.5 * reach))
 
     @classmethod
-    def from_videos(cls, left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
-                    reference: str, observer: FrameObserver | None = None) -> "SenaFrameCompositor":
-        """The compositor of two videos: maps from the best of their first frame pairs
-        (``estimate.best_first_estimate``); ``offset_s`` as ``VideoOptions.offset_s``, ``reference`` as
-        ``stitch_videos``; ``cfg.device`` resolved."""
-        maps, pair, attempts = best_first_estimate(left, right, offset_s, cfg, reference)
+    def from_pairs(cls, pairs: Iterator[tuple[YuvFrame, YuvFrame]], left: str | os.PathLike,
+                   right: str | os.PathLike, cfg: Config, reference: str,
+                   observer: FrameObserver | None = None) -> "SenaFrameCompositor":
+        """The compositor of two videos ``left`` and ``right``: maps from the best of their first frame
+        ``pairs`` (``estimate.best_first_estimate``; it takes pairs up to the last it tries);
+        ``reference`` as ``stitch_videos``; ``cfg.device`` resolved."""
+        maps, pair, attempts = best_first_estimate(spaced_pairs(pairs, cfg), cfg, reference)
         info_l, info_r = probe_video(left), probe_video(right)
         return cls(maps, attempts, pair, float(info_l.fps), ((info_l.height, info_l.width), (info_r.height, info_r.width)),
                    cfg, observer)
+
+    @classmethod
+    def from_videos(cls, left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
+                    reference: str, observer: FrameObserver | None = None) -> "SenaFrameCompositor":
+        """:meth:`from_pairs` on decoders of its own (``offset_s`` as ``VideoOptions.offset_s``), for a
+        compositor made apart from a frame loop."""
+        with paired_frames(left, right, offset_s, cfg) as pairs:
+            return cls.from_pairs(pairs, left, right, cfg, reference, observer)
 
     def source_target(self, item_left, item_right) -> tuple:
         """A (left, right) pair of per-input things (frames, planes, shapes) as (source, target)."""
@@ -527,8 +537,8 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
     load_kernels_s = time.perf_counter() - t0
     built: list[SenaFrameCompositor] = []
 
-    def factory(first_l: YuvFrame, first_r: YuvFrame) -> SenaFrameCompositor:
-        built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference, observer))
+    def factory(pairs: Iterator[tuple[YuvFrame, YuvFrame]]) -> SenaFrameCompositor:
+        built.append(SenaFrameCompositor.from_pairs(pairs, left, right, cfg, reference, observer))
         return built[0]
 
     try:

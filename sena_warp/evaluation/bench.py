@@ -124,7 +124,8 @@ def make_clip_pair(pair: tuple[Path, Path], work: Path, size: tuple[int, int], s
 class SideBySide:
     """Baseline frame compositor: left planes then right planes on one row (no stitching at all)."""
 
-    def __init__(self, first_l, first_r):
+    def __init__(self, pairs):
+        first_l, first_r = next(pairs)
         self.width_l = first_l.y.shape[1]
         self.output_size = (first_l.y.shape[1] + first_r.y.shape[1], max(first_l.y.shape[0], first_r.y.shape[0]))
 
