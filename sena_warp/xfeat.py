@@ -35,13 +35,22 @@ NORM_EPS = 1e-12  # as torch.nn.functional.normalize
 CUBIC_A = -0.75
 
 
-@functools.lru_cache(maxsize=2)
-def xfeat_session(threads: int) -> ort.InferenceSession:
-    """The ONNX backbone from the installed package, loaded once per thread count (CUDA provider when available).
+def pool_spins(cfg: Config) -> bool:
+    """Whether onnxruntime's intra-op pool spins while it waits for work. Only for a moving rig with a
+    thread per core: its re-estimates run beside the frame loop and land on their frame sooner. Anywhere
+    else the spinning takes the core that the decoders and the estimate's numpy work need (the first
+    estimate of a static rig is 0.25-0.3 s faster without it, image pairs take less CPU: see
+    docs/benchmarks.md); with fewer threads than cores the process shares the machine."""
+    return cfg.video_rig == "moving" and not 0 < cfg.cpu_threads < (os.cpu_count() or 1)
 
-    ``threads``: onnxruntime's intra-op threads (``Config.cpu_threads``; 0 = one per physical core).
-    With fewer threads than cores the process shares the machine (batch workers, the video decoder
-    and encoder), so the pool does not spin while waiting for work: spinning would take cores from them.
+
+@functools.lru_cache(maxsize=2)
+def xfeat_session(threads: int, spins: bool) -> ort.InferenceSession:
+    """The ONNX backbone from the installed package, loaded once per thread count and spinning (CUDA
+    provider when available).
+
+    ``threads``: onnxruntime's intra-op threads (``Config.cpu_threads``; 0 = one per physical core);
+    ``spins``: the pool spins while it waits for work (:func:`pool_spins`), as onnxruntime's default.
     """
     model = importlib.resources.files("sena_warp") / "models" / MODEL_FILE
     if not model.is_file():
@@ -53,7 +62,7 @@ def xfeat_session(threads: int) -> ort.InferenceSession:
     options = ort.SessionOptions()
     options.log_severity_level = 3  # errors only: the CUDA provider's fallbacks are not news
     options.intra_op_num_threads = threads
-    if 0 < threads < (os.cpu_count() or 1):
+    if not spins:
         options.add_session_config_entry("session.intra_op.allow_spinning", "0")
     return ort.InferenceSession(model.read_bytes(), sess_options=options, providers=providers)
 
@@ -171,8 +180,8 @@ def detect_xfeat(img_bgr: np.ndarray, cfg: Config) -> tuple[np.ndarray, np.ndarr
     N <= cfg.xfeat_top_k (0 on an image without keypoints).
     """
     work_w, work_h = working_size(img_bgr.shape[:2], cfg.xfeat_max_side)
-    feats, logits, reliability = xfeat_session(cfg.cpu_threads).run(list(OUTPUT_NAMES),
-                                                     {"image": prepare_input(img_bgr, (work_w, work_h))})
+    session = xfeat_session(cfg.cpu_threads, pool_spins(cfg))
+    feats, logits, reliability = session.run(list(OUTPUT_NAMES), {"image": prepare_input(img_bgr, (work_w, work_h))})
     heatmap = keypoint_heatmap(logits[0])
     pts_work = nms_peaks(heatmap, cfg.xfeat_nms_size, cfg.xfeat_detection_threshold).astype(np.float64)
     prob = heatmap[pts_work[:, 1].astype(np.int64), pts_work[:, 0].astype(np.int64)]

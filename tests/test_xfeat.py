@@ -13,8 +13,8 @@ from sena_warp.xfeat import (CELL, OUTPUT_NAMES, detect_xfeat, keypoint_heatmap,
 
 
 def test_model_loads_from_installed_package():
-    session = xfeat_session(0)
-    assert session is xfeat_session(0)  # cached: loaded once per process
+    session = xfeat_session(0, False)
+    assert session is xfeat_session(0, False)  # cached: loaded once per process
     assert [i.name for i in session.get_inputs()] == ["image"]
     assert tuple(o.name for o in session.get_outputs()) == OUTPUT_NAMES
     h, w = 64, 96
