@@ -168,7 +168,8 @@ class Config:
     video_estimate_workers: int = 1  # moving rig: re-estimates run on this many threads off the frame loop (0: on it)
     video_estimate_lookahead_s: float = 1.5  # moving rig, worker: a re-estimate starts on the frame this far ahead of
     # the one composited (those decoded frames are held), so it is ready when the loop reaches its frame; 0: none
-    video_estimate_lookahead_mib: int = 512  # ... holding at most this much of decoded frames (1080p: 45 pairs, 4K: 21)
+    video_estimate_lookahead_mib: int = 512  # ... holding at most this much of decoded frames (1080p: 45 pairs, 4K: 21);
+    # also the most the first estimate's pairs may hold for the loop (21 pairs; more: it decodes its own, as at 8K)
     seam_prior_weight: float = 0.5  # moving rig: cost per px (per row) of a new seam's distance from the current one
     # --- Video over time: the per-frame seam and exposure (issue 14) ----------------------------
     video_seam_band_ratio: float = 0.05  # per-frame seam: band half-width, x the canvas diagonal (room to go round an object)

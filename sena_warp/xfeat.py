@@ -37,7 +37,8 @@ CUBIC_A = -0.75
 
 def pool_spins(cfg: Config) -> bool:
     """Whether onnxruntime's intra-op pool spins while it waits for work. Only for a moving rig with a
-    thread per core: its re-estimates run beside the frame loop and land on their frame sooner. Anywhere
+    thread per core, its whole run as before: its re-estimates run beside the frame loop and land on
+    their frame sooner. Anywhere
     else the spinning takes the core that the decoders and the estimate's numpy work need (the first
     estimate of a static rig is 0.25-0.3 s faster without it, image pairs take less CPU: see
     docs/benchmarks.md); with fewer threads than cores the process shares the machine."""

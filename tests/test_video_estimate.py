@@ -8,7 +8,7 @@ import pytest
 
 from sena_warp.config import Config
 from sena_warp.video import estimate
-from sena_warp.video.estimate import best_first_estimate, first_pairs, screening_config
+from sena_warp.video.estimate import best_first_estimate, first_pairs, screening_config, spaced_pairs, spaced_span
 
 CFG = Config(device="cpu", video_estimate_pairs=2)
 
@@ -77,6 +77,21 @@ def test_a_screening_side_too_small_for_xfeat_screens_at_the_estimate_s(clips, f
     maps, chosen, attempts = best_of(clips / "office_cam1.mp4", clips / "office_cam2.mp4", cfg)
     assert len(full_estimates) == 1 and full_estimates[0] is not None
     assert maps.warp.glob.n_inliers == next(a.inliers for a in attempts if a.pair == chosen)
+
+
+@pytest.mark.parametrize("available, taken, yielded", [(100, 21, [0, 5, 10, 15, 20]), (12, 12, [0, 5, 10]),
+                                                       (1, 1, [0])])
+def test_spaced_pairs_take_no_pair_after_the_last_they_yield(available, taken, yielded):
+    pulled = []
+
+    def pairs():
+        for i in range(available):
+            pulled.append(i)
+            yield i, -i
+
+    cfg = Config()  # five pairs, five apart
+    assert [index for index, _, _ in spaced_pairs(pairs(), cfg)] == yielded
+    assert len(pulled) == taken == min(available, spaced_span(cfg))
 
 
 def test_first_pairs_are_spaced_by_the_setting(clips):

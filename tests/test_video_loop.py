@@ -117,15 +117,40 @@ class TakesFive(SideBySide):
         self.taken = [next(pairs) for _ in range(4)]
 
 
-def test_pairs_the_factory_took_are_composited_in_order(clips, tmp_path):
+class TakesNone(SideBySide):
+    """Builds itself from what it knows of the rooftop clips, without a frame."""
+
+    def __init__(self, pairs):
+        (self.h_l, self.w_l), (self.h_r, self.w_r) = (480, 270), (480, 270)
+        self.output_size = (540, 480)
+
+
+@pytest.mark.parametrize("factory", [TakesFive, TakesNone])
+def test_every_pair_is_composited_in_order_whatever_the_factory_took(clips, tmp_path, factory):
     left, right = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4"
-    report = run_video(left, right, tmp_path / "five.mp4", TakesFive, QUIET)
+    report = run_video(left, right, tmp_path / "taken.mp4", factory, QUIET)
     assert report["frames_in"] == {"left": 60, "right": 63} and report["frames_out"] == 60
     run_video(left, right, tmp_path / "one.mp4", SideBySide, QUIET)
-    five, one = decoded_frames(tmp_path / "five.mp4"), decoded_frames(tmp_path / "one.mp4")
-    assert len(five) == len(one) == 60
-    assert all(np.array_equal(a.y, b.y) and np.array_equal(a.u, b.u) for a, b in zip(five, one))
-    assert not np.array_equal(five[0].y, five[4].y)  # the rig moves: a wrong order would show
+    taken, one = decoded_frames(tmp_path / "taken.mp4"), decoded_frames(tmp_path / "one.mp4")
+    assert len(taken) == len(one) == 60
+    assert all(np.array_equal(a.y, b.y) and np.array_equal(a.u, b.u) for a, b in zip(taken, one))
+    assert not np.array_equal(taken[0].y, taken[4].y)  # the rig moves: a wrong order would show
+
+
+class FailsBuilding(TakesFive):
+    """Takes five pairs, then fails, as an estimate that finds no stitch does."""
+
+    def __init__(self, pairs):
+        super().__init__(pairs)
+        raise RuntimeError("no estimate")
+
+
+def test_a_factory_that_fails_after_taking_pairs_leaves_no_output_and_no_decoder(clips, tmp_path):
+    with pytest.raises(RuntimeError, match="no estimate"):
+        run_video(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "out.mp4", FailsBuilding,
+                  QUIET)
+    assert list(tmp_path.iterdir()) == []
+    assert not [t for t in threading.enumerate() if t.name.startswith("decode:")]
 
 
 def test_office_yuv422_is_converted_and_missing_audio_is_noted(clips, tmp_path):

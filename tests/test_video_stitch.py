@@ -64,16 +64,8 @@ def target_region_diff(out: YuvFrame, tgt: YuvFrame, report: dict, cfg: Config) 
     return float(pixels.mean())
 
 
-@pytest.fixture(scope="module")
-def rooftop_static(clips, tmp_path_factory):
-    out = tmp_path_factory.mktemp("rooftop") / "static.mp4"
-    report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", out, CFG,
-                           VideoOptions.from_config(CFG))
-    return out, report
-
-
-def test_the_first_estimate_takes_its_pairs_from_the_frame_loop(clips, tmp_path, monkeypatch):
-    """Each input is opened and decoded once: the pairs screened are the loop's, composited after."""
+def stitch_counting_openings(clips: Path, out: Path, cfg: Config) -> tuple[dict, list[str]]:
+    """The rooftop clips stitched with ``cfg``: the report, and the file of every ``FrameReader`` opened."""
     opened = []
     real_init = FrameReader.__init__
 
@@ -81,16 +73,41 @@ def test_the_first_estimate_takes_its_pairs_from_the_frame_loop(clips, tmp_path,
         opened.append(Path(path).name)
         real_init(self, path, *args, **kwargs)
 
-    monkeypatch.setattr(FrameReader, "__init__", counting_init)
-    report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "once.mp4", CFG,
-                           VideoOptions.from_config(CFG))
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(FrameReader, "__init__", counting_init)
+        report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", out, cfg,
+                               VideoOptions.from_config(cfg))
+    return report, opened
+
+
+@pytest.fixture(scope="module")
+def rooftop_static(clips, tmp_path_factory):
+    out = tmp_path_factory.mktemp("rooftop") / "static.mp4"
+    report, opened = stitch_counting_openings(clips, out, CFG)
+    return out, report, opened
+
+
+def test_the_first_estimate_takes_its_pairs_from_the_frame_loop(rooftop_static):
+    """Each input is opened and decoded once: the pairs screened are the loop's, composited after."""
+    out, report, opened = rooftop_static
     assert opened == ["rooftop_left.mp4", "rooftop_right.mp4"]
     assert report["frames_in"] == {"left": 60, "right": 63} and report["frames_out"] == 60
     assert len(report["stitch"]["first_estimate"]["tried"]) == CFG.video_estimate_pairs
 
 
+def test_pairs_too_large_to_hold_are_decoded_apart_with_the_same_frames(clips, rooftop_static, tmp_path):
+    """Over ``video_estimate_lookahead_mib`` (21 pairs of 270x480: 7.8 MiB) the estimate opens the
+    inputs itself, as at 8K by default, and the video is the same."""
+    cfg = CFG.replace(video_estimate_lookahead_mib=7)
+    report, opened = stitch_counting_openings(clips, tmp_path / "apart.mp4", cfg)
+    assert opened == ["rooftop_left.mp4", "rooftop_right.mp4"] * 2
+    apart, held = decoded_frames(tmp_path / "apart.mp4"), decoded_frames(rooftop_static[0])
+    assert len(apart) == len(held) == 60
+    assert all(np.array_equal(a.y, b.y) and np.array_equal(a.v, b.v) for a, b in zip(apart, held))
+
+
 def test_rooftop_frames_pts_audio(rooftop_static):
-    out, report = rooftop_static
+    out, report, _ = rooftop_static
     assert report["frames_out"] == 60 and report["dropped"] == 0 and report["repeated"] == 0
     spans = stream_spans(out)
     n_video, t_video, end_video = spans["video"]
@@ -101,7 +118,7 @@ def test_rooftop_frames_pts_audio(rooftop_static):
 
 
 def test_rooftop_frames_are_real_stitches(clips, rooftop_static):
-    out, report = rooftop_static
+    out, report, _ = rooftop_static
     stitch = report["stitch"]
     assert stitch["rig"]["source"] == "left"  # the right camera is the unwarped target
     assert [a["error"] for a in stitch["first_estimate"]["tried"]] == [None] * CFG.video_estimate_pairs

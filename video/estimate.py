@@ -43,12 +43,17 @@ class Attempt:
         return {"pair": self.pair, "time_s": round(self.time_s, 4), "inliers": self.inliers, "error": self.error}
 
 
+def spaced_span(cfg: Config) -> int:
+    """How many pairs :func:`spaced_pairs` takes, at most."""
+    return (cfg.video_estimate_pairs - 1) * cfg.video_estimate_spacing + 1
+
+
 def spaced_pairs(pairs: Iterable[tuple[YuvFrame, YuvFrame]], cfg: Config) -> Iterator[tuple[int, YuvFrame, YuvFrame]]:
     """Pairs 0, s, 2s, ... of ``pairs`` (``cfg.video_estimate_pairs`` of them, s =
     ``cfg.video_estimate_spacing``), as (pair index, left, right); each as soon as it is there, so the
-    caller works on one while the decoders go on to the next. The pairs in between are taken too."""
-    span = (cfg.video_estimate_pairs - 1) * cfg.video_estimate_spacing + 1
-    for i, (frame_l, frame_r) in zip(range(span), pairs):
+    caller works on one while the decoders go on to the next. The pairs in between are taken too, and
+    no pair after the last one yielded (:func:`spaced_span` in all)."""
+    for i, (frame_l, frame_r) in zip(range(spaced_span(cfg)), pairs):  # the range ends first
         if i % cfg.video_estimate_spacing == 0:
             yield i, frame_l, frame_r
 
@@ -164,7 +169,7 @@ def best_first_estimate(first: Iterable[tuple[int, YuvFrame, YuvFrame]], cfg: Co
             last_error = exc
             attempts = [Attempt(a.pair, a.time_s, a.inliers, str(exc)) if a.pair == index else a for a in attempts]
     if last_error is None:
-        raise VideoError("no frame pair to estimate the stitch from: the videos' frames do not overlap in time")
+        raise VideoError("no frame pairs to estimate the stitch from")
     raise type(last_error)(no_estimate_message(tried, last_error, cfg)) from last_error
 
 

@@ -1,9 +1,9 @@
 """The paired-video loop: decode both inputs in threads, pair by time, composite, encode.
 
 The stitch itself is not in here: the loop takes a *frame compositor*, built once from the first
-pair of frames (that is where a real stitch estimates its maps: "cached warps, per-frame seam
-slicing", SENA.md "Maps, not images"), then called for every pair on YUV 4:2:0 planes, so frames
-never go through RGB on the hot path.
+pairs of frames it takes (that is where a real stitch estimates its maps: "cached warps, per-frame
+seam slicing", SENA.md "Maps, not images"; the pairs it took are composited after), then called for
+every pair on YUV 4:2:0 planes, so frames never go through RGB on the hot path.
 """
 
 from __future__ import annotations
@@ -61,8 +61,9 @@ class FrameCompositor(Protocol):
 
 CompositorFactory = Callable[[Iterator[tuple[YuvFrame, YuvFrame]]], FrameCompositor]
 """Builds the compositor from the video's first (left, right) pairs of frames (e.g. by estimating maps
-on a few of them): it takes as many as it needs from the iterator, at least one. Each pair it took is
-composited all the same, so those are held (decoded once) until then."""
+on a few of them): it takes as many as it needs from the iterator (none at all is fine). Every pair is
+composited all the same, so those it took are held (decoded once) until then: the factory bounds how
+much of a video it holds by how many it takes."""
 
 
 @dataclass(frozen=True)
@@ -170,8 +171,8 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
             )
         t0 = time.perf_counter()
         stage("estimating maps")
-        held: deque[tuple[YuvFrame, YuvFrame]] = deque()
-        compositor = compositor_factory(_held_as_taken(chain([first], pairs), held))
+        held: deque[tuple[YuvFrame, YuvFrame]] = deque([first])
+        compositor = compositor_factory(chain([first], _held_as_taken(pairs, held)))
         timing["compositor_setup"] = time.perf_counter() - t0
         width, height = compositor.output_size
         # The output clock is the left input's own time base, so every frame keeps its input time.
@@ -206,15 +207,16 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
             **_report(infos, (reader_l, reader_r), writer, stats, timing, notes, warnings, output, audio_side)}
 
 
-def _held_as_taken(pairs: Iterator[tuple[YuvFrame, YuvFrame]], held: deque) -> Iterator[tuple[YuvFrame, YuvFrame]]:
+def _held_as_taken(pairs: Iterator[tuple[YuvFrame, YuvFrame]], held: deque[tuple[YuvFrame, YuvFrame]]
+                   ) -> Iterator[tuple[YuvFrame, YuvFrame]]:
     """``pairs``, each also kept in ``held`` as it is taken (for the frame loop after the factory)."""
     for pair in pairs:
         held.append(pair)
         yield pair
 
 
-def _drained(held: deque) -> Iterator:
-    """``held``'s items, oldest first, each let go of as it is yielded."""
+def _drained(held: deque[tuple[YuvFrame, YuvFrame]]) -> Iterator[tuple[YuvFrame, YuvFrame]]:
+    """``held``'s pairs, oldest first, each let go of as it is yielded."""
     while held:
         yield held.popleft()
 

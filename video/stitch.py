@@ -37,7 +37,8 @@ from ..report import run_info
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
 from .drift import DriftWatch, overlap_boxes
-from .estimate import Attempt, best_first_estimate, estimate_pair, paired_frames, rejection_reason, spaced_pairs
+from .estimate import (Attempt, best_first_estimate, estimate_pair, paired_frames, rejection_reason, spaced_pairs,
+                       spaced_span)
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_video
@@ -140,7 +141,7 @@ reported as the stitch's ``timing_s.observer``."""
 class SenaFrameCompositor:
     """The loop's frame compositor for a SENA stitch (see ``loop.FrameCompositor``).
 
-    Public surface: :meth:`from_videos` (estimate and build), ``output_size`` (width, height),
+    Public surface: :meth:`from_pairs` and :meth:`from_videos` (estimate and build), ``output_size`` (width, height),
     :meth:`update` and :meth:`composite_yuv` (what the loop calls), :meth:`source_target` and
     :meth:`passes` (what a frame is composited with, for the bench's reference implementation),
     :meth:`report`; ``observer`` (a :data:`FrameObserver` or None) sees every composited frame. Inside: one :class:`~sena_warp.composite.Compositor` for the Y plane and one for
@@ -190,9 +191,9 @@ class SenaFrameCompositor:
         self._workers = ThreadPoolExecutor(cfg.video_estimate_workers, thread_name_prefix="estimate") \
             if self._reestimate_s is not None and cfg.video_estimate_workers > 0 else None
         # With a worker, re-estimates start this many frames ahead (``look_ahead``) and land on their frame.
-        pair_mib = sum(rows * cols * 1.5 for rows, cols in frame_shapes) / 2**20  # YUV 4:2:0, both views
-        self.lookahead_frames = min(int(math.ceil(cfg.video_estimate_lookahead_s * fps)),
-                                    int(cfg.video_estimate_lookahead_mib / pair_mib)) if self._workers else 0
+        held_pairs = int(cfg.video_estimate_lookahead_mib / pair_mib(frame_shapes))
+        self.lookahead_frames = (min(int(math.ceil(cfg.video_estimate_lookahead_s * fps)), held_pairs)
+                                 if self._workers else 0)
         # A static rig's drift: the camera views its maps were made on (taken on the first estimate's
         # pair), those maps, the views' moves (source, target) they were last moved by, the time of the
         # last check, and what the checks found.
@@ -238,9 +239,7 @@ class SenaFrameCompositor:
         ``pairs`` (``estimate.best_first_estimate``; it takes pairs up to the last it tries);
         ``reference`` as ``stitch_videos``; ``cfg.device`` resolved."""
         maps, pair, attempts = best_first_estimate(spaced_pairs(pairs, cfg), cfg, reference)
-        info_l, info_r = probe_video(left), probe_video(right)
-        return cls(maps, attempts, pair, float(info_l.fps), ((info_l.height, info_l.width), (info_r.height, info_r.width)),
-                   cfg, observer)
+        return cls(maps, attempts, pair, float(probe_video(left).fps), video_shapes(left, right), cfg, observer)
 
     @classmethod
     def from_videos(cls, left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
@@ -508,6 +507,17 @@ def fixed_canvas(first: StitchMaps, shapes_src_tgt: tuple[tuple[int, int], tuple
     return x0, y0, width, height
 
 
+def video_shapes(left: str | os.PathLike, right: str | os.PathLike) -> tuple[tuple[int, int], tuple[int, int]]:
+    """(rows, cols) of the left and the right video's frames, upright."""
+    info_l, info_r = probe_video(left), probe_video(right)
+    return (info_l.height, info_l.width), (info_r.height, info_r.width)
+
+
+def pair_mib(shapes: tuple[tuple[int, int], ...]) -> float:
+    """MiB of one decoded pair of frames of (rows, cols) ``shapes``: YUV 4:2:0, both views."""
+    return sum(rows * cols * 1.5 for rows, cols in shapes) / 2**20
+
+
 def check_rig_settings(cfg: Config) -> None:
     """InputError for a rig mode or re-estimation period that cannot be used (before any work)."""
     if cfg.video_rig not in RIGS:
@@ -538,7 +548,10 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
     built: list[SenaFrameCompositor] = []
 
     def factory(pairs: Iterator[tuple[YuvFrame, YuvFrame]]) -> SenaFrameCompositor:
-        built.append(SenaFrameCompositor.from_pairs(pairs, left, right, cfg, reference, observer))
+        if spaced_span(cfg) * pair_mib(video_shapes(left, right)) <= cfg.video_estimate_lookahead_mib:
+            built.append(SenaFrameCompositor.from_pairs(pairs, left, right, cfg, reference, observer))
+        else:  # too large to hold that many pairs for the loop: the estimate decodes its own
+            built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference, observer))
         return built[0]
 
     try:
