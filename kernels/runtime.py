@@ -209,12 +209,20 @@ def loaded() -> frozenset[tuple[str, str]]:
 def prewarm(device: str) -> None:
     """Import every module of ``sena_warp.kernels`` and load (compile once, then cached) its kernels:
     those at module level and the variants a module builds with a factory and lists in a dict. On
-    ``device``, or where a module says its kernels always run (its ``DEVICE``: work on host arrays)."""
+    ``device``, or where a module says its kernels always run (its ``DEVICE``: work on host arrays).
+    A first run compiles the Warp modules on a thread per core (Warp >= 1.19 loads CPU modules
+    concurrently without losing any: NVIDIA/warp issues 1474 and 1705)."""
     package = importlib.import_module("sena_warp.kernels")
+    due: dict[str, dict[str, wp.Module]] = {}  # per device, the Warp modules not loaded yet, by name
     for info in pkgutil.iter_modules(package.__path__):
         module = importlib.import_module(f"sena_warp.kernels.{info.name}")
         on = getattr(module, "DEVICE", device)
         for obj in vars(module).values():
             for kernel in obj.values() if isinstance(obj, dict) else (obj,):
-                if isinstance(kernel, wp.Kernel):
-                    _ensure_loaded(kernel, on)
+                if isinstance(kernel, wp.Kernel) and (kernel.module.name, on) not in _loaded:
+                    due.setdefault(on, {})[kernel.module.name] = kernel.module
+    for on, modules in due.items():
+        if not _compiling_said and not all(_in_kernel_cache(module, on) for module in modules.values()):
+            _say_compiling()
+        wp.force_load(device=on, modules=list(modules.values()), max_workers=CORES)
+        _loaded.update((name, on) for name in modules)

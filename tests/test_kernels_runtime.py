@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -50,8 +51,9 @@ def test_threaded_launch_equals_single_launch(udisd_pair, warp_device):
     assert valid_one.any()
 
 
-# Run in a fresh process, where nothing is loaded yet: prewarm, then an image stitch and the video
-# compositor's Y (1 channel) and UV (2 channels) passes; print what was loaded before and after.
+# Run in a fresh process, where nothing is loaded yet, with an empty kernel cache (a first run, whose
+# modules compile on a thread per core): prewarm, then an image stitch and the video compositor's Y
+# (1 channel) and UV (2 channels) passes; print what was loaded before and after.
 PREWARM_PROBE = """
 import json, sys
 import numpy as np
@@ -75,9 +77,11 @@ print(json.dumps({"before": sorted(before), "warmed": sorted(warmed), "after": s
 """
 
 
-def test_prewarm_loads_every_kernel_module_and_all_that_a_stitch_launches(bundled_dir):
+def test_prewarm_loads_every_kernel_module_and_all_that_a_stitch_launches(bundled_dir, tmp_path):
     probe = subprocess.run([sys.executable, "-c", PREWARM_PROBE, str(bundled_dir / "udisd_test_000001")],
-                           capture_output=True, text=True, check=True)
+                           capture_output=True, text=True, check=True,
+                           env={**os.environ, "WARP_CACHE_PATH": str(tmp_path)})
+    assert len(list(tmp_path.glob("*/*"))) >= 13  # compiled here, not loaded from the user's cache
     seen = json.loads(probe.stdout.strip().splitlines()[-1])
     kernel_files = {path.stem for path in (REPO / "kernels").glob("*.py")} - {"__init__"}
     assert {"composite", "ffd", "gate", "remap", "sampling", "seam"} <= kernel_files
