@@ -38,10 +38,10 @@ CUBIC_A = -0.75
 def pool_spins(cfg: Config) -> bool:
     """Whether onnxruntime's intra-op pool spins while it waits for work. Only for a moving rig with a
     thread per core, its whole run as before: its re-estimates run beside the frame loop and land on
-    their frame sooner. Anywhere
-    else the spinning takes the core that the decoders and the estimate's numpy work need (the first
-    estimate of a static rig is 0.25-0.3 s faster without it, image pairs take less CPU: see
-    docs/benchmarks.md); with fewer threads than cores the process shares the machine."""
+    their frame sooner. Anywhere else the spinning takes the core that the decoders and the
+    estimate's numpy work need (the first estimate of a static rig is 0.25-0.3 s faster without it,
+    image pairs take less CPU: see docs/benchmarks.md); with fewer threads than cores the process
+    shares the machine."""
     return cfg.video_rig == "moving" and not 0 < cfg.cpu_threads < (os.cpu_count() or 1)
 
 

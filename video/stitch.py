@@ -141,8 +141,8 @@ reported as the stitch's ``timing_s.observer``."""
 class SenaFrameCompositor:
     """The loop's frame compositor for a SENA stitch (see ``loop.FrameCompositor``).
 
-    Public surface: :meth:`from_pairs` and :meth:`from_videos` (estimate and build), ``output_size`` (width, height),
-    :meth:`update` and :meth:`composite_yuv` (what the loop calls), :meth:`source_target` and
+    Public surface: :meth:`from_pairs` and :meth:`from_videos` (estimate and build), ``output_size``
+    (width, height), :meth:`update` and :meth:`composite_yuv` (what the loop calls), :meth:`source_target` and
     :meth:`passes` (what a frame is composited with, for the bench's reference implementation),
     :meth:`report`; ``observer`` (a :data:`FrameObserver` or None) sees every composited frame. Inside: one :class:`~sena_warp.composite.Compositor` for the Y plane and one for
     the U/V planes (stacked as two channels), both allocated once; every frame the seam is cut anew
