@@ -100,12 +100,18 @@ def _pool(threads: int) -> ThreadPoolExecutor:
 
 def _ensure_loaded(kernel, device: str) -> None:
     """Load (compile if needed) the kernel's module once, before bands launch concurrently."""
-    key = (kernel.module.name, device)
-    if key not in _loaded:
-        if not _compiling_said and not _in_kernel_cache(kernel.module, device):
-            _say_compiling()
-        wp.load_module(kernel.module, device=device)
-        _loaded.add(key)
+    if (kernel.module.name, device) not in _loaded:
+        _load([kernel.module], device)
+
+
+def _load(modules: list[wp.Module], device: str) -> None:
+    """Load (compile if needed) Warp ``modules`` on ``device``, several at once on a thread per core
+    (Warp >= 1.19 loads CPU modules concurrently without losing any: NVIDIA/warp issues 1474 and 1705);
+    a first run says once that it compiles."""
+    if not _compiling_said and not all(_in_kernel_cache(module, device) for module in modules):
+        _say_compiling()
+    wp.force_load(device=device, modules=modules, max_workers=CORES)
+    _loaded.update((module.name, device) for module in modules)
 
 
 def _in_kernel_cache(module, device: str) -> bool:
@@ -209,9 +215,8 @@ def loaded() -> frozenset[tuple[str, str]]:
 def prewarm(device: str) -> None:
     """Import every module of ``sena_warp.kernels`` and load (compile once, then cached) its kernels:
     those at module level and the variants a module builds with a factory and lists in a dict. On
-    ``device``, or where a module says its kernels always run (its ``DEVICE``: work on host arrays).
-    A first run compiles the Warp modules on a thread per core (Warp >= 1.19 loads CPU modules
-    concurrently without losing any: NVIDIA/warp issues 1474 and 1705)."""
+    ``device``, or where a module says its kernels always run (its ``DEVICE``: work on host arrays);
+    the modules of one device together (:func:`_load`)."""
     package = importlib.import_module("sena_warp.kernels")
     due: dict[str, dict[str, wp.Module]] = {}  # per device, the Warp modules not loaded yet, by name
     for info in pkgutil.iter_modules(package.__path__):
@@ -222,7 +227,4 @@ def prewarm(device: str) -> None:
                 if isinstance(kernel, wp.Kernel) and (kernel.module.name, on) not in _loaded:
                     due.setdefault(on, {})[kernel.module.name] = kernel.module
     for on, modules in due.items():
-        if not _compiling_said and not all(_in_kernel_cache(module, on) for module in modules.values()):
-            _say_compiling()
-        wp.force_load(device=on, modules=list(modules.values()), max_workers=CORES)
-        _loaded.update((name, on) for name in modules)
+        _load(list(modules.values()), on)
