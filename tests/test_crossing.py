@@ -14,7 +14,7 @@ import pytest
 
 from sena_warp.affine import apply_affine
 from sena_warp.config import Config
-from sena_warp.evaluation.crossing import (CrossingFigures, Walk, background_affines, make_crossing_clip,
+from sena_warp.evaluation.crossing import (BLOCK_PX, CrossingFigures, Walk, background_affines, make_crossing_clip,
                                            shown_figure, walk_affines)
 from sena_warp.video.estimate import spaced_span
 from sena_warp.video.loop import VideoOptions
@@ -23,6 +23,8 @@ from sena_warp.video.stitch import stitch_videos
 CFG = Config(device="cpu")  # the static rig's defaults
 CANVAS = (300, 400)  # (H, W) of the made-up canvases
 FIGURE = np.ones((100, 40), bool)
+BLOCKS = FIGURE.size // BLOCK_PX**2  # what the figures count
+COLUMN = 100 // BLOCK_PX  # blocks in a column of the figure
 OFFSET_TGT = np.array([150.0, 0.0])  # the target's pixel (0, 0) on the made-up canvas
 
 
@@ -43,7 +45,7 @@ def made_up(parallax: float, seam_x: float) -> tuple:
 def test_a_seam_clear_of_both_copies_shows_the_figure_whole_from_one_view():
     left_of_both = shown_figure(*made_up(30.0, 190.0))
     assert left_of_both.whole and not left_of_both.doubled and left_of_both.source_share == 0.0
-    assert left_of_both.truth == FIGURE.size and left_of_both.apart_px == pytest.approx(30.0, abs=0.5)
+    assert left_of_both.truth == BLOCKS and left_of_both.apart_px == pytest.approx(30.0, abs=0.5)
     right_of_both = shown_figure(*made_up(30.0, 280.0))
     assert right_of_both.whole and right_of_both.source_share == 1.0
 
@@ -52,10 +54,10 @@ def test_a_seam_between_the_copies_of_a_near_figure_loses_a_strip_and_tears_it()
     # Between the left edges of the copies (x 200 and 230): the target shows the figure right of
     # the seam, the source nothing of it: a strip of 15 px is lost.
     cut = shown_figure(*made_up(30.0, 215.0))
-    assert not cut.whole and cut.shown == FIGURE.size - 15 * 100 and cut.pieces == 1
+    assert not cut.whole and cut.shown == pytest.approx(BLOCKS * (1 - 15 / 40), abs=COLUMN) and cut.pieces == 1
     # Through both: each view shows its side, with the 30 px between the copies lost: two pieces.
     torn = shown_figure(*made_up(30.0, 235.0))
-    assert not torn.whole and torn.pieces == 2 and torn.shown == FIGURE.size - 30 * 100
+    assert not torn.whole and torn.pieces == 2 and torn.shown == pytest.approx(BLOCKS * (1 - 30 / 40), abs=COLUMN)
     # Between the copies of a figure nearer than its width: it vanishes.
     gone = shown_figure(*made_up(50.0, 245.0))
     assert gone.shown == 0 and gone.pieces == 0
@@ -63,7 +65,7 @@ def test_a_seam_between_the_copies_of_a_near_figure_loses_a_strip_and_tears_it()
 
 def test_a_seam_through_a_figure_farther_than_the_background_doubles_it():
     doubled = shown_figure(*made_up(-20.0, 200.0))
-    assert doubled.doubled and doubled.twice == 20 * 100 and doubled.pieces == 2
+    assert doubled.doubled and doubled.twice == pytest.approx(BLOCKS * 20 / 40, abs=COLUMN) and doubled.pieces == 2
 
 
 def test_a_seam_through_a_figure_at_the_background_s_depth_leaves_it_whole():

@@ -48,6 +48,7 @@ PIECE_SHARE = 0.02  # a piece: a connected part of the shown figure of at least 
 TWICE_SHARE = 0.02  # shown twice: this share of the figure shown from both views at two places
 COINCIDE_PX = 2.0  # the two copies on the canvas coincide when this close (median over the figure)
 SHOWN_WEIGHT = 0.5  # a canvas pixel shows a view where that view's weight is at least this
+BLOCK_PX = 2  # the figure's shown share is counted in blocks of this x this of its pixels
 WINDOW_STRIDE = 8  # the canvas pixels showing the figure are looked for on every this-th pixel first
 
 
@@ -261,14 +262,16 @@ def make_crossing_clip(left: Path, right: Path, folder: Path, walk: Walk, lead_f
 
 @dataclass(frozen=True)
 class ShownFigure:
-    """What one output frame shows of the figure, in the figure's own pixels.
+    """What one output frame shows of the figure, counted in blocks of :data:`BLOCK_PX` x
+    :data:`BLOCK_PX` of the figure's own pixels (a warp that shrinks a view's copy a little skips some
+    of its pixels, never a block).
 
     ``truth``: how many of them the better view's copy puts on the canvas (what a whole figure
     shows); ``shown``: how many the output shows, from either view; ``twice``: how many it shows from
-    both views at two places (the copies ``apart_px`` apart, median over the pixels both copies put on
+    both views at two places (the copies ``apart_px`` apart, median over the blocks both copies put on
     the canvas; None when they share none); ``pieces``: connected parts of what it shows (each at least
     :data:`PIECE_SHARE` of the truth; the two views' parts count apart when the copies are more than
-    :data:`COINCIDE_PX` apart); ``source_share``: the share of the shown pixels that come from the
+    :data:`COINCIDE_PX` apart); ``source_share``: the share of the shown blocks that come from the
     source."""
 
     truth: int
@@ -287,7 +290,7 @@ class ShownFigure:
         return self.twice >= TWICE_SHARE * self.truth
 
     def as_dict(self) -> dict:
-        return {"truth_px": self.truth, "shown_pct": round(100.0 * self.shown / max(self.truth, 1), 1),
+        return {"truth_blocks": self.truth, "shown_pct": round(100.0 * self.shown / max(self.truth, 1), 1),
                 "twice_pct": round(100.0 * self.twice / max(self.truth, 1), 1), "pieces": self.pieces,
                 "apart_px": None if self.apart_px is None else round(self.apart_px, 2),
                 "source_pct": round(100.0 * self.source_share, 1), "whole": self.whole, "doubled": self.doubled}
@@ -310,22 +313,32 @@ def _window(map_canvas: np.ndarray, figure_to_view: np.ndarray, mask: np.ndarray
             slice(max(cols[0] - WINDOW_STRIDE, 0), min(cols[-1] + WINDOW_STRIDE + 1, map_canvas.shape[1])))
 
 
-def _figure_cells(map_canvas: np.ndarray, valid: np.ndarray, figure_to_view: np.ndarray, mask: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """(cell, inside) per canvas pixel: the figure pixel (flat index into ``mask``) the canvas pixel
-    samples through ``map_canvas`` (H, W, 2) where it is ``valid`` (H, W) when the figure lies in that
-    view through ``figure_to_view`` (2, 3), and whether it samples one of the figure's pixels at all."""
+def _figure_blocks(map_canvas: np.ndarray, valid: np.ndarray, figure_to_view: np.ndarray, mask: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(block, inside) per canvas pixel: the figure block (flat index into :func:`block_mask`'s grid)
+    the canvas pixel samples through ``map_canvas`` (H, W, 2) where it is ``valid`` (H, W) when the
+    figure lies in that view through ``figure_to_view`` (2, 3), and whether it samples one of the
+    figure's pixels (``mask`` (h, w) bool) at all."""
     height, width = mask.shape
     at = apply_affine(invert_affine(figure_to_view), map_canvas.reshape(-1, 2).astype(np.float64))
     col, row = (np.floor(at[:, k] + 0.5).reshape(valid.shape) for k in (0, 1))
     inside = valid & (col >= 0) & (col < width) & (row >= 0) & (row < height)  # False on NaN
-    cell = np.where(inside, row * width + col, 0).astype(np.int64)
-    inside &= mask.ravel()[cell]
-    return cell, inside
+    col, row = np.where(inside, col, 0).astype(np.int64), np.where(inside, row, 0).astype(np.int64)
+    inside &= mask[row, col]
+    return (row // BLOCK_PX) * -(-width // BLOCK_PX) + col // BLOCK_PX, inside
+
+
+def block_mask(mask: np.ndarray) -> np.ndarray:
+    """(ceil(h / BLOCK_PX), ceil(w / BLOCK_PX)) bool: the blocks holding a pixel of ``mask`` (h, w)."""
+    height, width = mask.shape
+    padded = np.zeros((-(-height // BLOCK_PX) * BLOCK_PX, -(-width // BLOCK_PX) * BLOCK_PX), bool)
+    padded[:height, :width] = mask
+    return padded.reshape(padded.shape[0] // BLOCK_PX, BLOCK_PX, -1, BLOCK_PX).any(axis=(1, 3))
 
 
 def _pieces(cells: np.ndarray, shape: tuple[int, int], least: float) -> int:
-    """Connected parts (8-neighbours) of at least ``least`` pixels of the figure pixels ``cells`` (bool, flat)."""
+    """Connected parts (8-neighbours) of at least ``least`` blocks of the figure's blocks ``cells``
+    (bool, flat over a grid of ``shape``)."""
     count, _, stats, _ = cv2.connectedComponentsWithStats(cells.reshape(shape).astype(np.uint8), connectivity=8)
     return int((stats[1:, cv2.CC_STAT_AREA] >= least).sum())
 
@@ -336,12 +349,13 @@ def shown_figure(maps: tuple[np.ndarray, np.ndarray], valid: tuple[np.ndarray, n
     ``maps`` (H, W, 2) the canvas's (x, y) sample positions in it, ``valid`` (H, W) where they are in
     it, ``figure_to_views`` (2, 3) the affine from the figure's pixels to it; ``alpha`` (H, W) the
     source's weight where both are valid; ``mask`` (h, w) bool the figure's pixels."""
-    size = mask.size
+    grid = block_mask(mask).shape
+    size = grid[0] * grid[1]
     seen, shown, where = [], [], []
     for view, (map_canvas, affine) in enumerate(zip(maps, figure_to_views)):
         window = _window(map_canvas, affine, mask)  # the figure's few canvas pixels, not all of them
         weight = view_weights(alpha[window], valid[0][window], valid[1][window])[view]
-        cell, inside = _figure_cells(map_canvas[window], valid[view][window], affine, mask)
+        cell, inside = _figure_blocks(map_canvas[window], valid[view][window], affine, mask)
         rows, cols = np.mgrid[window]
         hits = np.bincount(cell[inside], minlength=size)
         seen.append(hits > 0)
@@ -355,7 +369,7 @@ def shown_figure(maps: tuple[np.ndarray, np.ndarray], valid: tuple[np.ndarray, n
     union = shown[0] | shown[1]
     least = PIECE_SHARE * truth
     together = apart is not None and apart <= COINCIDE_PX
-    pieces = _pieces(union, mask.shape, least) if together else sum(_pieces(s, mask.shape, least) for s in shown)
+    pieces = _pieces(union, grid, least) if together else sum(_pieces(s, grid, least) for s in shown)
     twice = 0 if together else int((shown[0] & shown[1]).sum())
     from_src = int(shown[0].sum())
     return ShownFigure(truth=truth, shown=int(union.sum()), twice=twice, pieces=pieces, apart_px=apart,
@@ -392,7 +406,7 @@ class CrossingFigures:
     def figures(self) -> dict:
         """JSON-ready: frames counted (the figure on the canvas), frames not whole, frames doubled, the
         least shown share, the most pieces, and every frame's figures."""
-        counted = [f for f in self.per_frame if f["truth_px"] > 0]
+        counted = [f for f in self.per_frame if f["truth_blocks"] > 0]
         return {
             "walk": self.clip.walk.name,
             "frames_counted": len(counted),
