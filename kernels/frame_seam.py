@@ -1,12 +1,11 @@
 """The per-frame seam's work on its band of cells (``video/frame_seam.py``).
 
 The band's difference, sum and change since the last frame come from
-``composite.band_difference_kernel`` (``NOT_BOTH`` and 0 where a cell does not hold both views). Three
-kernels follow it each frame, so the band is read a few times rather than by a dozen array
-expressions: what is in front of the background model (a static rig), what each cell costs the seam's
-paths, and the difference next to the chosen seam (the seam blend's). The first runs over
-``runtime.launch_row_loops`` (thread i does line ``row0 + i``, cells j, j + col_step, ... < width),
-the others one thread per line (``runtime.launch_rows`` with width 1): they reduce along it.
+``composite.band_difference_kernel`` (``NOT_BOTH`` and 0 where a cell does not hold both views); what
+is in front of the background on a static rig from ``kernels/frame_objects.py``. Two kernels follow,
+so the band is read a few times rather than by a dozen array expressions: what each cell costs the
+seam's paths, and the difference next to the chosen seam (the seam blend's). Both run one thread per
+line (``runtime.launch_rows`` with width 1): they reduce along it.
 """
 
 from __future__ import annotations
@@ -19,54 +18,12 @@ wp.set_module_options({"enable_backward": False})  # see the package docstring
 
 
 @wp.kernel
-def background_kernel(
-    row0: int,
-    col_step: int,
-    width: int,
-    diff: wp.array2d(dtype=float),
-    total: wp.array2d(dtype=float),
-    gain_less_one: float,
-    offset: float,
-    noise: float,
-    spread_factor: float,
-    learn: float,
-    background: wp.array2d(dtype=float),
-    spread: wp.array2d(dtype=float),
-    off: wp.array2d(dtype=wp.uint8),
-):
-    """One frame of the band's background model: ``off`` 1 where the cell's source-plus-target ``total``
-    is off its ``background`` beyond what the whole band's gain and offset explain
-    (``gain_less_one * background + offset``) by more than ``noise`` and ``spread_factor`` x the cell's
-    mean absolute deviation ``spread``; then both learn at rate ``learn``. Cells without both views
-    neither count nor learn."""
-    i, j0 = wp.tid()
-    k = row0 + i
-    for j in range(j0, width, col_step):
-        both = holds_both(diff[k, j])
-        model = background[k, j]
-        change = float(0.0)
-        if both:
-            change = total[k, j] - model
-        explained = gain_less_one * model
-        explained = explained + offset
-        deviation = wp.abs(change - explained)
-        spread_now = spread[k, j]
-        limit = wp.max(noise, spread_factor * spread_now)
-        off[k, j] = wp.uint8(0)
-        if both and deviation > limit:
-            off[k, j] = wp.uint8(1)
-        step = learn * change
-        background[k, j] = model + step
-        if both:
-            step = learn * (deviation - spread_now)
-            spread[k, j] = spread_now + step
-
-
-@wp.kernel
 def band_cost_kernel(
     row0: int,
     diff: wp.array2d(dtype=float),
     moving: wp.array2d(dtype=wp.uint8),
+    kept_off: wp.array2d(dtype=wp.uint8),
+    object_cost: float,
     home_term: wp.array2d(dtype=float),
     band_x0: wp.array(dtype=int),
     cell: int,
@@ -87,7 +44,8 @@ def band_cost_kernel(
     """What each band cell costs a path (band cell j of line k at ``band_x0[k] + cell j``):
 
     - ``change``: its difference beyond ``noise``, plus ``motion_cost`` where something is in front
-      (``moving``), or ``blocked_cost`` without both views;
+      (``moving``), or ``blocked_cost`` without both views; plus ``object_cost`` on the strips an
+      object's copies span (``kept_off``);
     - the path's cost: that plus ``home_term`` and ``stay_cost`` per px from the last frame's seam
       ``last``; ``free_cost`` adds ``block_cost`` off the last seam on still lines (``still``);
     - ``glide_cost`` (K, G): the path's cost on the G cells from ``glide_first[k]``, plus ``block_cost``
@@ -114,6 +72,7 @@ def band_cost_kernel(
         c = c + motion_cost * float(moving[k, j])
         if not holds_both(d):
             c = blocked_cost
+        c = c + object_cost * float(kept_off[k, j])
         change[k, j] = c
         lowest = wp.min(lowest, c)
         pos = x0 + cell * j
@@ -136,6 +95,7 @@ def band_cost_kernel(
 def strip_mean_kernel(
     row0: int,
     diff: wp.array2d(dtype=float),
+    moving: wp.array2d(dtype=wp.uint8),
     band_x0: wp.array(dtype=int),
     cell: int,
     path: wp.array(dtype=int),
@@ -144,7 +104,8 @@ def strip_mean_kernel(
     count: wp.array(dtype=int),
 ):
     """Per solved line k = row0 + i: the mean difference of the band cells holding both views within
-    ``reach`` cells of the seam ``path[k]`` (on the band's grid), and how many there are (``count``;
+    ``reach`` cells of the seam ``path[k]`` (on the band's grid), but those where something is in front
+    (``moving``: its two copies differ, not the views' exposure), and how many there are (``count``;
     ``mean`` 0 without any)."""
     i, _j = wp.tid()
     k = row0 + i
@@ -154,7 +115,7 @@ def strip_mean_kernel(
     found = int(0)
     for j in range(wp.max(at - reach, 0), wp.min(at + reach, width - 1) + 1):
         d = diff[k, j]
-        if holds_both(d):
+        if holds_both(d) and moving[k, j] == wp.uint8(0):
             total = total + d
             found = found + 1
     mean[k] = total / float(wp.max(found, 1))

@@ -187,6 +187,10 @@ class Config:
     video_seam_motion_cost: float = 40.0  # per-frame seam, static rig: cost of a band cell where something is in front
     # of the background (either view off the band's background model by 2 x video_seam_noise): the seam goes round it
     video_seam_background_s: float = 2.0  # per-frame seam, static rig: time constant of the band's background model
+    video_seam_foreground_learn: float = 0.1  # per-frame seam, static rig: a view's model learns this x as fast where
+    # the view is off it (someone standing still stays in front for ten time constants, not one)
+    video_seam_object_cost: float = 1000.0  # per-frame seam, static rig: cost of a band cell on an object's two copies
+    # or between them (video/frame_objects.py): the seam keeps off them and shows the object whole from one view
     video_gain_period_s: float = 0.2  # exposure: gains re-measured on the frames every this many seconds
     video_gain_stride_px: int = 8  # exposure: the overlap sampled every this many canvas pixels
     video_gain_settle_s: float = 0.3  # exposure: time constant with which gains follow the measurement

@@ -1,11 +1,12 @@
 """The seam of every video frame (issue 14): "cached warps, per-frame seam slicing".
 
 The estimate fixes the maps and a seam; each frame the seam is re-optimised inside a band around it
-(``band`` cells each side, ``video_seam_band_ratio`` x the canvas diagonal: room to go round an
-object and its second copy) on that frame's luma difference (the compositor's ``band_difference``:
-source minus target, gains applied), by the dynamic programming of ``seam_path`` with a temporal term:
+(``band`` px each side, ``video_seam_band_ratio`` x the canvas diagonal) on that frame's luma
+difference (the compositor's ``band_difference``: source minus target, gains applied), by the
+dynamic programming of ``seam_path`` with a temporal term:
 a cell costs its difference beyond the noise floor, plus ``video_seam_stay_cost`` per pixel away from
-the last frame's seam and ``video_seam_home_cost`` per pixel away from the estimate's.
+the last frame's seam and ``video_seam_home_cost`` per pixel away from the estimate's. (The plan keeps
+both views wherever the band may go: about the estimate's seam, and on a static rig over the overlap.)
 
 *Glide and jump.* The seam glides: it moves at most ``video_seam_speed_px`` per line from the last
 frame's (one cell where cells are wider). On a static rig, while something is in front of the
@@ -20,15 +21,15 @@ difference changed by more than ``video_seam_noise`` since the last frame on it 
 width of lines (room for the path to leave and come back); there every cell but the last frame's
 seam is blocked, and a frame whose lines are all still solves nothing.
 
-*In front of the background* (static rigs). The band keeps a background model: each cell's
-source-plus-target luma as a running mean with time constant ``video_seam_background_s``, and its
-mean absolute deviation. A cell is in front when it is off the model by more than twice the noise and
-three deviations (leaves in the wind and a drifting camera's edges keep changing), beyond what one
-gain and offset over the whole band explain (a camera's exposure step, a flickering light), in most
-of a box twice ``video_seam_still_box_px`` wide (an object, not thin edges). Such cells cost
-``video_seam_motion_cost`` more, so the seam goes round a moving object whole (both its copies), not
-only round where the views differ: inside a smooth object its two copies differ little, and a seam
-through it would lose a strip of it.
+*In front of the background* (static rigs, ``frame_objects.ObjectBand``). Over the whole overlap, on
+cells four times as wide, each view keeps a background model; what is off it in either view (an object,
+both its copies) costs ``video_seam_motion_cost`` more, so the seam goes round a moving object whole,
+not only round where the views differ: inside a smooth object its two copies differ little, and a
+seam through it would lose a strip of it. Each object's two copies (paired across the views) and the
+strip between them cost ``video_seam_object_cost``: the seam keeps off them and shows the object once
+and whole from one view. Where an object stands on the band's home, the band moves (``_place``) to
+where the object band's route passes it, on the side it passed before (a jump when the route switches
+sides, round the object); the seam goes with it, freely in the band, that frame.
 
 Only the compositor's seam positions and the seam blend's offsets change per frame; its plan stays.
 Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig). The seam is
@@ -51,10 +52,10 @@ from ..partition import running_mean
 from ..seam_path import BandPath
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.kernels.frame_seam import background_kernel, band_cost_kernel, strip_mean_kernel
+from sena_warp.kernels.frame_objects import CellGrid, coarse_masks_kernel
+from sena_warp.kernels.frame_seam import band_cost_kernel, strip_mean_kernel
+from .frame_objects import ObjectBand, whole_band_fit
 
-FIT_STRIDE = 4  # the whole band's gain and offset are fitted on every this-th line and cell
-SPREAD_FACTOR = 3.0  # a band cell is off its background beyond this x its mean absolute deviation there
 
 
 def band_half_width(shape: tuple[int, int], cfg: Config) -> int:
@@ -78,25 +79,25 @@ def line_step(cell: int, cfg: Config) -> int:
 
 class FrameSeam:
     """The per-frame seam of one luma compositor whose plan keeps both views within ``band`` of the
-    estimate's seam ``home`` (L,) float32 (positions per line), on cells ``cell`` px wide
-    (:func:`cell_px`); ``jumps``: whether it may leave its gliding path and keeps a background model (a
-    static rig); ``fps``: the video's frame rate.
+    estimate's seam ``home`` (L,) float32 (positions per line) and, on a static rig, over the whole
+    overlap, on cells ``cell`` px wide (:func:`cell_px`); ``overlap`` (L, 2) int: per line the first
+    and the last position holding both views, for a static rig (whose seam may jump and goes round
+    what is in front of the background, ``frame_objects.ObjectBand``), None for a moving rig (whose
+    seam only glides); ``fps``: the video's frame rate.
 
     The seam is solved on every ``step``-th line (:func:`line_step`, and the last) and interpolated
     between them; ``positions``, ``shown`` and ``still`` are per line. The band's cells live in Warp
     arrays (K solved lines, ``width`` cells) that the kernels of ``kernels/frame_seam.py`` fill (on
     ``runtime.BAND_THREADS`` CPU threads)."""
 
-    def __init__(self, home: np.ndarray, band: int, cell: int, jumps: bool, fps: float, cfg: Config):
+    def __init__(self, home: np.ndarray, band: int, cell: int, overlap: np.ndarray | None, fps: float, cfg: Config):
         self.cfg = cfg
-        self.jumps = jumps
+        self.fps = fps
         self.band = band
         self.cell = cell
         self.width = 2 * int(np.ceil(band / self.cell)) + 1  # cells
         count = len(home)
         self._every_line = np.arange(count)
-        box = 2 * max(1, cfg.video_seam_still_box_px) + 1
-        self._object_box = (box, np.ones((box, box), np.uint8))  # an object's box (``foreground``): size, kernel
         self.step = line_step(self.cell, cfg)
         step = self.step
         self._lines = np.unique(np.append(np.arange(0, count, step), count - 1)).astype(np.int32)
@@ -116,11 +117,10 @@ class FrameSeam:
         self._total = wp.zeros(cells, dtype=float, device=device)
         self._last_diff = wp.zeros(cells, dtype=float, device=device)  # the last frame's difference
         self._delta = wp.zeros(cells, dtype=float, device=device)  # how much it changed since
-        self._learn = 1.0 / max(1.0, fps * cfg.video_seam_background_s)  # the background's update per frame
-        self._background = wp.zeros(cells, dtype=float, device=device)  # source-plus-target luma of the background
-        self._spread = wp.zeros(cells, dtype=float, device=device)  # its mean absolute deviation
-        self._off = wp.zeros(cells, dtype=wp.uint8, device=device)  # 1: off the background this frame
         self._moving = wp.zeros(cells, dtype=wp.uint8, device=device)  # 1: something in front (a static rig's)
+        self._kept_off = wp.zeros(cells, dtype=wp.uint8, device=device)  # 1: on an object's copies or between them
+        self._grid = CellGrid()  # the band's cells, for the object band's masks
+        self._grid.x0, self._grid.cell, self._grid.step = self._x0_wp, self.cell, step
         self._home_term = wp.zeros(cells, dtype=float, device=device)  # the cost of leaving home, per reset
         self._last_wp = wp.zeros(solved, dtype=int, device=device)  # the last frame's seam, per solved line
         self._still_wp = wp.zeros(solved, dtype=wp.uint8, device=device)
@@ -132,33 +132,62 @@ class FrameSeam:
         self._path_wp = wp.zeros(solved, dtype=int, device=device)  # this frame's seam, for the strip's mean
         self._strip_mean = wp.zeros(solved, dtype=float, device=device)  # the seam blend's difference by the seam
         self._strip_count = wp.zeros(solved, dtype=int, device=device)
-        self._modelled = False  # whether the background model holds this estimate's band
+        self._objects: ObjectBand | None = None  # a static rig's (``reset``)
         self._shown: np.ndarray | None = None  # (K,) the solved lines' seam the last frame was composited with
-        self._has_last = False  # whether ``_last_diff`` holds the last frame's difference on this band
+        self._has_last = np.zeros(solved, bool)  # the lines where ``_last_diff`` holds the last frame's difference
         self._still = np.zeros(solved, bool)  # the solved lines the last frame found still (``still_lines``)
-        self.home: np.ndarray | None = None  # (L,) the estimate's seam, the band's centre (``reset``)
+        self.home: np.ndarray | None = None  # (L,) the estimate's seam (``reset``)
+        self._centre: np.ndarray | None = None  # (K,) where the band is centred on the solved lines (``_place``)
+        self._moved = False  # whether ``_place`` moved the band since the last solve
         self._path: np.ndarray | None = None  # (K,) the solved lines' seam (px, on the grid of cells)
-        self.reset(home)
+        self.reset(home, overlap)
 
-    def reset(self, home: np.ndarray) -> None:
-        """A new estimate's seam: the band follows it; the last path is kept where it still fits. The
-        glide still starts from the seam last shown (``shown``), so a band that moves with a blend does
-        not add its own step to the seam's. A seam that did not move (a static rig's maps moved with a
-        camera's drift) keeps its band, its last difference and its background model: the band's
-        content moved by a pixel or two, which the model's own learning follows."""
+    @property
+    def jumps(self) -> bool:
+        """Whether the seam may leave its gliding path: a static rig's, which watches what moves."""
+        return self._objects is not None
+
+    def reset(self, home: np.ndarray, overlap: np.ndarray | None) -> None:
+        """A new estimate's seam and, for a static rig, overlap (as the constructor's): the band follows
+        it; the last path is kept where it still fits. The glide still starts from the seam last shown
+        (``shown``), so a band that moves with a blend does not add its own step to the seam's. A seam
+        that did not move (a static rig's maps moved with a camera's drift) keeps its band, its last
+        difference and its background models: the band's content moved by a pixel or two, which the
+        models' own learning follows."""
         home = np.asarray(home, np.float32)
         if self.home is not None and np.array_equal(home, self.home):
             return
         self.home = home
+        self._objects = None if overlap is None else ObjectBand(home, overlap, self.cell, self.fps, self.cfg)
+        self._centre = None
+        self._place(self.home[self._lines].astype(np.float64))
+
+    def _place(self, centre: np.ndarray) -> None:
+        """The band centred on ``centre`` (K,) px on the solved lines (the estimate's seam, or where a
+        static rig's objects move it): its cells, their cost of leaving home; the last path is kept where
+        it still fits."""
         half = self.width // 2
-        self._x0 = ((np.floor_divide(np.rint(self.home[self._lines]).astype(np.int32), self.cell) - half)
-                    * self.cell).astype(np.int32)  # on the grid of cells, so cells line up from line to line
+        centre = gentle(centre, max(self._max_step - 1, 1) * self.cell)  # a path can follow it, rounding and all
+        x0 = ((np.floor_divide(np.rint(centre).astype(np.int32), self.cell) - half)
+              * self.cell).astype(np.int32)  # on the grid of cells, so cells line up from line to line
+        if self._centre is not None and np.array_equal(x0, self._x0):
+            return
+        if self._centre is None:
+            kept = np.zeros(len(x0), bool)
+        else:  # the last frame's difference moves with the cells it was taken on (none where new)
+            shift = (x0 - self._x0) // self.cell
+            kept = np.abs(shift) < self.width
+            taken = np.arange(self.width)[None, :] + shift[:, None]
+            inside = (taken >= 0) & (taken < self.width)
+            last = np.take_along_axis(self._diff.numpy(), np.clip(taken, 0, self.width - 1), axis=1)
+            runtime.upload(self._diff, np.where(inside, last, np.float32(NOT_BOTH)).astype(np.float32))
+        self._moved = self._centre is not None  # moved from where it was: round an object
+        self._centre, self._x0 = centre, x0
         runtime.upload(self._x0_wp, self._x0)
         self._cells = self._x0[:, None] + self.cell * np.arange(self.width, dtype=np.int32)[None, :]
         runtime.upload(self._home_term, self.cfg.video_seam_home_cost
                        * np.abs(self._cells - self.home[self._lines, None]))
-        self._has_last = False  # the band's cells moved: the last difference no longer lines up
-        self._modelled = False
+        self._has_last &= kept
         self._path = self._on_grid(self.home[self._lines] if self._path is None else self._path)
 
     def _on_grid(self, path: np.ndarray) -> np.ndarray:
@@ -193,19 +222,22 @@ class FrameSeam:
     def next(self, luma: Compositor) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The seam of the frame loaded in ``luma`` and its seam blend's offsets (``band_offsets``):
         (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32)."""
+        if self._objects is not None:  # a static rig: what is in front, and where the band must lie to go round it
+            self._objects.update(luma)
+            self._place(self._objects.centre(self._lines))
         self._diff, self._last_diff = self._last_diff, self._diff  # this frame's fills the older
         luma.band_difference(self._lines_wp, self._x0_wp, self.width, self.cell, self._last_diff, self._diff,
                              self._total, self._delta)
         self._still = self.still_lines()
-        self._has_last = True
+        self._has_last[:] = True
         last = self._path if self._shown is None else self._shown
-        if not self._still.all():  # else nothing changed on any line: the seam and the background model stay
-            moving = self.foreground(self._diff, self._total) if self.jumps else None
+        if not self._still.all():  # else nothing changed on any line: the seam stays
+            moving = self.foreground() if self.jumps else None
             self._path = self._solve(moving, last)
         self._shown = self._path.copy()
         runtime.upload(self._path_wp, self._path)
         runtime.launch_rows(strip_mean_kernel, len(self._lines), 1, [
-            self._diff, self._x0_wp, self.cell, self._path_wp, self.cfg.seam_blend_strip_px // self.cell,
+            self._diff, self._moving, self._x0_wp, self.cell, self._path_wp, self.cfg.seam_blend_strip_px // self.cell,
             self._strip_mean, self._strip_count], self.cfg.device, runtime.BAND_THREADS)
         offsets_src, offsets_tgt = band_offsets(self._strip_mean.numpy(), self._strip_count.numpy(), self._lines,
                                                 self.step, self.cfg)
@@ -223,11 +255,15 @@ class FrameSeam:
         runtime.upload(self._still_wp, self._still)
         runtime.upload(self._glide_first, first)
         runtime.launch_rows(band_cost_kernel, len(self._lines), 1, [
-            self._diff, self._moving, self._home_term, self._x0_wp, self.cell, self._last_wp, self._still_wp,
+            self._diff, self._moving, self._kept_off, float(cfg.video_seam_object_cost), self._home_term,
+            self._x0_wp, self.cell, self._last_wp, self._still_wp,
             self._glide_first, float(self._speed), float(cfg.video_seam_noise), float(cfg.video_seam_motion_cost),
             float(cfg.video_seam_blocked_cost), float(cfg.video_seam_stay_cost),
             float(cfg.video_seam_blocked_cost * 10),  # a blocked cell; still lines keep their seam
             self._change, self._free_cost, self._glide_cost, self._line_min], cfg.device, runtime.BAND_THREADS)
+        if self._moved:  # the band moved round an object: the seam goes with it, anywhere in the band
+            self._moved = False
+            return self._solve_band(self._solver, self._free_cost, self._x0)
         change = self._change.numpy()
         glide = self._solve_band(self._glide_solver, self._glide_cost, self._x0 + self.cell * first)
         def along(path: np.ndarray) -> float:
@@ -245,66 +281,36 @@ class FrameSeam:
             return path.astype(np.int32)
         return self._path
 
-    def foreground(self, diff: wp.array, total: wp.array) -> np.ndarray:
-        """(K, width) uint8 over the solved lines' band (its difference ``diff`` and source-plus-target
-        ``total``, Warp arrays as ``band_difference`` fills them), 1 on cells off the background model
-        (module docstring), grown by ``video_seam_still_box_px``; none on the first frame of an estimate.
-        Updates the model."""
-        if diff.shape != self._background.shape or total.shape != self._background.shape:
-            raise ValueError(f"band of {diff.shape} / {total.shape} cells for a model of {self._background.shape}")
-        noise = np.float32(2.0 * self.cfg.video_seam_noise)
-        if not self._modelled:
-            wp.copy(self._background, total)
-            self._spread.fill_(float(noise / SPREAD_FACTOR))
-            self._modelled = True
-        fit = (slice(None, None, FIT_STRIDE),) * 2
-        gain, offset = whole_band_fit(self._background.numpy()[fit], total.numpy()[fit],
-                                      diff.numpy()[fit] < 0.5 * NOT_BOTH, float(noise))
-        runtime.launch_row_loops(background_kernel, len(self._lines), self.width, [
-            diff, total, float(np.float32(gain - 1.0)), float(np.float32(offset)), float(noise), SPREAD_FACTOR,
-            float(np.float32(self._learn)), self._background, self._spread, self._off], self.cfg.device,
-            runtime.BAND_THREADS)
-        box, kernel = self._object_box
-        solid = (cv2.blur(self._off.numpy(), (box, box)) > 0).view(np.uint8)
-        moving = cv2.dilate(solid, kernel)
-        runtime.upload(self._moving, moving)
-        return moving
+    def foreground(self) -> np.ndarray:
+        """(K, width) uint8 over the solved lines' band: 1 on cells in front of either view's background
+        (the object band's, grown by an object's box), with the strips the seam keeps off (``_kept_off``)
+        from it too (``frame_objects``)."""
+        objects = self._objects
+        runtime.launch_row_loops(coarse_masks_kernel, len(self._lines), self.width, [
+            self._lines_wp, self._grid, objects.grid, objects.moving_wp, objects.kept_off_wp, self._moving,
+            self._kept_off], self.cfg.device, runtime.BAND_THREADS)
+        return self._moving.numpy()
 
     def still_lines(self) -> np.ndarray:
         """(K,) bool: solved lines where nothing changed since the last frame (module docstring), from the
-        band's difference loaded by ``band_difference``; none without a last frame."""
-        if not self._has_last:
+        band's difference loaded by ``band_difference``; none on a line without the last frame's (the band
+        moved there)."""
+        if not self._has_last.any():
             return np.zeros(len(self._lines), bool)
         box = max(1, self.cfg.video_seam_still_box_px)
-        moved = (cv2.blur(self._delta.numpy(), (box, box)) > self.cfg.video_seam_noise).any(axis=1)
+        moved = (cv2.blur(self._delta.numpy(), (box, box)) > self.cfg.video_seam_noise).any(axis=1) | ~self._has_last
         return ~lines_near(moved, int(np.ceil(self.width * self.cell / self.step)))
 
 
-def whole_band_fit(background: np.ndarray, total: np.ndarray, both: np.ndarray, noise: float) -> tuple[float, float]:
-    """(gain, offset): how ``total`` changed from ``background`` over the whole band (a camera's exposure
-    step, a flickering light): their least-squares fit on the cells in ``both`` (the caller takes every
-    :data:`FIT_STRIDE`-th line and cell), fitted again without the cells more than ``noise`` (and twice
-    the median residual) off the first fit (an object in front). ``(gain - 1) x background + offset``
-    is the change they explain."""
-    x = background[both].astype(np.float64)
-    y = total[both].astype(np.float64)
-    gain, offset = _gain_offset(x, y)
-    residual = np.abs(y - gain * x - offset)
-    kept = residual <= max(noise, 2.0 * float(np.median(residual))) if residual.size else residual > 0
-    return _gain_offset(x[kept], y[kept])
-
-
-def _gain_offset(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """Least squares y = gain x + offset; gain 1 where x does not vary, (1, 0) without points."""
-    if x.size == 0:
-        return 1.0, 0.0
-    x_mean, y_mean = x.sum() / x.size, y.sum() / y.size
-    dx = x - x_mean
-    x_var = float(dx @ dx) / x.size
-    if x.size < 2 or x_var <= 1e-6:
-        return 1.0, float(y_mean - x_mean)
-    gain = float(dx @ (y - y_mean)) / x.size / x_var
-    return gain, float(y_mean - gain * x_mean)
+def gentle(positions: np.ndarray, most: float) -> np.ndarray:
+    """(K,) float64 ``positions`` (K,) moved as little as it takes to change by at most ``most`` from
+    one line to the next (clamped forwards, then backwards)."""
+    out = np.asarray(positions, np.float64).copy()
+    for k in range(1, len(out)):
+        out[k] = min(max(out[k], out[k - 1] - most), out[k - 1] + most)
+    for k in range(len(out) - 2, -1, -1):
+        out[k] = min(max(out[k], out[k + 1] - most), out[k + 1] + most)
+    return out
 
 
 def lines_near(flags: np.ndarray, reach: int) -> np.ndarray:

@@ -272,6 +272,19 @@ def sampled_mask(map_canvas: np.ndarray, plane_shape: tuple[int, int]) -> np.nda
     return (x >= 0) & (y >= 0) & (x <= plane_shape[1] - 1) & (y <= plane_shape[0] - 1)
 
 
+def overlap_lines(maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[int, int]) -> np.ndarray:
+    """(L, 2) int32: per seam line of the luma plane (a canvas row, or a column for a vertical rig) the
+    first and the last position where ``maps`` sample both views, planes of (rows, cols) ``shape_src``
+    / ``shape_tgt``; (0, -1) on a line where they sample both nowhere."""
+    both = sampled_mask(maps.map_src_luma, shape_src) & sampled_mask(maps.map_tgt_luma, shape_tgt)
+    if not maps.seam_luma.lines_are_rows:
+        both = both.T
+    has = both.any(axis=1)
+    first = np.argmax(both, axis=1)
+    last = both.shape[1] - 1 - np.argmax(both[:, ::-1], axis=1)
+    return np.stack([np.where(has, first, 0), np.where(has, last, -1)], axis=1).astype(np.int32)
+
+
 def seam_change_px(before: PlaneMaps, after: PlaneMaps) -> float:
     """Mean over rows of |seam x after - seam x before| (working frame, px); rows either lacks are skipped."""
     change = np.abs(after.seam_x_working - before.seam_x_working)

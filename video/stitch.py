@@ -43,7 +43,8 @@ from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_video
 from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, MapsBlend, PlaneMaps, chroma_lines, drifted_maps, lerp_maps,
-                   map_change_px, plane_maps, sampled_mask, seam_change_px, seam_per_target_line, target_offset)
+                   map_change_px, overlap_lines, plane_maps, sampled_mask, seam_change_px, seam_per_target_line,
+                   target_offset)
 from .reader import YuvFrame, probe_video
 from .writer import even_size
 
@@ -167,7 +168,8 @@ class SenaFrameCompositor:
         self._reestimate_s = cfg.video_reestimate_s if cfg.video_rig == "moving" else None
         # A static rig's views are checked for drift this often (``drift.py``); None: not checked.
         self._drift_s = cfg.video_drift_check_s if cfg.video_rig == "static" and cfg.video_drift_check_s > 0 else None
-        x0, y0, width, height = fixed_canvas(first, self._rig.pick(*frame_shapes), cfg.video_crop)
+        self._shapes = self._rig.pick(*frame_shapes)  # (rows, cols) of the source's and the target's frames
+        x0, y0, width, height = fixed_canvas(first, self._shapes, cfg.video_crop)
         shape = (height, width)
         self.crop_xywh = (x0, y0, width, height) if cfg.video_crop else None
         self._band = band_half_width(shape, cfg)
@@ -180,7 +182,7 @@ class SenaFrameCompositor:
         self._border_set = None  # the border offsets last uploaded
         self._set_border()
         self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, cell_px(frame_shapes, cfg),
-                               self._reestimate_s is None, fps, cfg)
+                               self._overlap(self._maps), fps, cfg)
         self._fps = fps
         self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
         self._plane_shapes: tuple[tuple[int, int], tuple[int, int]] | None = None
@@ -224,10 +226,21 @@ class SenaFrameCompositor:
             self._luma.set_border_offsets(*border)
             self._border_set = border
 
+    def _overlap(self, maps: PlaneMaps) -> np.ndarray | None:
+        """A static rig's overlap per seam line (``maps.overlap_lines``), where its per-frame seam may go
+        round what is in front; None for a moving rig, whose seam keeps to its band."""
+        return overlap_lines(maps, *self._shapes) if self._reestimate_s is None else None
+
     def _on_canvas(self, maps: StitchMaps, shape: tuple[int, int]) -> PlaneMaps:
-        """An estimate on the fixed canvas, its plan band wide enough for the per-frame seam."""
+        """An estimate on the fixed canvas, its plan band wide enough for the per-frame seam: its band
+        about the estimate's seam, and for a static rig about wherever in the overlap it may go."""
         plane = plane_maps(maps, shape, self._offset_tgt)
         reach = self._band + plane.seam_luma.band_px
+        overlap = self._overlap(plane)
+        if overlap is not None:
+            home, inside = plane.seam_luma.positions, overlap[:, 1] >= overlap[:, 0]
+            far = np.maximum(home - overlap[:, 0], overlap[:, 1] - home)[inside & np.isfinite(home)]
+            reach += float(far.max()) if far.size else 0.0
         return replace(plane, seam_luma=replace(plane.seam_luma, band_px=reach),
                        seam_chroma=replace(plane.seam_chroma, band_px=0.5 * reach))
 
@@ -400,7 +413,7 @@ class SenaFrameCompositor:
         self._luma.set_maps(self._maps.map_src_luma, self._maps.seam_luma.positions)
         self._chroma.set_maps(self._maps.map_src_chroma, self._maps.seam_chroma.positions)
         self._set_border()
-        self._seam.reset(self._maps.seam_luma.positions)
+        self._seam.reset(self._maps.seam_luma.positions, self._overlap(self._maps))
         if self._exposure is not None:
             self._exposure.set_maps(self._maps, *self._plane_shapes)
         self._seconds["maps_upload"] += time.perf_counter() - t0
