@@ -95,7 +95,6 @@ def band_cost_kernel(
 def strip_mean_kernel(
     row0: int,
     diff: wp.array2d(dtype=float),
-    moving: wp.array2d(dtype=wp.uint8),
     band_x0: wp.array(dtype=int),
     cell: int,
     path: wp.array(dtype=int),
@@ -104,8 +103,7 @@ def strip_mean_kernel(
     count: wp.array(dtype=int),
 ):
     """Per solved line k = row0 + i: the mean difference of the band cells holding both views within
-    ``reach`` cells of the seam ``path[k]`` (on the band's grid), but those where something is in front
-    (``moving``: its two copies differ, not the views' exposure), and how many there are (``count``;
+    ``reach`` cells of the seam ``path[k]`` (on the band's grid), and how many there are (``count``;
     ``mean`` 0 without any)."""
     i, _j = wp.tid()
     k = row0 + i
@@ -115,7 +113,7 @@ def strip_mean_kernel(
     found = int(0)
     for j in range(wp.max(at - reach, 0), wp.min(at + reach, width - 1) + 1):
         d = diff[k, j]
-        if holds_both(d) and moving[k, j] == wp.uint8(0):
+        if holds_both(d):
             total = total + d
             found = found + 1
     mean[k] = total / float(wp.max(found, 1))

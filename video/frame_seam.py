@@ -237,7 +237,7 @@ class FrameSeam:
         self._shown = self._path.copy()
         runtime.upload(self._path_wp, self._path)
         runtime.launch_rows(strip_mean_kernel, len(self._lines), 1, [
-            self._diff, self._moving, self._x0_wp, self.cell, self._path_wp, self.cfg.seam_blend_strip_px // self.cell,
+            self._diff, self._x0_wp, self.cell, self._path_wp, self.cfg.seam_blend_strip_px // self.cell,
             self._strip_mean, self._strip_count], self.cfg.device, runtime.BAND_THREADS)
         offsets_src, offsets_tgt = band_offsets(self._strip_mean.numpy(), self._strip_count.numpy(), self._lines,
                                                 self.step, self.cfg)
