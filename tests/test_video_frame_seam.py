@@ -114,18 +114,18 @@ def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
     background = frames.total
     for _ in range(5):
         home, _, _ = band.next(frames)
-    # A 60-line object 24 cells wide from 10 cells before the seam (it is found on cells four times as
+    # A 100-line object 24 cells wide from 10 cells before the seam (it is found on cells four times as
     # wide), 80 levels brighter in both views; its two copies differ little inside (a smooth object),
     # at its edges a lot.
     start, end = REACH - 10 * cell, REACH + 14 * cell
     frames.total = background.copy()
-    frames.total[30:90, start:end] += 160.0
+    frames.total[10:110, start:end] += 160.0
     frames.diff = valley_band(REACH)
-    frames.diff[30:90, start:end] = 2.0
-    frames.diff[30:90, [start, start + 1, end - 2, end - 1]] = 60.0
+    frames.diff[10:110, start:end] = 2.0
+    frames.diff[10:110, [start, start + 1, end - 2, end - 1]] = 60.0
     positions, offsets_src, offsets_tgt = band.next(frames)
     at = positions - (HOME - REACH)
-    assert np.all((at[30:90] < start) | (at[30:90] >= end))  # round the object, not through it
+    assert np.all((at[10:110] < start) | (at[10:110] >= end))  # round the object, not through it
     assert np.abs(positions - home).max() > max(CFG.video_seam_speed_px, cell)  # a jump, not a glide
     assert offsets_src.shape == (LINES, 1) and np.allclose(offsets_src, -offsets_tgt)
 

@@ -57,6 +57,7 @@ PAIR_AREA = 0.3  # ... and the smaller has this share of the larger's area at le
 COARSE_CELLS = 4  # the object band's cells are this many of the per-frame seam's cells wide
 FOREGROUND_MOST = 0.5  # a view off its background on more of the band: the camera or the light changed
 MOST_STRIPS = 8  # strips kept off per line at most
+OBJECT_BOXES = 2  # an object covers this x this of an object's boxes at least (smaller things only cost motion)
 
 
 @dataclass(frozen=True)
@@ -353,8 +354,8 @@ class ObjectBand:
         both = diff < 0.5 * NOT_BOTH
         crowded = max(float(s[both].mean()) if both.any() else 0.0 for s in solids) > FOREGROUND_MOST
         # Most of a view off its background: the camera or the light changed, not an object in front.
-        self.pairs = [] if crowded else pair_copies(blobs(solids[0], box * box), blobs(solids[1], box * box),
-                                                     self.width)
+        least = (OBJECT_BOXES * box) ** 2  # a person's size, not a head turning or a screen's flicker
+        self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), self.width)
         starts, ends = keep_off_strips(self.pairs, both, self.x0 // self.cell, self._margin_cells,
                                        self._margin_cells, MOST_STRIPS)
         runtime.upload(self.kept_off_wp, strip_cells(starts, ends, self.width, self.kept_off))

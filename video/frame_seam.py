@@ -138,7 +138,7 @@ class FrameSeam:
         self._still = np.zeros(solved, bool)  # the solved lines the last frame found still (``still_lines``)
         self.home: np.ndarray | None = None  # (L,) the estimate's seam (``reset``)
         self._centre: np.ndarray | None = None  # (K,) where the band is centred on the solved lines (``_place``)
-        self._moved = False  # whether ``_place`` moved the band since the last solve
+        self._moved = False  # whether ``_place`` moved the band off the seam last shown since the last solve
         self._path: np.ndarray | None = None  # (K,) the solved lines' seam (px, on the grid of cells)
         self.reset(home, overlap)
 
@@ -181,7 +181,9 @@ class FrameSeam:
             inside = (taken >= 0) & (taken < self.width)
             last = np.take_along_axis(self._diff.numpy(), np.clip(taken, 0, self.width - 1), axis=1)
             runtime.upload(self._diff, np.where(inside, last, np.float32(NOT_BOTH)).astype(np.float32))
-        self._moved = self._centre is not None  # moved from where it was: round an object
+        last = self._path if self._shown is None else self._shown
+        # Moved away from the seam last shown (round an object): it has to follow, anywhere in the band.
+        self._moved = self._centre is not None and bool(np.any((last < x0) | (last > x0 + self.cell * (self.width - 1))))
         self._centre, self._x0 = centre, x0
         runtime.upload(self._x0_wp, self._x0)
         self._cells = self._x0[:, None] + self.cell * np.arange(self.width, dtype=np.int32)[None, :]
@@ -261,7 +263,7 @@ class FrameSeam:
             float(cfg.video_seam_blocked_cost), float(cfg.video_seam_stay_cost),
             float(cfg.video_seam_blocked_cost * 10),  # a blocked cell; still lines keep their seam
             self._change, self._free_cost, self._glide_cost, self._line_min], cfg.device, runtime.BAND_THREADS)
-        if self._moved:  # the band moved round an object: the seam goes with it, anywhere in the band
+        if self._moved:  # the band left the seam behind (round an object): the seam follows, anywhere in the band
             self._moved = False
             return self._solve_band(self._solver, self._free_cost, self._x0)
         change = self._change.numpy()
