@@ -444,7 +444,7 @@ class PixelRule:
     fy_t: int
 
 
-@wp.func
+@wp.func(inline=True)  # per pixel: inlined, its struct arguments are not copied per call
 def pixel_rule(x: int, y: int, q: int, plan: Plan, seam: SeamState, layout: Layout, border: Border, bw_row: wp.vec2,
                channels: int) -> PixelRule:
     """The full rule's terms of canvas pixel (x, y), flat index q, for images of ``channels``
@@ -487,10 +487,13 @@ def pixel_rule(x: int, y: int, q: int, plan: Plan, seam: SeamState, layout: Layo
     return r
 
 
-@wp.func
-def rule_channel(r: PixelRule, c: int, planes: Planes, seam: SeamState, border: Border, gains: Gains) -> wp.uint8:
-    """Channel c of a pixel that a side covers, by the full rule: per side ``gain * sample + bias +
-    lf * lf[line, c]`` plus each border's weighted offset (``side_offset``), mixed by ``a``."""
+@wp.func(inline=True)
+def rule_channel(r: PixelRule, c: int, planes: Planes, seam: SeamState, border: Border, gains: Gains,
+                 fill: wp.vec4i) -> wp.uint8:
+    """Channel c of a pixel by the full rule: ``fill[c]`` where no side covers it, else per side ``gain *
+    sample + bias + lf * lf[line, c]`` plus each border's weighted offset (``side_offset``), mixed by ``a``."""
+    if r.kind == KIND_FILL:
+        return wp.uint8(fill[c])
     steps = planes.steps
     if r.a >= 1.0:
         off = side_offset(r.lf, seam.lf_src, r.lo + c, r.bw, border.src, r.bo + c, border.second)
@@ -589,12 +592,8 @@ def _composite_frame_kernel(channels: int):
                 q = y * width + x
                 o = q * wp.static(channels)
                 r = pixel_rule(x, y, q, plan, seam, layout, border, bw_row, wp.static(channels))
-                if r.kind == KIND_FILL:
-                    for c in range(wp.static(channels)):
-                        out[o + c] = wp.uint8(plan.fill[c])
-                    continue
                 for c in range(wp.static(channels)):
-                    out[o + c] = rule_channel(r, c, planes, seam, border, gains)
+                    out[o + c] = rule_channel(r, c, planes, seam, border, gains, plan.fill)
 
     return composite_frame
 
@@ -622,12 +621,8 @@ def _composite_pixel_kernel(channels: int):
         o = q * wp.static(channels)
         bw_row = border_weights(y, border.lines, border.on, layout.lf_px)
         r = pixel_rule(x, y, q, plan, seam, layout, border, bw_row, wp.static(channels))
-        if r.kind == KIND_FILL:
-            for c in range(wp.static(channels)):
-                out[o + c] = wp.uint8(plan.fill[c])
-            return
         for c in range(wp.static(channels)):
-            out[o + c] = rule_channel(r, c, planes, seam, border, gains)
+            out[o + c] = rule_channel(r, c, planes, seam, border, gains, plan.fill)
 
     return composite_pixels
 

@@ -81,11 +81,11 @@ def host_array(values: np.ndarray, dtype) -> wp.array:
 def to_device(values, dtype, device: str, what: str) -> wp.array:
     """A new array on ``device`` holding a copy of the numpy ``values`` (on the CPU too): one upload."""
     _count("upload", what)
-    values = np.ascontiguousarray(values)
+    host = wp.array(np.ascontiguousarray(values), dtype=dtype, device="cpu")  # converted to dtype's scalars
     if device == "cpu":
-        return wp.array(values, dtype=dtype, device="cpu")
-    out = wp.empty(values.shape[:values.ndim - len(getattr(dtype, "_shape_", ()))], dtype=dtype, device=device)
-    wp.copy(out, host_array(values, dtype), stream=stream(device))
+        return host
+    out = wp.empty_like(host, device=device)
+    wp.copy(out, host, stream=stream(device))
     return out
 
 
@@ -94,7 +94,7 @@ def for_reading(values: np.ndarray, dtype, device: str, what: str) -> wp.array:
     nobody may change, such as a video's maps) is used where it is, anything else is copied, so that a
     caller changing its array later changes nothing on any device."""
     if device == "cpu" and isinstance(values, np.ndarray) and not values.flags.writeable \
-            and values.flags.c_contiguous:
+            and values.flags.c_contiguous and values.dtype == _numpy_dtype(dtype):
         _count("upload", what)
         return wp.array(values, dtype=dtype, device="cpu", copy=False)
     return to_device(values, dtype, device, what)

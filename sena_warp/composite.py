@@ -109,11 +109,6 @@ def clipped_seam(positions: np.ndarray, layout: SeamLayout) -> np.ndarray:
     return np.clip(positions, static - reach, static + reach).astype(np.float32)
 
 
-def identity_gains(channels: int) -> tuple[np.ndarray, ...]:
-    """Gains that change nothing: (gain_src, bias_src, gain_tgt, bias_tgt) of ``channels`` channels."""
-    return tuple(v[:channels] for v in IDENTITY * 2)
-
-
 def kernel_gains(gains: Sequence, channels: int, tone: wp.vec2i, table: wp.array) -> Gains:
     """(gain_src, bias_src, gain_tgt, bias_tgt) grey levels of ``channels`` channels as the kernels take
     them (fixed point), with the highlight knee ``tone`` and the target's gain ``table`` to fill."""

@@ -61,8 +61,9 @@ def frame_plan(maps: PlaneMaps, shapes: tuple[tuple[int, int], tuple[int, int]],
 
 
 class Plans:
-    """The plan of each frame's maps, made when the maps change (a new :class:`PlaneMaps` object) and
-    given its runs once it has served a frame (``composite.with_runs``)."""
+    """The plan of each frame's maps, made when the maps change (a new :class:`PlaneMaps` object) and,
+    on the CPU, given its runs once it has served a frame (``composite.with_runs``; CUDA's per-pixel
+    kernel takes none)."""
 
     def __init__(self, cfg: Config):
         self._cfg = cfg
@@ -75,7 +76,8 @@ class Plans:
         if plan is None or plan.maps is not maps or plan.shapes != shapes:
             self._plan, self._served = frame_plan(maps, shapes, self._cfg, plan), False
         elif not self._served:
-            self._plan = FramePlan(maps, shapes, with_runs(plan.luma, self._cfg), with_runs(plan.chroma, self._cfg))
+            if self._cfg.device == "cpu":
+                self._plan = FramePlan(maps, shapes, with_runs(plan.luma, self._cfg), with_runs(plan.chroma, self._cfg))
             self._served = True
         return self._plan
 

@@ -218,13 +218,15 @@ class BandCosts:
         dtypes = {np.dtype(np.int32): int, np.dtype(np.float32): float, np.dtype(np.uint8): wp.uint8}
         self.views = {name: host_array(a, dtypes[a.dtype]) for name, a in self.host.items()}
         self.last = LastSeam()
-        self.last.last, self.last.still, self.last.glide_first = (self.views[k] for k in ("last", "still", "glide_first"))
+        self.last.last, self.last.still, self.last.glide_first = (
+            self.views[k] for k in ("last", "still", "glide_first"))
         self.out = CellCosts()
         self.out.change, self.out.free, self.out.glide, self.out.line_min = (
             self.views[k] for k in ("change", "free", "glide", "line_min"))
         self.costs = SeamCosts()
         self.costs.speed, self.costs.noise = float(grid.speed), float(cfg.video_seam_noise)
-        self.costs.motion_cost, self.costs.blocked_cost = float(cfg.video_seam_motion_cost), float(cfg.video_seam_blocked_cost)
+        self.costs.motion_cost = float(cfg.video_seam_motion_cost)
+        self.costs.blocked_cost = float(cfg.video_seam_blocked_cost)
         self.costs.stay_cost = float(cfg.video_seam_stay_cost)
         self.costs.block_cost = float(cfg.video_seam_blocked_cost * 10)  # a blocked cell; still lines keep their seam
 
