@@ -1,4 +1,4 @@
-"""Time of the per-frame seam (issue 14's budget: <= 3 ms CPU per 1080p frame), frame by frame.
+"""Time of the per-frame seam (the budget: <= 4 ms CPU per 1080p frame), frame by frame.
 
 Usage (from the repository root)::
 
@@ -9,13 +9,16 @@ Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p 
 a slow pan over a real pair, so every line of the band changes every frame (the worst case: no line
 is still, the free path is solved every frame). The first N frame pairs are decoded into memory, a
 :class:`~sena_warp.video.stitch.SenaFrameCompositor` is made as ``sena-warp video`` makes it (static
-rig, one estimate pair), and each frame is composited in order; the per-frame seam's call
-(``FrameSeam.next``: the band's difference, still lines, background model, paths, seam blend offsets)
-is timed in wall and process CPU time (no drift checks: nothing else of the process runs
+rig, one estimate pair), and each frame is composited in order; the per-frame seam's calls (the
+object band's difference over the overlap and its download, ``DeviceFrame.objects``, what is in front
+and where the band goes, ``FrameSeam.follow``; the band's difference and its download,
+``DeviceFrame.band``, then ``FrameSeam.next``: still lines, paths, seam blend offsets) are timed in
+wall and process CPU time (no drift checks: nothing else of the process runs
 meanwhile; the estimate is made on the first pair, ``video_estimate_pairs=1``). Prints median,
 mean and p95 over the frames after the first five, and the band's size. ``--parts`` also gives the
 mean process CPU time per call of its parts (the band's difference, the dynamic programming, the
-background model and its whole-band fit, still lines, the seam blend's offsets, the paths' costs).
+views' background models and their whole-band fits, the objects, still lines, the seam blend's
+offsets, the paths' costs).
 """
 
 from __future__ import annotations
@@ -29,19 +32,21 @@ from pathlib import Path
 
 import numpy as np
 
-from sena_warp import composite, seam_path
+from sena_warp import seam_path
 from sena_warp.config import Config
 from sena_warp.evaluation.bench import DATA_DIR, make_clip_pair, pair_paths
 from sena_warp.kernels.runtime import resolve_config
-from sena_warp.video import frame_seam
+from sena_warp.video import device_frame, frame_objects, frame_seam
 from sena_warp.video.reader import FrameReader
 from sena_warp.video.stitch import SenaFrameCompositor
 
 WARMUP = 5  # frames not counted: the first estimate's band, the background model's start
-PARTS = ((composite.Compositor, "band_difference", "band's difference (kernel)"),
+PARTS = ((device_frame, "band_difference", "band's difference (kernel)"),
          (seam_path.BandPath, "solve", "dynamic programming (per solve)"),
-         (frame_seam.FrameSeam, "foreground", "background model"),
-         (frame_seam, "whole_band_fit", "... its whole-band fit"),
+         (frame_objects.ObjectBand, "update", "objects and their route (all of it)"),
+         (frame_objects.ViewBackground, "update", "... the views' background models"),
+         (frame_objects, "whole_band_fit", "... their whole-band fits"),
+         (frame_seam.FrameSeam, "foreground", "objects on the seam's band"),
          (frame_seam.FrameSeam, "still_lines", "still lines"),
          (frame_seam, "band_offsets", "seam blend's offsets"),
          (frame_seam.FrameSeam, "_solve", "paths with their costs (the DPs included)"))
@@ -86,20 +91,27 @@ def main() -> int:
     # while the seam is timed (a worker's estimate would count in the process's CPU time).
     compositor = SenaFrameCompositor.from_videos(
         args.left, args.right, 0.0, cfg.replace(video_estimate_pairs=1, video_drift_check_s=0.0), "auto")
-    seam = compositor._seam  # the compositor's own FrameSeam, timed where the loop calls it
-    solve = seam.next
-    wall, cpu = [], []
+    seam = compositor.frame_seam  # the compositor's own FrameSeam, timed where the loop calls it
+    solve, follow, band, objects = (seam.next, seam.follow, device_frame.DeviceFrame.band,
+                                    device_frame.DeviceFrame.objects)
+    wall, cpu = [0.0], [0.0]
 
-    def timed(luma):
+    def timed(call, *args):
         t0, c0 = time.perf_counter(), time.process_time()
-        result = solve(luma)
-        wall.append(time.perf_counter() - t0)
-        cpu.append(time.process_time() - c0)
+        result = call(*args)
+        wall[-1] += time.perf_counter() - t0
+        cpu[-1] += time.process_time() - c0
         return result
 
-    seam.next = timed
+    seam.next = lambda frame: timed(solve, frame)
+    seam.follow = lambda frame: timed(follow, frame)
+    device_frame.DeviceFrame.band = lambda device, *args: timed(band, device, *args)
+    device_frame.DeviceFrame.objects = lambda device, *args: timed(objects, device, *args)
     for planes_l, planes_r in zip(left, right):
         compositor.composite_yuv(*planes_l, *planes_r)
+        wall.append(0.0)
+        cpu.append(0.0)
+    wall, cpu = wall[:-1], cpu[:-1]
     compositor.close()
     width, height = compositor.output_size
     print(f"{args.left.name}: canvas {width}x{height}, band {seam.band} px each side, cells of {seam.cell} px, "

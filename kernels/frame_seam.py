@@ -1,11 +1,13 @@
-"""The per-frame seam's work on its band of cells (``video/frame_seam.py``).
+"""The per-frame seam's work on its band of cells (``video/frame_seam.py``), on the host.
 
 The band's difference, sum and change since the last frame come from
-``composite.band_difference_kernel`` (``NOT_BOTH`` and 0 where a cell does not hold both views); what
-is in front of the background on a static rig from ``kernels/frame_objects.py``. Two kernels follow,
-so the band is read a few times rather than by a dozen array expressions: what each cell costs the
-seam's paths, and the difference next to the chosen seam (the seam blend's). Both run one thread per
-line (``runtime.launch_rows`` with width 1): they reduce along it.
+``composite.band_difference_kernel`` on the frame's device (``NOT_BOTH`` and 0 where a cell does not
+hold both views), downloaded in one small block; what is in front of the background on a static rig
+from ``kernels/frame_objects.py``. Two kernels follow on Warp's CPU device (:data:`DEVICE`), where the
+band's few thousand cells are, so the band is read a few times rather than by a dozen array
+expressions: what each cell costs the seam's paths, and the difference next to the chosen seam (the
+seam blend's). Both run one thread per line (``runtime.launch_rows`` with width 1): they reduce along
+it.
 """
 
 from __future__ import annotations
@@ -16,6 +18,45 @@ from sena_warp.kernels.composite import holds_both
 
 wp.set_module_options({"enable_backward": False})  # see the package docstring
 
+DEVICE = "cpu"  # the band's cells are on the host, whatever the frame's device
+
+
+@wp.struct
+class SeamCosts:
+    """What a band cell costs the per-frame seam (``band_cost_kernel``): per px away from the last seam
+    ``stay_cost``, the glide's reach ``speed`` px, the noise floor ``noise`` of the difference,
+    ``motion_cost`` where something is in front, ``object_cost`` on the strips an object's copies span,
+    ``blocked_cost`` without both views, ``block_cost`` off limits."""
+
+    speed: float
+    noise: float
+    motion_cost: float
+    object_cost: float
+    blocked_cost: float
+    stay_cost: float
+    block_cost: float
+
+
+@wp.struct
+class LastSeam:
+    """The last frame's seam per band line (``last``, px), which lines are still (``still`` 1), and the
+    first cell of each line's glide (``glide_first``)."""
+
+    last: wp.array(dtype=int)
+    still: wp.array(dtype=wp.uint8)
+    glide_first: wp.array(dtype=int)
+
+
+@wp.struct
+class CellCosts:
+    """``band_cost_kernel``'s output: each cell's ``change``, the free path's ``free`` and the glide's
+    ``glide`` costs, each line's cheapest ``line_min``."""
+
+    change: wp.array2d(dtype=float)
+    free: wp.array2d(dtype=float)
+    glide: wp.array2d(dtype=float)
+    line_min: wp.array(dtype=float)
+
 
 @wp.kernel
 def band_cost_kernel(
@@ -23,72 +64,61 @@ def band_cost_kernel(
     diff: wp.array2d(dtype=float),
     moving: wp.array2d(dtype=wp.uint8),
     kept_off: wp.array2d(dtype=wp.uint8),
-    object_cost: float,
     home_term: wp.array2d(dtype=float),
     band_x0: wp.array(dtype=int),
     cell: int,
-    last: wp.array(dtype=int),
-    still: wp.array(dtype=wp.uint8),
-    glide_first: wp.array(dtype=int),
-    speed: float,
-    noise: float,
-    motion_cost: float,
-    blocked_cost: float,
-    stay_cost: float,
-    block_cost: float,
-    change: wp.array2d(dtype=float),
-    free_cost: wp.array2d(dtype=float),
-    glide_cost: wp.array2d(dtype=float),
-    line_min: wp.array(dtype=float),
+    last: LastSeam,
+    costs: SeamCosts,
+    out: CellCosts,
 ):
     """What each band cell costs a path (band cell j of line k at ``band_x0[k] + cell j``):
 
-    - ``change``: its difference beyond ``noise``, plus ``motion_cost`` where something is in front
+    - ``out.change``: its difference beyond ``noise``, plus ``motion_cost`` where something is in front
       (``moving``), or ``blocked_cost`` without both views; plus ``object_cost`` on the strips an
       object's copies span (``kept_off``);
     - the path's cost: that plus ``home_term`` and ``stay_cost`` per px from the last frame's seam
-      ``last``; ``free_cost`` adds ``block_cost`` off the last seam on still lines (``still``);
-    - ``glide_cost`` (K, G): the path's cost on the G cells from ``glide_first[k]``, plus ``block_cost``
-      on those more than ``speed`` px from the last seam (or than the band's own distance from it,
-      where the band has moved past it) and off it on still lines;
-    - ``line_min``: each line's cheapest ``change``.
+      ``last.last``; ``out.free`` adds ``block_cost`` off the last seam on still lines (``last.still``);
+    - ``out.glide`` (K, G): the path's cost on the G cells from ``last.glide_first[k]``, plus
+      ``block_cost`` on those more than ``speed`` px from the last seam (or than the band's own distance
+      from it, where the band has moved past it) and off it on still lines;
+    - ``out.line_min``: each line's cheapest ``change``.
 
     One thread per line (``runtime.launch_rows`` with width 1).
     """
     i, _j = wp.tid()
     k = row0 + i
     x0 = band_x0[k]
-    seam = last[k]
-    keep = still[k] != wp.uint8(0)
-    first = glide_first[k]
-    glide_width = glide_cost.shape[1]
+    seam = last.last[k]
+    keep = last.still[k] != wp.uint8(0)
+    first = last.glide_first[k]
+    glide_width = out.glide.shape[1]
     width = diff.shape[1]
     outside = wp.max(wp.max(x0 - seam, seam - (x0 + cell * (width - 1))), 0)
-    reach = wp.max(speed, float(outside))
+    reach = wp.max(costs.speed, float(outside))
     lowest = float(1.0e30)
     for j in range(width):
         d = diff[k, j]
-        c = wp.max(wp.abs(d) - noise, 0.0)
-        c = c + motion_cost * float(moving[k, j])
+        c = wp.max(wp.abs(d) - costs.noise, 0.0)
+        c = c + costs.motion_cost * float(moving[k, j])
         if not holds_both(d):
-            c = blocked_cost
-        c = c + object_cost * float(kept_off[k, j])
-        change[k, j] = c
+            c = costs.blocked_cost
+        c = c + costs.object_cost * float(kept_off[k, j])
+        out.change[k, j] = c
         lowest = wp.min(lowest, c)
         pos = x0 + cell * j
         total = c + home_term[k, j]
-        total = total + stay_cost * float(wp.abs(pos - seam))
+        total = total + costs.stay_cost * float(wp.abs(pos - seam))
         held = keep and pos != seam
         free = total
         if held:
-            free = total + block_cost
-        free_cost[k, j] = free
+            free = total + costs.block_cost
+        out.free[k, j] = free
         if j >= first and j < first + glide_width:
             glide = total
             if held or float(wp.abs(pos - seam)) > reach:
-                glide = total + block_cost
-            glide_cost[k, j - first] = glide
-    line_min[k] = lowest
+                glide = total + costs.block_cost
+            out.glide[k, j - first] = glide
+    out.line_min[k] = lowest
 
 
 @wp.kernel

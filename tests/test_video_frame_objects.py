@@ -6,12 +6,12 @@ test_crossing.py."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from sena_warp.config import Config
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.video.frame_objects import (ObjectBand, ViewBackground, blobs, keep_off_strips, merge_strips,
+from sena_warp.video.frame_objects import (ObjectBand, ObjectGrid, ViewBackground, blobs, keep_off_strips, merge_strips,
                                            pair_copies, solid, strip_cells, whole_band_fit)
+from sena_warp.video.frame_seam import BandFrame
 
 CFG = Config(device="cpu")
 LINES, CELLS = 120, 61
@@ -156,32 +156,29 @@ def test_strips_merge_and_the_narrowest_gaps_close_beyond_the_most():
 
 
 class Overlap:
-    """A stand-in for the luma compositor over an overlap of (LINES, ``width``) px from position 0:
-    the views' luma ``src`` / ``tgt`` sampled on the cells asked for, as ``band_difference`` does."""
+    """A stand-in for the device frame over an overlap of (LINES, ``width``) px from position 0: the
+    views' luma ``src`` / ``tgt`` sampled on an object band's cells, as ``DeviceFrame.objects`` gives them."""
 
     def __init__(self, src: np.ndarray, tgt: np.ndarray):
         self.src, self.tgt = src, tgt
 
-    def band_difference(self, lines, band_x0, width, cell, last, out, out_total, out_delta):
-        solved = lines.numpy()
-        taken = band_x0.numpy()[:, None] + cell * np.arange(width)[None, :]
+    def band(self, grid: ObjectGrid) -> BandFrame:
+        taken = grid.x0[:, None] + grid.cell * np.arange(grid.width)[None, :]
         inside = taken < self.src.shape[1]
         taken = np.clip(taken, 0, self.src.shape[1] - 1)
-        src, tgt = (np.take_along_axis(v[solved], taken, axis=1) for v in (self.src, self.tgt))
+        src, tgt = (np.take_along_axis(v[grid.lines], taken, axis=1) for v in (self.src, self.tgt))
         diff, total = band_of(src, tgt, inside)
-        out.assign(diff)
-        out_total.assign(total)
-        out_delta.assign(np.zeros(diff.shape, np.float32))
+        return BandFrame.of(diff, total, np.zeros(diff.shape, np.float32))
 
 
 def test_the_route_leaves_home_only_to_go_round_an_object_and_keeps_its_side():
     width, home = 400, 200.0
     overlap = np.tile(np.int32([0, width - 1]), (LINES, 1))
-    objects = ObjectBand(np.full(LINES, home, np.float32), overlap, 1, FPS, CFG)
+    objects = ObjectBand(ObjectGrid.of(np.full(LINES, home, np.float32), overlap, 1), FPS, CFG)
     src, tgt = textured(10, (LINES, width)), textured(11, (LINES, width))
     frames = Overlap(src, tgt)
     for _ in range(3):
-        objects.update(frames)
+        objects.update(frames.band(objects.grid))
     np.testing.assert_array_equal(objects.centre(np.arange(LINES)), home)  # nothing in front: home
     # A figure 60 px wide and 20 px nearer than the background, walking right across the seam's home.
     sides = []
@@ -189,7 +186,7 @@ def test_the_route_leaves_home_only_to_go_round_an_object_and_keeps_its_side():
         frames.src, frames.tgt = src.copy(), tgt.copy()
         frames.src[30:90, left + 20:left + 80] = 240.0
         frames.tgt[30:90, left:left + 60] = 240.0
-        objects.update(frames)
+        objects.update(frames.band(objects.grid))
         centre = objects.centre(np.arange(30, 90))
         assert np.all((centre <= left - 8) | (centre >= left + 80 + 8))  # clear of both copies and the strip
         sides.append("left" if centre.mean() < left else "right")

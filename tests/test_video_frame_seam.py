@@ -7,11 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import warp as wp
 
 from sena_warp.config import Config
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.video.frame_seam import FrameSeam, cell_px, line_step, lines_near
+from sena_warp.video.frame_seam import BandFrame, FrameSeam, cell_px, gentle, line_step, lines_near
 
 CFG = Config(device="cpu")
 LINES, BAND = 120, 30
@@ -56,24 +55,50 @@ def test_lines_near_is_a_dilation_along_the_lines():
         np.testing.assert_array_equal(lines_near(flags, reach), expected)
 
 
+def test_gentle_moves_a_centre_line_no_more_than_a_path_can_follow():
+    # A step of 30 px between two lines: clamped forwards (the rise spread over the next lines), then
+    # backwards (the fall over the lines before it).
+    out = gentle(np.float64([0, 0, 30, 30, 30, 0, 0]), 10.0)
+    np.testing.assert_array_equal(out, [0, 0, 10, 20, 30, 20, 10])
+    np.testing.assert_array_equal(gentle(np.arange(5.0), 2.0), np.arange(5.0))  # already gentle: unchanged
+
+
 class BandFrames:
-    """A stand-in for the luma compositor: the overlap's difference and sum of the current frame, given
-    (L, 2 REACH + 1) per px from HOME - REACH, sampled on the solved lines' cells as
-    ``Compositor.band_difference`` gives them."""
+    """A stand-in for the device frame: the overlap's difference and sum of the current frame, given
+    (L, 2 REACH + 1) per px from HOME - REACH, sampled on a seam's solved lines' cells as
+    ``DeviceFrame.band`` gives them (with the change from the difference it gave last), and on its
+    object band's as ``DeviceFrame.objects`` does."""
 
     def __init__(self, diff: np.ndarray, total: np.ndarray):
         self.diff, self.total = diff, total
+        self.last: np.ndarray | None = None
 
-    def band_difference(self, lines, band_x0, width, cell, last, out, out_total, out_delta):
-        solved = lines.numpy()  # Warp arrays, as the compositor takes and fills them
-        taken = band_x0.numpy()[:, None] + cell * np.arange(width)[None, :] - (HOME - REACH)
+    def sampled(self, lines: np.ndarray, x0: np.ndarray, cell: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+        taken = x0[:, None] + cell * np.arange(width)[None, :] - (HOME - REACH)
         inside = (taken >= 0) & (taken <= 2 * REACH)
         taken = np.clip(taken, 0, 2 * REACH)
-        diff = np.where(inside, np.take_along_axis(self.diff[solved], taken, axis=1), NOT_BOTH).astype(np.float32)
-        out.assign(diff)
-        out_total.assign(np.where(inside, np.take_along_axis(self.total[solved], taken, axis=1), 0.0).astype(np.float32))
-        last = last.numpy()
-        out_delta.assign(np.where(inside & (last < 0.5 * NOT_BOTH), np.abs(diff - last), 0.0).astype(np.float32))
+        diff = np.where(inside, np.take_along_axis(self.diff[lines], taken, axis=1), NOT_BOTH).astype(np.float32)
+        total = np.where(inside, np.take_along_axis(self.total[lines], taken, axis=1), 0.0).astype(np.float32)
+        return diff, total
+
+    def band(self, seam: FrameSeam) -> BandFrame:
+        diff, total = self.sampled(seam.grid.lines, seam.place.x0, seam.cell, seam.grid.width)
+        last = self.last if self.last is not None else np.zeros_like(diff)
+        delta = np.where((diff < 0.5 * NOT_BOTH) & (last < 0.5 * NOT_BOTH), np.abs(diff - last), 0.0)
+        self.last = diff
+        return BandFrame.of(diff, total, delta.astype(np.float32))
+
+    def objects(self, seam: FrameSeam) -> BandFrame:
+        grid = seam.objects.grid
+        diff, total = self.sampled(grid.lines, grid.x0, grid.cell, grid.width)
+        return BandFrame.of(diff, total, np.zeros_like(diff))
+
+
+def next_seam(seam: FrameSeam, frames: BandFrames) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The seam of the next frame of ``frames``, as the video's frame path takes it."""
+    if seam.objects is not None:
+        seam.follow(frames.objects(seam))
+    return seam.next(frames.band(seam))
 
 
 def valley_band(column: int) -> np.ndarray:
@@ -95,15 +120,15 @@ def test_a_moving_rig_s_seam_glides_and_then_stays(cell):
     # keeps its place (still lines), though the valley is still 18 px away.
     band = FrameSeam(np.full(LINES, float(HOME), np.float32), BAND, cell, None, FPS, CFG)
     frames = BandFrames(valley_band(REACH), static_band(7))
-    first, _, _ = band.next(frames)
+    first, _, _ = next_seam(band, frames)
     assert np.abs(first - HOME).max() <= cell // 2  # home, the valley (its nearest cell)
-    band.next(frames)
+    next_seam(band, frames)
     frames.diff = valley_band(REACH + 20)
-    moved, _, _ = band.next(frames)
+    moved, _, _ = next_seam(band, frames)
     step = np.abs(moved - first)
     assert step.max() <= max(CFG.video_seam_speed_px, cell) and step.max() > 0
     for _ in range(3):  # the same frame again: every line still, the seam stays
-        again, _, _ = band.next(frames)
+        again, _, _ = next_seam(band, frames)
         np.testing.assert_array_equal(again, moved)
         assert band.still.all()
 
@@ -113,7 +138,7 @@ def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
     band, frames = valley_seam(cell, 8)
     background = frames.total
     for _ in range(5):
-        home, _, _ = band.next(frames)
+        home, _, _ = next_seam(band, frames)
     # A 100-line object 24 cells wide from 10 cells before the seam (it is found on cells four times as
     # wide), 80 levels brighter in both views; its two copies differ little inside (a smooth object),
     # at its edges a lot.
@@ -123,7 +148,7 @@ def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
     frames.diff = valley_band(REACH)
     frames.diff[10:110, start:end] = 2.0
     frames.diff[10:110, [start, start + 1, end - 2, end - 1]] = 60.0
-    positions, offsets_src, offsets_tgt = band.next(frames)
+    positions, offsets_src, offsets_tgt = next_seam(band, frames)
     at = positions - (HOME - REACH)
     assert np.all((at[10:110] < start) | (at[10:110] >= end))  # round the object, not through it
     assert np.abs(positions - home).max() > max(CFG.video_seam_speed_px, cell)  # a jump, not a glide
@@ -133,13 +158,13 @@ def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
 def test_a_reset_to_the_same_home_keeps_the_band_and_a_new_home_starts_it_again():
     band, frames = valley_seam(1, 9)
     for _ in range(3):
-        band.next(frames)
+        next_seam(band, frames)
     assert band.still.all()  # nothing changes: every line still
     band.reset(band.home.copy(), OVERLAP)  # the maps moved with a camera's drift, the seam did not
-    band.next(frames)
+    next_seam(band, frames)
     assert band.still.all()  # the last difference was kept: still at once
     band.reset(band.home + 4.0, OVERLAP + 4)  # a new estimate's seam: the band's cells moved
-    band.next(frames)
+    next_seam(band, frames)
     assert not band.still.any()  # no last difference on the new cells: nothing is still yet
-    band.next(frames)
+    next_seam(band, frames)
     assert band.still.all()

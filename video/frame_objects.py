@@ -29,8 +29,10 @@ them, as ``composite.band_difference`` fills them):
    seam's band is centred on the route (``FrameSeam``), which is the estimate's seam where nothing is
    in the way.
 
-All of it runs on the object band: the overlap on cells :data:`COARSE_CELLS` x the per-frame seam's,
-solved on every such cell's line; an object is found when it covers a few of them.
+All of it runs on the object band (:class:`ObjectGrid`): the overlap on cells :data:`COARSE_CELLS` x
+the per-frame seam's, solved on every such cell's line; an object is found when it covers a few of
+them. Its difference and sum come from the frame's device in one small block
+(``device_frame.DeviceFrame.objects``); the rest runs on the host (Warp's CPU device, numpy, OpenCV).
 """
 
 from __future__ import annotations
@@ -41,13 +43,14 @@ import cv2
 import numpy as np
 import warp as wp
 
-from ..composite import Compositor
 from ..config import Config
 from ..seam_path import BandPath
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
 from sena_warp.kernels.frame_objects import (CellGrid, ViewModels, route_cost_kernel, strip_cells_kernel,
                                              view_background_kernel)
+from sena_warp.kernels.frame_seam import DEVICE
+from sena_warp.kernels.transfer import host_array
 
 FIT_STRIDE = 4  # each view's whole-band gain and offset are fitted on every this-th line and cell
 SPREAD_FACTOR = 3.0  # a cell is off its background beyond this x its mean absolute deviation there
@@ -86,7 +89,7 @@ class Blob:
 class ViewBackground:
     """Each view's background model over a band of ``shape`` (K solved lines, cells) (module
     docstring, 1), learnt with time constant ``video_seam_background_s`` at ``fps`` (``video_seam_foreground_learn``
-    x as fast where the view is off it); on Warp's CPU device."""
+    x as fast where the view is off it); on Warp's CPU device, on the host."""
 
     def __init__(self, shape: tuple[int, int], fps: float, cfg: Config):
         self.cfg = cfg
@@ -95,9 +98,8 @@ class ViewBackground:
         self._arrays = (np.zeros((2, *shape), np.float32), np.zeros((2, *shape), np.float32),
                         np.zeros((2, *shape), np.float32), np.zeros((2, *shape), np.uint8))  # background, spread, last, off
         models = ViewModels()
-        models.background, models.spread, models.last = (wp.array(a, dtype=float, device="cpu", copy=False)
-                                                         for a in self._arrays[:3])
-        models.off = wp.array(self._arrays[3], dtype=wp.uint8, device="cpu", copy=False)
+        models.background, models.spread, models.last = (host_array(a, float) for a in self._arrays[:3])
+        models.off = host_array(self._arrays[3], wp.uint8)
         models.noise, models.spread_factor = float(self.noise), SPREAD_FACTOR
         models.learn = float(np.float32(learn))
         models.learn_off = float(np.float32(learn * cfg.video_seam_foreground_learn))
@@ -127,8 +129,8 @@ class ViewBackground:
                                           float(self.noise))
             explained += [np.float32(gain - 1.0), np.float32(offset)]
         runtime.launch_row_loops(view_background_kernel, diff.shape[0], diff.shape[1], [
-            wp.array(diff, dtype=float, device="cpu", copy=False), wp.array(total, dtype=float, device="cpu", copy=False),
-            wp.vec4(*explained), self._models], "cpu", runtime.BAND_THREADS)
+            host_array(diff, float), host_array(total, float), wp.vec4(*explained), self._models], DEVICE,
+            runtime.BAND_THREADS)
         return off
 
 
@@ -291,92 +293,109 @@ def merge_strips(strips: list[tuple[int, int]], most: int) -> list[tuple[int, in
 def strip_cells(starts: np.ndarray, ends: np.ndarray, cells: int, out: np.ndarray) -> np.ndarray:
     """``out`` (K, cells) uint8 filled with 1 inside the strips ``starts`` / ``ends`` (K, M), 0 elsewhere."""
     runtime.launch_row_loops(strip_cells_kernel, starts.shape[0], cells, [
-        wp.array(starts, dtype=int, device="cpu", copy=False), wp.array(ends, dtype=int, device="cpu", copy=False),
-        wp.array(out, dtype=wp.uint8, device="cpu", copy=False)], "cpu", runtime.BAND_THREADS)
+        host_array(starts, int), host_array(ends, int), host_array(out, wp.uint8)], DEVICE, runtime.BAND_THREADS)
     return out
+
+
+@dataclass(frozen=True)
+class ObjectGrid:
+    """The object band's cells over the whole overlap of a static rig, fixed for an estimate's seam:
+    ``lines`` (Kc,) int32 the seam lines it is solved on (every ``cell``-th, and the last), line k's first
+    cell at ``x0[k]`` px, ``width`` cells of ``cell`` px (:data:`COARSE_CELLS` x the per-frame seam's);
+    ``home`` (Kc,) float64 the estimate's seam on its lines; ``kernel`` the same as the host kernels take
+    it (``CellGrid``)."""
+
+    lines: np.ndarray
+    x0: np.ndarray
+    width: int
+    cell: int
+    home: np.ndarray
+    kernel: CellGrid
+
+    @staticmethod
+    def of(home: np.ndarray, overlap: np.ndarray, seam_cell: int) -> "ObjectGrid":
+        """The grid for the estimate's seam ``home`` (L,) and ``overlap`` (L, 2) int (per seam line the
+        first and the last position whose canvas pixel holds both views; first > last: none), on cells
+        :data:`COARSE_CELLS` x the seam's ``seam_cell`` px."""
+        cell = seam_cell * COARSE_CELLS
+        count = len(home)
+        lines = np.unique(np.append(np.arange(0, count, cell), count - 1)).astype(np.int32)
+        first, last = (np.asarray(overlap, np.int64)[lines, k] for k in (0, 1))
+        inside = last >= first
+        near_home = np.rint(np.asarray(home, np.float64)[lines]).astype(np.int64)
+        x0 = ((np.where(inside, first, near_home) // cell) * cell).astype(np.int32)
+        width = max(1, int(np.max(np.where(inside, (last - x0) // cell + 1, 1))))
+        kernel = CellGrid()
+        kernel.x0, kernel.cell, kernel.step = host_array(x0, int), cell, cell
+        return ObjectGrid(lines, x0, width, cell, np.asarray(home, np.float64)[lines], kernel)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(lines, cells): the shape of the object band's per-cell arrays."""
+        return len(self.lines), self.width
 
 
 class ObjectBand:
     """The objects in front of the background over the whole overlap of a static rig, and the route the
-    per-frame seam takes round them (module docstring), on cells :data:`COARSE_CELLS` x the seam's
-    ``cell`` px wide, solved on every cell-th seam line.
+    per-frame seam takes round them (module docstring), on the cells of ``grid`` (:class:`ObjectGrid`);
+    ``fps``: the video's frame rate.
 
-    ``home`` (L,) float32: the estimate's seam per seam line; ``overlap`` (L, 2) int: per line the
-    first and the last position whose canvas pixel holds both views (first > last: none); ``fps``: the
-    video's frame rate. Each frame, :meth:`update` on the loaded compositor gives ``moving`` (cells in
-    front of either view's background, grown by an object's box), ``kept_off`` (the strips each object
-    keeps the seam off) and the route: per line, where the seam's band must be centred so that the
-    seam can keep off every object (the estimate's seam where it can; :meth:`centre`)."""
+    Each frame, :meth:`update` on the object band's difference gives ``moving`` (cells in front of
+    either view's background, grown by an object's box), ``kept_off`` (the strips each object keeps the
+    seam off), both (Kc, width) uint8 on the host with their Warp views in ``views``, and the route: per
+    line, where the seam's band must be centred so that the seam can keep off every object (the
+    estimate's seam where it can; :meth:`centre`)."""
 
-    def __init__(self, home: np.ndarray, overlap: np.ndarray, cell: int, fps: float, cfg: Config):
+    def __init__(self, grid: ObjectGrid, fps: float, cfg: Config):
         self.cfg = cfg
-        self.cell = cell * COARSE_CELLS
-        count = len(home)
-        self.lines = np.unique(np.append(np.arange(0, count, self.cell), count - 1)).astype(np.int32)
-        first, last = (np.asarray(overlap, np.int64)[self.lines, k] for k in (0, 1))
-        inside = last >= first
-        near_home = np.rint(np.asarray(home, np.float64)[self.lines]).astype(np.int64)
-        self.x0 = ((np.where(inside, first, near_home) // self.cell) * self.cell).astype(np.int32)
-        self.width = max(1, int(np.max(np.where(inside, (last - self.x0) // self.cell + 1, 1))))
-        shape = (len(self.lines), self.width)
-        self.home = np.asarray(home, np.float64)[self.lines]
+        self.grid = grid
         box = 2 * max(1, round(cfg.video_seam_still_box_px / COARSE_CELLS)) + 1
         self._box = (box, np.ones((box, box), np.uint8))
-        self._margin_cells = int(np.ceil((0.5 * cfg.transition_px + 2.0) / self.cell)) + 1
-        self._max_step = max(1, int(cfg.seam_max_step_px))  # cells between its lines: no steeper than the seam
-        self._solver = BandPath(len(self.lines), self.width, np.array([[0, len(self.lines) - 1, -1, -1]]), cfg)
-        self._views = ViewBackground(shape, fps, cfg)
-        device = cfg.device
-        self._lines_wp = wp.array(self.lines, dtype=int, device=device)
-        self._x0_wp = wp.array(self.x0, dtype=int, device=device)
-        self._home_wp = wp.array(self.home.astype(np.float32), dtype=float, device=device)
-        self._diff, self._last_diff, self._total, self._delta, self._cost = (
-            wp.zeros(shape, dtype=float, device=device) for _ in range(5))
-        self.kept_off = np.zeros(shape, np.uint8)  # on the host, where the objects are found
-        self.moving_wp = wp.zeros(shape, dtype=wp.uint8, device=device)
-        self.kept_off_wp = wp.zeros(shape, dtype=wp.uint8, device=device)
-        self.grid = CellGrid()
-        self.grid.x0, self.grid.cell, self.grid.step = self._x0_wp, self.cell, self.cell
+        self._margin_cells = int(np.ceil((0.5 * cfg.transition_px + 2.0) / grid.cell)) + 1
+        self._solver = BandPath(len(grid.lines), grid.width, np.array([[0, len(grid.lines) - 1, -1, -1]]),
+                                cfg.cpu_threads)
+        self._views = ViewBackground(grid.shape, fps, cfg)
+        self.host = {"moving": np.zeros(grid.shape, np.uint8), "kept_off": np.zeros(grid.shape, np.uint8),
+                     "cost": np.zeros(grid.shape, np.float32), "home": grid.home.astype(np.float32)}
+        self.views = {name: host_array(a, wp.uint8 if a.dtype == np.uint8 else float) for name, a in self.host.items()}
         self.pairs: list[tuple[Blob | None, Blob | None]] = []
-        self.route = self.home.copy()  # (Kc,) px: where the seam's band is centred, per object-band line
+        self.route = grid.home.copy()  # (Kc,) px: where the seam's band is centred, per object-band line
 
-    def update(self, luma: Compositor) -> None:
-        """The objects and the route of the frame loaded in ``luma`` (class docstring)."""
-        cfg, device = self.cfg, self.cfg.device
-        self._diff, self._last_diff = self._last_diff, self._diff
-        luma.band_difference(self._lines_wp, self._x0_wp, self.width, self.cell, self._last_diff, self._diff,
-                             self._total, self._delta)
-        diff = self._diff.numpy()
-        off = self._views.update(diff, self._total.numpy())
+    def update(self, band) -> None:
+        """The objects and the route of the frame whose object band is ``band`` (``frame_seam.BandFrame``
+        on :attr:`grid`) (class docstring)."""
+        cfg, grid, host = self.cfg, self.grid, self.host
+        off = self._views.update(band.diff, band.total)
         box, kernel = self._box
         solids = [solid(view, box) for view in off]
-        runtime.upload(self.moving_wp, cv2.dilate(solids[0] | solids[1], kernel))
-        both = diff < 0.5 * NOT_BOTH
+        np.copyto(host["moving"], cv2.dilate(solids[0] | solids[1], kernel))
+        both = band.diff < 0.5 * NOT_BOTH
         crowded = max(float(s[both].mean()) if both.any() else 0.0 for s in solids) > FOREGROUND_MOST
         # Most of a view off its background: the camera or the light changed, not an object in front.
         least = (OBJECT_BOXES * box) ** 2  # a person's size, not a head turning or a screen's flicker
-        self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), self.width)
-        starts, ends = keep_off_strips(self.pairs, both, self.x0 // self.cell, self._margin_cells,
+        self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), grid.width)
+        starts, ends = keep_off_strips(self.pairs, both, grid.x0 // grid.cell, self._margin_cells,
                                        self._margin_cells, MOST_STRIPS)
-        runtime.upload(self.kept_off_wp, strip_cells(starts, ends, self.width, self.kept_off))
-        runtime.launch_row_loops(route_cost_kernel, len(self.lines), self.width, [
-            self._diff, self.kept_off_wp, self.grid, self._home_wp, float(cfg.video_seam_object_cost),
-            float(cfg.video_seam_home_cost), float(cfg.video_seam_blocked_cost), self._cost], device,
+        strip_cells(starts, ends, grid.width, host["kept_off"])
+        runtime.launch_row_loops(route_cost_kernel, len(grid.lines), grid.width, [
+            band.diff_wp, self.views["kept_off"], grid.kernel, self.views["home"], float(cfg.video_seam_object_cost),
+            float(cfg.video_seam_home_cost), float(cfg.video_seam_blocked_cost), self.views["cost"]], DEVICE,
             runtime.BAND_THREADS)
-        cost = self._cost.numpy()
-        route = (self._solver.solve(self._cost, self.x0 // self.cell, self._max_step, 0.0) * self.cell).astype(np.int64)
-        lines = np.arange(len(self.lines))
+        cost = host["cost"]
+        route = (self._solver.solve(self.views["cost"], grid.x0 // grid.cell, max(1, int(cfg.seam_max_step_px)), 0.0)
+                 * grid.cell).astype(np.int64)  # no steeper than the seam between its lines
+        lines = np.arange(len(grid.lines))
 
         def along(path: np.ndarray) -> float:
-            at = np.clip((np.rint(path).astype(np.int64) - self.x0) // self.cell, 0, self.width - 1)
+            at = np.clip((np.rint(path).astype(np.int64) - grid.x0) // grid.cell, 0, grid.width - 1)
             return float(cost[lines, at].sum())
 
         # A new route only where it saves more than the margin: while objects only move a little, the
         # seam keeps the side of each it was on.
         if along(self.route) - along(route) > cfg.video_seam_margin * len(lines):
-            self.route = np.where(np.abs(route - self.home) <= self.cell, self.home, route)
+            self.route = np.where(np.abs(route - grid.home) <= grid.cell, grid.home, route)
 
     def centre(self, lines: np.ndarray) -> np.ndarray:
         """(n,) float64: where the seam's band is centred on seam lines ``lines``: the estimate's seam
         moved as the route moved it from there (interpolated between object-band lines)."""
-        return np.interp(lines, self.lines, self.route)
+        return np.interp(lines, self.grid.lines, self.route)

@@ -1,12 +1,12 @@
 """The seam of every video frame (issue 14): "cached warps, per-frame seam slicing".
 
 The estimate fixes the maps and a seam; each frame the seam is re-optimised inside a band around it
-(``band`` px each side, ``video_seam_band_ratio`` x the canvas diagonal) on that frame's luma
-difference (the compositor's ``band_difference``: source minus target, gains applied), by the
-dynamic programming of ``seam_path`` with a temporal term:
+(``band`` cells each side, ``video_seam_band_ratio`` x the canvas diagonal: room to go round an
+object and its second copy) on that frame's luma difference (``composite.band_difference`` on the
+frame's device, source minus target, gains applied, downloaded as one small :class:`BandFrame`), by
+the dynamic programming of ``seam_path`` with a temporal term:
 a cell costs its difference beyond the noise floor, plus ``video_seam_stay_cost`` per pixel away from
-the last frame's seam and ``video_seam_home_cost`` per pixel away from the estimate's. (The plan keeps
-both views wherever the band may go: about the estimate's seam, and on a static rig over the overlap.)
+the last frame's seam and ``video_seam_home_cost`` per pixel away from the estimate's.
 
 *Glide and jump.* The seam glides: it moves at most ``video_seam_speed_px`` per line from the last
 frame's (one cell where cells are wider). On a static rig, while something is in front of the
@@ -27,12 +27,16 @@ both its copies) costs ``video_seam_motion_cost`` more, so the seam goes round a
 not only round where the views differ: inside a smooth object its two copies differ little, and a
 seam through it would lose a strip of it. Each object's two copies (paired across the views) and the
 strip between them cost ``video_seam_object_cost``: the seam keeps off them and shows the object once
-and whole from one view. Where an object stands on the band's home, the band moves (``_place``) to
-where the object band's route passes it, on the side it passed before (a jump when the route switches
-sides, round the object); the seam goes with it, freely in the band, that frame.
+and whole from one view. Where an object stands on the band's home, the band moves (:meth:`FrameSeam.follow`)
+to where the object band's route passes it, on the side it passed before (a jump when the route
+switches sides, round the object); where the band left the seam last shown behind, the seam goes with
+it, freely in the band, that frame. (The plan keeps both views wherever the band may go: about the
+estimate's seam, and on a static rig over the overlap.)
 
-Only the compositor's seam positions and the seam blend's offsets change per frame; its plan stays.
-Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig). The seam is
+All of it runs on the host, on the band's few thousand cells (``kernels/frame_seam.py`` on Warp's
+CPU device, numpy, OpenCV); the frame's seam and the seam blend's offsets go back to the device in
+one small block, the plan stays. Positions are per seam line of the luma plane (canvas rows, or
+columns for a vertical rig). The seam is
 solved on a grid of square cells: along a line every ``cell`` px (:func:`cell_px`: 1 px for inputs
 up to 640x480, 2 px for 720p, 3 px for 1080p), on every ``video_seam_line_step``-th line or, where
 cells are wider, every cell-th (:func:`line_step`), and interpolated between the solved lines (the
@@ -42,20 +46,21 @@ little with the size; the boxes above are counted in cells and solved lines.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 import warp as wp
 
-from ..composite import Compositor
 from ..config import Config
 from ..partition import running_mean
 from ..seam_path import BandPath
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
 from sena_warp.kernels.frame_objects import CellGrid, coarse_masks_kernel
-from sena_warp.kernels.frame_seam import band_cost_kernel, strip_mean_kernel
-from .frame_objects import ObjectBand, whole_band_fit
-
+from sena_warp.kernels.frame_seam import DEVICE, CellCosts, LastSeam, SeamCosts, band_cost_kernel, strip_mean_kernel
+from sena_warp.kernels.transfer import host_array
+from .frame_objects import ObjectBand, ObjectGrid
 
 
 def band_half_width(shape: tuple[int, int], cfg: Config) -> int:
@@ -77,75 +82,165 @@ def line_step(cell: int, cfg: Config) -> int:
     return max(1, cfg.video_seam_line_step, cell)
 
 
-class FrameSeam:
-    """The per-frame seam of one luma compositor whose plan keeps both views within ``band`` of the
-    estimate's seam ``home`` (L,) float32 (positions per line) and, on a static rig, over the whole
-    overlap, on cells ``cell`` px wide (:func:`cell_px`); ``overlap`` (L, 2) int: per line the first
-    and the last position holding both views, for a static rig (whose seam may jump and goes round
-    what is in front of the background, ``frame_objects.ObjectBand``), None for a moving rig (whose
-    seam only glides); ``fps``: the video's frame rate.
+@dataclass(frozen=True)
+class BandGrid:
+    """The band's cells, fixed for a video: ``lines`` (K,) int32 the solved seam lines (every ``step``-th
+    of the ``count`` lines, and the last), ``width`` cells of ``cell`` px each; a path moves at most
+    ``max_step`` cells between solved lines, at ``step_cost`` per cell; it glides at most ``speed`` px
+    a frame, on ``glide_width`` cells."""
 
-    The seam is solved on every ``step``-th line (:func:`line_step`, and the last) and interpolated
-    between them; ``positions``, ``shown`` and ``still`` are per line. The band's cells live in Warp
-    arrays (K solved lines, ``width`` cells) that the kernels of ``kernels/frame_seam.py`` fill (on
-    ``runtime.BAND_THREADS`` CPU threads)."""
+    count: int
+    lines: np.ndarray
+    cell: int
+    width: int
+    step: int
+    max_step: int
+    step_cost: float
+    speed: float
+    glide_width: int
+
+    @staticmethod
+    def of(count: int, band: int, cell: int, cfg: Config) -> "BandGrid":
+        """The grid of ``count`` seam lines whose band reaches ``band`` px each side, cells ``cell`` px."""
+        width = 2 * int(np.ceil(band / cell)) + 1
+        step = line_step(cell, cfg)
+        lines = np.unique(np.append(np.arange(0, count, step), count - 1)).astype(np.int32)
+        speed = max(cfg.video_seam_speed_px, cell)  # px a frame: at least one cell, or it could not glide
+        return BandGrid(count, lines, cell, width, step, int(np.ceil(cfg.seam_max_step_px * step / cell)),
+                        cfg.seam_step_cost * cell, speed, min(width, 2 * int(np.ceil(speed / cell)) + 1))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(solved lines, cells): the shape of the band's per-cell arrays."""
+        return len(self.lines), self.width
+
+
+@dataclass(frozen=True)
+class BandPlace:
+    """Where the band lies for one estimate's seam ``home`` (L,) float32 (centred on it, or where a static
+    rig's objects move it): each solved line's first cell
+    ``x0`` (K,) int32 px, on the grid of cells so that cells line up from line to line, every cell's
+    position ``cells`` (K, width), and the cost of leaving home per cell ``home_term`` (K, width)
+    float32 (with its Warp view on the host, as the kernels take it)."""
+
+    home: np.ndarray
+    x0: np.ndarray
+    cells: np.ndarray
+    home_term: np.ndarray
+    x0_wp: wp.array
+    home_term_wp: wp.array
+
+    @staticmethod
+    def of(home: np.ndarray, grid: BandGrid, cfg: Config, centre: np.ndarray | None = None) -> "BandPlace":
+        """The band about ``centre`` (K,) px on the solved lines, or about ``home`` without one."""
+        half = grid.width // 2
+        centre = home[grid.lines] if centre is None else centre
+        x0 = ((np.floor_divide(np.rint(centre).astype(np.int32), grid.cell) - half) * grid.cell).astype(np.int32)
+        cells = x0[:, None] + grid.cell * np.arange(grid.width, dtype=np.int32)[None, :]
+        home_term = np.empty(grid.shape, np.float32)
+        np.copyto(home_term, cfg.video_seam_home_cost * np.abs(cells - home[grid.lines, None]), casting="unsafe")
+        return BandPlace(home, x0, cells, home_term, host_array(x0, int), host_array(home_term, float))
+
+
+@dataclass(frozen=True)
+class BandFrame:
+    """One frame's band, as ``composite.band_difference`` gives it: per solved line and cell, the source
+    minus the target (``diff``, ``NOT_BOTH`` where a cell lacks a view), their sum (``total``) and how
+    much ``diff`` changed since the last frame (``delta``), each (K, width) float32 on the host, with
+    Warp views of the first two for the host kernels."""
+
+    diff: np.ndarray
+    total: np.ndarray
+    delta: np.ndarray
+    diff_wp: wp.array
+    total_wp: wp.array
+
+    @staticmethod
+    def of(diff: np.ndarray, total: np.ndarray, delta: np.ndarray) -> "BandFrame":
+        """The band over host arrays (float32, C-ordered), used in place."""
+        return BandFrame(diff, total, delta, host_array(diff, float), host_array(total, float))
+
+
+class BandCosts:
+    """The host arrays ``band_cost_kernel`` and ``strip_mean_kernel`` fill for the band's paths, and
+    what they cost (``SeamCosts`` of ``cfg``): a path's cells from the last seam (``last``, ``still``,
+    ``glide_first``), each cell's costs (``change``, ``free``, ``glide``, ``line_min``), the frame's
+    ``path`` and the difference next to it (``strip_mean``, ``strip_count``); what is in front
+    (``moving``) and the strips kept off (``kept_off``) on a static rig, and the last frame's difference
+    (``last_diff``, for lines where the band moved)."""
+
+    def __init__(self, grid: BandGrid, cfg: Config):
+        solved, width = grid.shape
+        self.host = {"last": np.zeros(solved, np.int32), "still": np.zeros(solved, np.uint8),
+                     "glide_first": np.zeros(solved, np.int32), "change": np.zeros(grid.shape, np.float32),
+                     "free": np.zeros(grid.shape, np.float32),
+                     "glide": np.zeros((solved, grid.glide_width), np.float32),
+                     "line_min": np.zeros(solved, np.float32), "path": np.zeros(solved, np.int32),
+                     "strip_mean": np.zeros(solved, np.float32), "strip_count": np.zeros(solved, np.int32),
+                     "moving": np.zeros(grid.shape, np.uint8), "kept_off": np.zeros(grid.shape, np.uint8),
+                     "lines": grid.lines.astype(np.int32), "last_diff": np.zeros(grid.shape, np.float32)}
+        dtypes = {np.dtype(np.int32): int, np.dtype(np.float32): float, np.dtype(np.uint8): wp.uint8}
+        self.views = {name: host_array(a, dtypes[a.dtype]) for name, a in self.host.items()}
+        self.last = LastSeam()
+        self.last.last, self.last.still, self.last.glide_first = (
+            self.views[k] for k in ("last", "still", "glide_first"))
+        self.out = CellCosts()
+        self.out.change, self.out.free, self.out.glide, self.out.line_min = (
+            self.views[k] for k in ("change", "free", "glide", "line_min"))
+        self.costs = SeamCosts()
+        self.costs.speed, self.costs.noise = float(grid.speed), float(cfg.video_seam_noise)
+        self.costs.motion_cost = float(cfg.video_seam_motion_cost)
+        self.costs.object_cost = float(cfg.video_seam_object_cost)
+        self.costs.blocked_cost = float(cfg.video_seam_blocked_cost)
+        self.costs.stay_cost = float(cfg.video_seam_stay_cost)
+        self.costs.block_cost = float(cfg.video_seam_blocked_cost * 10)  # a blocked cell; still lines keep their seam
+
+
+class FrameSeam:
+    """The per-frame seam of a luma plane whose plan keeps both views within ``band`` px of the
+    estimate's seam ``home`` (L,) float32 (positions per line) and, on a static rig, over the whole
+    overlap, on cells ``cell`` px wide (:func:`cell_px`); ``overlap`` (L, 2) int: per line the first and
+    the last position holding both views, for a static rig (whose seam may jump and goes round what is
+    in front of the background, ``frame_objects.ObjectBand``), None for a moving rig (whose seam only
+    glides); ``fps``: the video's frame rate.
+
+    The seam is solved on the grid's lines (:class:`BandGrid`) and interpolated between them;
+    ``positions``, ``shown`` and ``still`` are per line. :meth:`reset` follows a new estimate's seam; per
+    frame, on a static rig :meth:`follow` takes the object band's difference (on ``objects.grid``) and
+    places the band, then :meth:`next` takes the frame's band (:class:`BandFrame`)."""
 
     def __init__(self, home: np.ndarray, band: int, cell: int, overlap: np.ndarray | None, fps: float, cfg: Config):
         self.cfg = cfg
         self.fps = fps
         self.band = band
-        self.cell = cell
-        self.width = 2 * int(np.ceil(band / self.cell)) + 1  # cells
-        count = len(home)
-        self._every_line = np.arange(count)
-        self.step = line_step(self.cell, cfg)
-        step = self.step
-        self._lines = np.unique(np.append(np.arange(0, count, step), count - 1)).astype(np.int32)
-        solved = len(self._lines)
-        self._solved = np.arange(solved)
-        self._max_step = int(np.ceil(cfg.seam_max_step_px * step / self.cell))  # cells between solved lines
-        self._step_cost = cfg.seam_step_cost * self.cell  # per cell of sideways step
-        segment = np.array([[0, solved - 1, -1, -1]])  # one, free at both ends
-        self._solver = BandPath(solved, self.width, segment, cfg)
-        self._speed = max(cfg.video_seam_speed_px, self.cell)  # px a frame: at least one cell, or it could not glide
-        self._glide_width = min(self.width, 2 * int(np.ceil(self._speed / self.cell)) + 1)
-        self._glide_solver = BandPath(solved, self._glide_width, segment, cfg)
-        device, cells = cfg.device, (solved, self.width)
-        self._lines_wp = wp.array(self._lines, dtype=int, device=device)
-        self._x0_wp = wp.zeros(solved, dtype=int, device=device)  # the band's first cells, per reset
-        self._diff = wp.zeros(cells, dtype=float, device=device)  # this frame's difference and sum
-        self._total = wp.zeros(cells, dtype=float, device=device)
-        self._last_diff = wp.zeros(cells, dtype=float, device=device)  # the last frame's difference
-        self._delta = wp.zeros(cells, dtype=float, device=device)  # how much it changed since
-        self._moving = wp.zeros(cells, dtype=wp.uint8, device=device)  # 1: something in front (a static rig's)
-        self._kept_off = wp.zeros(cells, dtype=wp.uint8, device=device)  # 1: on an object's copies or between them
-        self._grid = CellGrid()  # the band's cells, for the object band's masks
-        self._grid.x0, self._grid.cell, self._grid.step = self._x0_wp, self.cell, step
-        self._home_term = wp.zeros(cells, dtype=float, device=device)  # the cost of leaving home, per reset
-        self._last_wp = wp.zeros(solved, dtype=int, device=device)  # the last frame's seam, per solved line
-        self._still_wp = wp.zeros(solved, dtype=wp.uint8, device=device)
-        self._change = wp.zeros(cells, dtype=float, device=device)  # a cell's cost without the seam's terms
-        self._free_cost = wp.zeros(cells, dtype=float, device=device)  # ... with them: the free path's
-        self._glide_first = wp.zeros(solved, dtype=int, device=device)  # the glide's first cells
-        self._glide_cost = wp.zeros((solved, self._glide_width), dtype=float, device=device)  # ... its cost
-        self._line_min = wp.zeros(solved, dtype=float, device=device)  # each line's cheapest cell
-        self._path_wp = wp.zeros(solved, dtype=int, device=device)  # this frame's seam, for the strip's mean
-        self._strip_mean = wp.zeros(solved, dtype=float, device=device)  # the seam blend's difference by the seam
-        self._strip_count = wp.zeros(solved, dtype=int, device=device)
-        self._objects: ObjectBand | None = None  # a static rig's (``reset``)
-        self._shown: np.ndarray | None = None  # (K,) the solved lines' seam the last frame was composited with
-        self._has_last = np.zeros(solved, bool)  # the lines where ``_last_diff`` holds the last frame's difference
-        self._still = np.zeros(solved, bool)  # the solved lines the last frame found still (``still_lines``)
-        self.home: np.ndarray | None = None  # (L,) the estimate's seam (``reset``)
-        self._centre: np.ndarray | None = None  # (K,) where the band is centred on the solved lines (``_place``)
-        self._moved = False  # whether ``_place`` moved the band off the seam last shown since the last solve
+        self.grid = BandGrid.of(len(home), band, cell, cfg)
+        self.work = BandCosts(self.grid, cfg)
+        segment = np.array([[0, len(self.grid.lines) - 1, -1, -1]])  # one, free at both ends
+        self._solvers = (BandPath(len(self.grid.lines), self.grid.width, segment, cfg.cpu_threads),  # free
+                         BandPath(len(self.grid.lines), self.grid.glide_width, segment, cfg.cpu_threads))  # glide
+        self.objects: ObjectBand | None = None  # a static rig's (``reset``)
+        self.place: BandPlace | None = None  # where the band lies (``reset``, ``follow``)
+        self._moved = False  # whether ``follow`` moved the band off the seam last shown since the last solve
         self._path: np.ndarray | None = None  # (K,) the solved lines' seam (px, on the grid of cells)
+        self._shown: np.ndarray | None = None  # (K,) the solved lines' seam the last frame was composited with
+        self._still = np.zeros(len(self.grid.lines), bool)  # the solved lines the last frame found still
+        # Per solved line, how many cells the band moved since the last frame (``follow``): 0 where the
+        # band's ``delta`` compares with the last frame, a band's width or more where nothing does.
+        self._shift = np.full(len(self.grid.lines), self.grid.width, np.int32)
         self.reset(home, overlap)
 
     @property
-    def jumps(self) -> bool:
-        """Whether the seam may leave its gliding path: a static rig's, which watches what moves."""
-        return self._objects is not None
+    def cell(self) -> int:
+        return self.grid.cell
+
+    @property
+    def step(self) -> int:
+        return self.grid.step
+
+    @property
+    def home(self) -> np.ndarray:
+        """(L,) float32 the estimate's seam, the band's centre where nothing is in the way."""
+        return self.place.home
 
     def reset(self, home: np.ndarray, overlap: np.ndarray | None) -> None:
         """A new estimate's seam and, for a static rig, overlap (as the constructor's): the band follows
@@ -155,53 +250,45 @@ class FrameSeam:
         difference and its background models: the band's content moved by a pixel or two, which the
         models' own learning follows."""
         home = np.asarray(home, np.float32)
-        if self.home is not None and np.array_equal(home, self.home):
+        if self.place is not None and np.array_equal(home, self.place.home):
             return
-        self.home = home
-        self._objects = None if overlap is None else ObjectBand(home, overlap, self.cell, self.fps, self.cfg)
-        self._centre = None
-        self._place(self.home[self._lines].astype(np.float64))
+        self.objects = None if overlap is None else ObjectBand(ObjectGrid.of(home, overlap, self.grid.cell),
+                                                               self.fps, self.cfg)
+        self.place = BandPlace.of(home, self.grid, self.cfg)
+        self._shift[:] = self.grid.width  # the band's cells moved: the last difference no longer lines up
+        self._moved = False
+        self._path = self._on_grid(home[self.grid.lines] if self._path is None else self._path)
 
-    def _place(self, centre: np.ndarray) -> None:
-        """The band centred on ``centre`` (K,) px on the solved lines (the estimate's seam, or where a
-        static rig's objects move it): its cells, their cost of leaving home; the last path is kept where
-        it still fits."""
-        half = self.width // 2
-        centre = gentle(centre, max(self._max_step - 1, 1) * self.cell)  # a path can follow it, rounding and all
-        x0 = ((np.floor_divide(np.rint(centre).astype(np.int32), self.cell) - half)
-              * self.cell).astype(np.int32)  # on the grid of cells, so cells line up from line to line
-        if self._centre is not None and np.array_equal(x0, self._x0):
+    def follow(self, objects: BandFrame) -> None:
+        """A static rig's frame: what is in front on the object band (``objects``, on ``objects.grid``)
+        and the band centred where the objects' route passes (``ObjectBand.centre``), moved as gently as a
+        path can follow. On lines whose cells moved, the last frame's difference moves with the cells it
+        was taken on (``still_lines``); where the band left the seam last shown behind, the next solve is
+        free in the band."""
+        self.objects.update(objects)
+        grid, place = self.grid, self.place
+        centre = gentle(self.objects.centre(grid.lines), max(grid.max_step - 1, 1) * grid.cell)
+        moved = BandPlace.of(place.home, grid, self.cfg, centre)
+        if np.array_equal(moved.x0, place.x0):
             return
-        if self._centre is None:
-            kept = np.zeros(len(x0), bool)
-        else:  # the last frame's difference moves with the cells it was taken on (none where new)
-            shift = (x0 - self._x0) // self.cell
-            kept = np.abs(shift) < self.width
-            taken = np.arange(self.width)[None, :] + shift[:, None]
-            inside = (taken >= 0) & (taken < self.width)
-            last = np.take_along_axis(self._diff.numpy(), np.clip(taken, 0, self.width - 1), axis=1)
-            runtime.upload(self._diff, np.where(inside, last, np.float32(NOT_BOTH)).astype(np.float32))
+        self._shift = np.where(np.abs(self._shift) >= grid.width, self._shift,
+                               (moved.x0 - place.x0) // grid.cell).astype(np.int32)
         last = self._path if self._shown is None else self._shown
-        # Moved away from the seam last shown (round an object): it has to follow, anywhere in the band.
-        self._moved = self._centre is not None and bool(np.any((last < x0) | (last > x0 + self.cell * (self.width - 1))))
-        self._centre, self._x0 = centre, x0
-        runtime.upload(self._x0_wp, self._x0)
-        self._cells = self._x0[:, None] + self.cell * np.arange(self.width, dtype=np.int32)[None, :]
-        runtime.upload(self._home_term, self.cfg.video_seam_home_cost
-                       * np.abs(self._cells - self.home[self._lines, None]))
-        self._has_last &= kept
-        self._path = self._on_grid(self.home[self._lines] if self._path is None else self._path)
+        self._moved = bool(np.any((last < moved.x0) | (last > moved.cells[:, -1])))
+        self.place = moved
+        self._path = self._on_grid(self._path)
 
     def _on_grid(self, path: np.ndarray) -> np.ndarray:
         """(K,) int32 the band cells' positions nearest to ``path`` (K,) px on the solved lines."""
-        nearest = self._x0 + self.cell * np.rint((np.asarray(path, np.float64) - self._x0) / self.cell)
-        return np.clip(nearest, self._x0, self._cells[:, -1]).astype(np.int32)
+        x0, cell = self.place.x0, self.grid.cell
+        nearest = x0 + cell * np.rint((np.asarray(path, np.float64) - x0) / cell)
+        return np.clip(nearest, x0, self.place.cells[:, -1]).astype(np.int32)
 
     def _solve_band(self, solver: BandPath, cost: wp.array, x0: np.ndarray) -> np.ndarray:
-        """(K,) int32 positions (px) of the cheapest path through ``cost`` (K, cells; a Warp array) whose cells start
-        at ``x0`` (K,) px on the grid of cells."""
-        first = x0 // self.cell
-        return (solver.solve(cost, first, self._max_step, self._step_cost) * self.cell).astype(np.int32)
+        """(K,) int32 positions (px) of the cheapest path through ``cost`` (K, cells; a host Warp array)
+        whose cells start at ``x0`` (K,) px on the grid of cells."""
+        grid = self.grid
+        return (solver.solve(cost, x0 // grid.cell, grid.max_step, grid.step_cost) * grid.cell).astype(np.int32)
 
     @property
     def positions(self) -> np.ndarray:
@@ -216,68 +303,62 @@ class FrameSeam:
     @property
     def still(self) -> np.ndarray:
         """(L,) bool the lines the last frame found still (both solved lines around them still)."""
-        return np.interp(self._every_line, self._lines, self._still.astype(np.float64)) == 1.0
+        return np.interp(np.arange(self.grid.count), self.grid.lines, self._still.astype(np.float64)) == 1.0
 
     def _per_line(self, path: np.ndarray) -> np.ndarray:
-        return np.rint(np.interp(self._every_line, self._lines, path)).astype(np.int32)
+        return np.rint(np.interp(np.arange(self.grid.count), self.grid.lines, path)).astype(np.int32)
 
-    def next(self, luma: Compositor) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The seam of the frame loaded in ``luma`` and its seam blend's offsets (``band_offsets``):
+    def next(self, band: BandFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The seam of the frame whose band is ``band`` and its seam blend's offsets (``band_offsets``):
         (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32)."""
-        if self._objects is not None:  # a static rig: what is in front, and where the band must lie to go round it
-            self._objects.update(luma)
-            self._place(self._objects.centre(self._lines))
-        self._diff, self._last_diff = self._last_diff, self._diff  # this frame's fills the older
-        luma.band_difference(self._lines_wp, self._x0_wp, self.width, self.cell, self._last_diff, self._diff,
-                             self._total, self._delta)
-        self._still = self.still_lines()
-        self._has_last[:] = True
+        self._still = self.still_lines(band)
+        self._shift[:] = 0
+        np.copyto(self.work.host["last_diff"], band.diff)
         last = self._path if self._shown is None else self._shown
         if not self._still.all():  # else nothing changed on any line: the seam stays
-            moving = self.foreground() if self.jumps else None
-            self._path = self._solve(moving, last)
+            moving = self.foreground() if self.objects is not None else None
+            self._path = self._solve(band, moving, last)
         self._shown = self._path.copy()
-        runtime.upload(self._path_wp, self._path)
-        runtime.launch_rows(strip_mean_kernel, len(self._lines), 1, [
-            self._diff, self._x0_wp, self.cell, self._path_wp, self.cfg.seam_blend_strip_px // self.cell,
-            self._strip_mean, self._strip_count], self.cfg.device, runtime.BAND_THREADS)
-        offsets_src, offsets_tgt = band_offsets(self._strip_mean.numpy(), self._strip_count.numpy(), self._lines,
-                                                self.step, self.cfg)
+        work, grid = self.work, self.grid
+        np.copyto(work.host["path"], self._path, casting="unsafe")
+        runtime.launch_rows(strip_mean_kernel, len(grid.lines), 1, [
+            band.diff_wp, self.place.x0_wp, grid.cell, work.views["path"], self.cfg.seam_blend_strip_px // grid.cell,
+            work.views["strip_mean"], work.views["strip_count"]], DEVICE, runtime.BAND_THREADS)
+        offsets_src, offsets_tgt = band_offsets(work.host["strip_mean"], work.host["strip_count"], grid.lines,
+                                                grid.step, self.cfg)
         return self.positions, offsets_src, offsets_tgt
 
-    def _solve(self, moving: np.ndarray | None, last: np.ndarray) -> np.ndarray:
+    def _solve(self, band: BandFrame, moving: np.ndarray | None, last: np.ndarray) -> np.ndarray:
         """The solved lines' new path (module docstring); ``moving``: the cells in front of the
-        background (``foreground``), None on a moving rig.
+        background (:meth:`foreground`, which also filled the strips kept off), None on a moving rig.
 
         The glide moves at most ``video_seam_speed_px`` (or one cell) per solved line from ``last`` (K,)
         and not at all on still lines: it is solved on the few cells it may take, from ``first``."""
-        cfg = self.cfg
-        first = np.clip((last - self._x0) // self.cell - self._glide_width // 2, 0, self.width - self._glide_width)
-        runtime.upload(self._last_wp, last)
-        runtime.upload(self._still_wp, self._still)
-        runtime.upload(self._glide_first, first)
-        runtime.launch_rows(band_cost_kernel, len(self._lines), 1, [
-            self._diff, self._moving, self._kept_off, float(cfg.video_seam_object_cost), self._home_term,
-            self._x0_wp, self.cell, self._last_wp, self._still_wp,
-            self._glide_first, float(self._speed), float(cfg.video_seam_noise), float(cfg.video_seam_motion_cost),
-            float(cfg.video_seam_blocked_cost), float(cfg.video_seam_stay_cost),
-            float(cfg.video_seam_blocked_cost * 10),  # a blocked cell; still lines keep their seam
-            self._change, self._free_cost, self._glide_cost, self._line_min], cfg.device, runtime.BAND_THREADS)
+        cfg, grid, place, work = self.cfg, self.grid, self.place, self.work
+        first = np.clip((last - place.x0) // grid.cell - grid.glide_width // 2, 0, grid.width - grid.glide_width)
+        for name, values in (("last", last), ("still", self._still), ("glide_first", first)):
+            np.copyto(work.host[name], values, casting="unsafe")
+        runtime.launch_rows(band_cost_kernel, len(grid.lines), 1, [
+            band.diff_wp, work.views["moving"], work.views["kept_off"], place.home_term_wp, place.x0_wp, grid.cell, work.last, work.costs,
+            work.out], DEVICE, runtime.BAND_THREADS)
+        change = work.host["change"]
+        free_solver, glide_solver = self._solvers
         if self._moved:  # the band left the seam behind (round an object): the seam follows, anywhere in the band
             self._moved = False
-            return self._solve_band(self._solver, self._free_cost, self._x0)
-        change = self._change.numpy()
-        glide = self._solve_band(self._glide_solver, self._glide_cost, self._x0 + self.cell * first)
-        def along(path: np.ndarray) -> float:
-            return float(change[self._solved, (path - self._x0) // self.cell].sum())
+            return self._solve_band(free_solver, work.views["free"], place.x0)
+        glide = self._solve_band(glide_solver, work.views["glide"], place.x0 + grid.cell * first)
+        solved = np.arange(len(grid.lines))
 
-        limit = len(self._lines)
+        def along(path: np.ndarray) -> float:
+            return float(change[solved, (path - place.x0) // grid.cell].sum())
+
+        limit = len(grid.lines)
         path = glide
         jump = cfg.video_seam_jump_cost * limit
         # Something in front of the background, and a path cheaper than the glide's by a jump may exist
         # (no path costs less than each line's cheapest cell): it may jump round it.
-        if moving is not None and moving.any() and along(glide) - float(self._line_min.numpy().sum()) > jump:
-            free = self._solve_band(self._solver, self._free_cost, self._x0)
+        if moving is not None and moving.any() and along(glide) - float(work.host["line_min"].sum()) > jump:
+            free = self._solve_band(free_solver, work.views["free"], place.x0)
             path = free if along(glide) - along(free) > jump else glide
         if along(self._path) - along(path) > cfg.video_seam_margin * limit:
             return path.astype(np.int32)
@@ -285,23 +366,37 @@ class FrameSeam:
 
     def foreground(self) -> np.ndarray:
         """(K, width) uint8 over the solved lines' band: 1 on cells in front of either view's background
-        (the object band's, grown by an object's box), with the strips the seam keeps off (``_kept_off``)
-        from it too (``frame_objects``)."""
-        objects = self._objects
-        runtime.launch_row_loops(coarse_masks_kernel, len(self._lines), self.width, [
-            self._lines_wp, self._grid, objects.grid, objects.moving_wp, objects.kept_off_wp, self._moving,
-            self._kept_off], self.cfg.device, runtime.BAND_THREADS)
-        return self._moving.numpy()
+        (the object band's, grown by an object's box), with the strips the seam keeps off
+        (``work.host["kept_off"]``) filled from it too (``frame_objects``)."""
+        objects, work, grid = self.objects, self.work, self.grid
+        fine = CellGrid()
+        fine.x0, fine.cell, fine.step = self.place.x0_wp, grid.cell, grid.step
+        runtime.launch_row_loops(coarse_masks_kernel, len(grid.lines), grid.width, [
+            work.views["lines"], fine, objects.grid.kernel, objects.views["moving"], objects.views["kept_off"],
+            work.views["moving"], work.views["kept_off"]], DEVICE, runtime.BAND_THREADS)
+        return work.host["moving"]
 
-    def still_lines(self) -> np.ndarray:
+    def still_lines(self, band: BandFrame) -> np.ndarray:
         """(K,) bool: solved lines where nothing changed since the last frame (module docstring), from the
-        band's difference loaded by ``band_difference``; none on a line without the last frame's (the band
-        moved there)."""
-        if not self._has_last.any():
-            return np.zeros(len(self._lines), bool)
+        band's ``delta`` (on lines where the band moved, from the last frame's difference moved with its
+        cells); none on a line without the last frame's difference."""
+        width = self.grid.width
+        missing = np.abs(self._shift) >= width
+        if missing.all():
+            return np.zeros(len(self.grid.lines), bool)
+        delta = band.delta
+        shifted = np.flatnonzero((self._shift != 0) & ~missing)
+        if shifted.size:
+            delta = delta.copy()
+            taken = np.arange(width)[None, :] + self._shift[shifted, None]
+            inside = (taken >= 0) & (taken < width)
+            last = np.take_along_axis(self.work.host["last_diff"][shifted], np.clip(taken, 0, width - 1), axis=1)
+            now = band.diff[shifted]
+            both = inside & (now < 0.5 * NOT_BOTH) & (last < 0.5 * NOT_BOTH)
+            delta[shifted] = np.where(both, np.abs(now - last), 0.0)
         box = max(1, self.cfg.video_seam_still_box_px)
-        moved = (cv2.blur(self._delta.numpy(), (box, box)) > self.cfg.video_seam_noise).any(axis=1) | ~self._has_last
-        return ~lines_near(moved, int(np.ceil(self.width * self.cell / self.step)))
+        moved = (cv2.blur(delta, (box, box)) > self.cfg.video_seam_noise).any(axis=1) | missing
+        return ~lines_near(moved, int(np.ceil(self.grid.width * self.grid.cell / self.grid.step)))
 
 
 def gentle(positions: np.ndarray, most: float) -> np.ndarray:
