@@ -88,10 +88,12 @@ def test_cells_that_keep_changing_stop_being_foreground():
 
 
 def test_someone_standing_still_stays_in_front_for_a_while():
-    # The model learns video_seam_foreground_learn as fast where a view is off it.
+    # The model learns video_seam_foreground_learn as fast where a view is off it: once it has seen the
+    # empty scene for a time constant (its first frames are learnt as their running mean).
     models = ViewBackground((LINES, CELLS), FPS, CFG)
     src, tgt = textured(8), textured(9)
-    models.update(*band_of(src, tgt))
+    for _ in range(int(FPS * CFG.video_seam_background_s)):
+        models.update(*band_of(src, tgt))
     now = src.copy()
     now[30:60, 20:30] = 240.0
     frames = int(2 * FPS * CFG.video_seam_background_s)  # two time constants
@@ -191,3 +193,21 @@ def test_the_route_leaves_home_only_to_go_round_an_object_and_keeps_its_side():
         assert np.all((centre <= left - 8) | (centre >= left + 80 + 8))  # clear of both copies and the strip
         sides.append("left" if centre.mean() < left else "right")
     assert sides[0] == "right" and sides[-1] == "left" and sides.count("right") == sides.index("left")  # one jump
+
+
+def test_a_camera_settling_over_its_first_frames_leaves_nothing_in_front():
+    # A webcam's first frames: the first one far off (60 levels darker on a third of the band, as the
+    # office recording's left camera starts), the exposure settling over the next five. A model that
+    # kept its first frame saw a third of the band in front for seconds; the running mean of the first
+    # frames forgets it within a second.
+    models = ViewBackground((LINES, CELLS), FPS, CFG)
+    src, tgt = textured(12), textured(13)
+    rng = np.random.default_rng(14)
+    first = src.copy()
+    first[:, :20] -= 60.0
+    models.update(*band_of(first, tgt))
+    for gain in (0.8, 0.9, 0.95, 0.98, 1.0):
+        models.update(*band_of(gain * src, tgt))
+    found = [bool(solid(models.update(*band_of(src + rng.normal(0.0, 2.0, src.shape).astype(np.float32), tgt))[0],
+                        3).any()) for _ in range(int(FPS))]
+    assert not any(found[int(FPS) // 3:])

@@ -94,34 +94,39 @@ class ViewBackground:
     def __init__(self, shape: tuple[int, int], fps: float, cfg: Config):
         self.cfg = cfg
         self.noise = np.float32(2.0 * cfg.video_seam_noise)
-        learn = 1.0 / max(1.0, fps * cfg.video_seam_background_s)
+        self._learn = 1.0 / max(1.0, fps * cfg.video_seam_background_s)
         self._arrays = (np.zeros((2, *shape), np.float32), np.zeros((2, *shape), np.float32),
                         np.zeros((2, *shape), np.float32), np.zeros((2, *shape), np.uint8))  # background, spread, last, off
         models = ViewModels()
         models.background, models.spread, models.last = (host_array(a, float) for a in self._arrays[:3])
         models.off = host_array(self._arrays[3], wp.uint8)
         models.noise, models.spread_factor = float(self.noise), SPREAD_FACTOR
-        models.learn = float(np.float32(learn))
-        models.learn_off = float(np.float32(learn * cfg.video_seam_foreground_learn))
         self._models = models
-        self.modelled = False  # whether the models hold the band's place
+        self._learn_off = self._learn * cfg.video_seam_foreground_learn
+        self.frames = 0  # frames the models have learnt from
 
     def update(self, diff: np.ndarray, total: np.ndarray) -> np.ndarray:
         """(2, K, cells) uint8: 1 where the source (index 0) or the target (1) is off its background in
         the frame whose band has difference ``diff`` and sum ``total`` ((K, cells) float32, as
-        ``band_difference`` fills them); none on the first frame (the models start from it). Learns."""
+        ``band_difference`` fills them); none on the first frame (the models start from it). Learns: over
+        the first frames at least as fast as their running mean (a webcam's exposure settles over its
+        first frames; a model that kept the first frame saw the whole scene in front for seconds), then
+        at the model's rate."""
         background, spread, last, off = self._arrays
         if diff.shape != background.shape[1:] or total.shape != background.shape[1:]:
             raise ValueError(f"band of {diff.shape} / {total.shape} cells for models of {background.shape[1:]}")
         both = diff < 0.5 * NOT_BOTH
         views = np.stack([0.5 * (total + diff), 0.5 * (total - diff)]).astype(np.float32)
-        if not self.modelled:
+        self.frames += 1
+        if self.frames == 1:
             np.copyto(background, np.where(both, views, 0.0))
             np.copyto(last, background)
             spread.fill(float(self.noise / SPREAD_FACTOR))
             off.fill(0)
-            self.modelled = True
             return off
+        mean = 1.0 / self.frames  # the running mean's rate
+        self._models.learn = float(np.float32(max(self._learn, mean)))
+        self._models.learn_off = float(np.float32(max(self._learn_off, mean)))
         fit = (slice(None, None, FIT_STRIDE),) * 2
         explained = []
         for view in range(2):  # on the cells that were on the background last frame: an object is no exposure step
