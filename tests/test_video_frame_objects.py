@@ -180,7 +180,7 @@ def test_the_route_leaves_home_only_to_go_round_an_object_and_keeps_its_side():
     src, tgt = textured(10, (LINES, width)), textured(11, (LINES, width))
     frames = Overlap(src, tgt)
     for _ in range(3):
-        objects.update(frames.band(objects.grid))
+        assert not objects.update(frames.band(objects.grid))  # the route did not change
     np.testing.assert_array_equal(objects.centre(np.arange(LINES)), home)  # nothing in front: home
     # A figure 60 px wide and 20 px nearer than the background, walking right across the seam's home.
     sides = []

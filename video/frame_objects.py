@@ -366,9 +366,9 @@ class ObjectBand:
         self.pairs: list[tuple[Blob | None, Blob | None]] = []
         self.route = grid.home.copy()  # (Kc,) px: where the seam's band is centred, per object-band line
 
-    def update(self, band) -> None:
+    def update(self, band) -> bool:
         """The objects and the route of the frame whose object band is ``band`` (``frame_seam.BandFrame``
-        on :attr:`grid`) (class docstring)."""
+        on :attr:`grid`) (class docstring); whether the route changed."""
         cfg, grid, host = self.cfg, self.grid, self.host
         off = self._views.update(band.diff, band.total)
         box, kernel = self._box
@@ -397,8 +397,12 @@ class ObjectBand:
 
         # A new route only where it saves more than the margin: while objects only move a little, the
         # seam keeps the side of each it was on.
-        if along(self.route) - along(route) > cfg.video_seam_margin * len(lines):
-            self.route = np.where(np.abs(route - grid.home) <= grid.cell, grid.home, route)
+        if along(self.route) - along(route) <= cfg.video_seam_margin * len(lines):
+            return False
+        route = np.where(np.abs(route - grid.home) <= grid.cell, grid.home, route)
+        changed = not np.array_equal(route, self.route)
+        self.route = route
+        return changed
 
     def centre(self, lines: np.ndarray) -> np.ndarray:
         """(n,) float64: where the seam's band is centred on seam lines ``lines``: the estimate's seam

@@ -264,8 +264,9 @@ class FrameSeam:
         and the band centred where the objects' route passes (``ObjectBand.centre``), moved as gently as a
         path can follow. On lines whose cells moved, the last frame's difference moves with the cells it
         was taken on (``still_lines``); where the band left the seam last shown behind, the next solve is
-        free in the band."""
-        self.objects.update(objects)
+        free in the band. A route that did not change leaves the band where it is."""
+        if not self.objects.update(objects):
+            return
         grid, place = self.grid, self.place
         centre = gentle(self.objects.centre(grid.lines), max(grid.max_step - 1, 1) * grid.cell)
         moved = BandPlace.of(place.home, grid, self.cfg, centre)
