@@ -137,7 +137,7 @@ def test_a_moving_rig_s_seam_glides_and_then_stays(cell):
 def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
     band, frames = valley_seam(cell, 8)
     background = frames.total
-    for _ in range(5):
+    for _ in range(int(FPS)):  # a second of the empty scene: the background models settle
         home, _, _ = next_seam(band, frames)
     # A 100-line object 24 cells wide from 10 cells before the seam (it is found on cells four times as
     # wide), 80 levels brighter in both views; its two copies differ little inside (a smooth object),

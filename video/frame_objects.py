@@ -60,6 +60,7 @@ PAIR_AREA = 0.3  # ... and the smaller has this share of the larger's area at le
 COARSE_CELLS = 4  # the object band's cells are this many of the per-frame seam's cells wide
 FOREGROUND_MOST = 0.5  # a view off its background on more of the band: the camera or the light changed
 MOST_STRIPS = 8  # strips kept off per line at most
+SETTLE_S = 0.25  # nothing is in front while the models have learnt from less than this much video
 OBJECT_BOXES = 2  # an object covers this x this of an object's boxes at least (smaller things only cost motion)
 
 
@@ -95,6 +96,7 @@ class ViewBackground:
         self.cfg = cfg
         self.noise = np.float32(2.0 * cfg.video_seam_noise)
         self._learn = 1.0 / max(1.0, fps * cfg.video_seam_background_s)
+        self._settle = max(2, int(np.ceil(SETTLE_S * fps)))  # frames
         self._arrays = (np.zeros((2, *shape), np.float32), np.zeros((2, *shape), np.float32),
                         np.zeros((2, *shape), np.float32), np.zeros((2, *shape), np.uint8))  # background, spread, last, off
         models = ViewModels()
@@ -111,7 +113,8 @@ class ViewBackground:
         ``band_difference`` fills them); none on the first frame (the models start from it). Learns: over
         the first frames at least as fast as their running mean (a webcam's exposure settles over its
         first frames; a model that kept the first frame saw the whole scene in front for seconds), then
-        at the model's rate."""
+        at the model's rate. Nothing is off them over the first :data:`SETTLE_S` of video (a camera
+        settling)."""
         background, spread, last, off = self._arrays
         if diff.shape != background.shape[1:] or total.shape != background.shape[1:]:
             raise ValueError(f"band of {diff.shape} / {total.shape} cells for models of {background.shape[1:]}")
@@ -136,6 +139,8 @@ class ViewBackground:
         runtime.launch_row_loops(view_background_kernel, diff.shape[0], diff.shape[1], [
             host_array(diff, float), host_array(total, float), wp.vec4(*explained), self._models], DEVICE,
             runtime.BAND_THREADS)
+        if self.frames < self._settle:
+            off.fill(0)
         return off
 
 
