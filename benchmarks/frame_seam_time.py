@@ -57,13 +57,18 @@ def time_parts() -> dict[str, list[float]]:
     """Wrap the per-frame seam's parts (:data:`PARTS`) to record each call's process CPU seconds."""
     seconds: dict[str, list[float]] = defaultdict(list)
     for owner, name, label in PARTS:
-        def timed(*args, _call=getattr(owner, name), _label=label, **kwargs):
-            start = time.process_time()
-            result = _call(*args, **kwargs)
-            seconds[_label].append(time.process_time() - start)
-            return result
-        setattr(owner, name, timed)
+        setattr(owner, name, _timed(getattr(owner, name), seconds[label]))
     return seconds
+
+
+def _timed(call, seconds: list[float]):
+    """``call``, appending each call's process CPU seconds to ``seconds``."""
+    def timed(*args, **kwargs):
+        start = time.process_time()
+        result = call(*args, **kwargs)
+        seconds.append(time.process_time() - start)
+        return result
+    return timed
 
 
 def main() -> int:

@@ -41,7 +41,7 @@ from .partition import BorderOffsets, SeamMaps, SeamOffsets, border_offsets, sea
 from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .seam_path import SeamPath, seam_line
-from .warp_map import CanvasViews, canvas_views, forward_points, source_map_canvas
+from .warp_map import canvas_views, forward_points, source_map_canvas
 from .zone import Zone, adequate_zone
 from sena_warp.kernels import runtime
 

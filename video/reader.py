@@ -286,7 +286,7 @@ class FrameReader:
                 frames = packet.decode()
             except av.error.InvalidDataError:
                 if self.strict:
-                    raise self._damage_error(self._last_good.time_s if self._last_good else Fraction(0))
+                    raise self._damage_error(self._last_good.time_s if self._last_good else Fraction(0)) from None
                 tainted = True
                 continue
             finally:
