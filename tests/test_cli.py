@@ -1,4 +1,6 @@
 import json
+import subprocess
+import sys
 
 import cv2
 import pytest
@@ -79,3 +81,13 @@ def test_unknown_output_type_is_refused_before_work(pair, tmp_path, capsys):
     assert main(["image", *pair, "-o", str(tmp_path / "p.gif")]) == 2  # a bad option, like any other
     assert "unsupported output type" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_python_m_sena_warp_is_the_command(tmp_path):
+    # The same parser and messages as the installed script, under the script's name.
+    done = subprocess.run([sys.executable, "-m", "sena_warp", "config", "--threads", "3"], capture_output=True,
+                          text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 0 and "cpu_threads = 3" in done.stdout
+    done = subprocess.run([sys.executable, "-m", "sena_warp", "video", "left.mp4"], capture_output=True, text=True,
+                          timeout=120, cwd=tmp_path)
+    assert done.returncode == 2 and done.stderr.startswith("sena-warp: error: ") and "sena-warp video --help" in done.stderr
