@@ -156,3 +156,23 @@ def test_a_count_is_shown_at_most_once_per_interval_and_always_at_its_end(monkey
     lines = stream.getvalue().splitlines()
     assert lines[0] == "sena-warp: stitching frames" and lines[-1] == "sena-warp: warning: a fallback"
     assert 2 <= len(lines) - 2 <= 3 and lines[-2].startswith("sena-warp: 1000/1000 frames")
+
+
+@pytest.mark.parametrize("mode", ["plain", "json"])
+def test_a_count_s_last_figure_is_said_once(mode, monkeypatch):
+    # Jobs take longer than the redraw interval: every update is shown, and the close must not repeat the last.
+    monkeypatch.setitem(progress.REDRAW_INTERVAL_S, mode, 0.0)
+    stream = io.StringIO()
+    handler = ConsoleHandler(stream, mode, verbose=False)
+    LOGGER.addHandler(handler)
+    monkeypatch.setattr(LOGGER, "level", logging.INFO)
+    try:
+        count = Count("jobs", 3, "jobs/s")
+        for done in (1, 2, 3):
+            count.update(done)
+        count.close(3)
+    finally:
+        LOGGER.removeHandler(handler)
+    lines = stream.getvalue().splitlines()
+    shown = [json.loads(line)["done"] for line in lines] if mode == "json" else [line.split()[1] for line in lines]
+    assert shown == ([1, 2, 3] if mode == "json" else ["1/3", "2/3", "3/3"])
