@@ -30,7 +30,10 @@ PROGRESS_MODES = ("auto", "bar", "plain", "json")
 # Command-line options that set a Config field: option dest -> field name.
 SETTING_OPTIONS = {"features": "features", "device": "device", "threads": "cpu_threads",
                    "max_megapixels": "max_input_megapixels", "rig": "video_rig", "reestimate": "video_reestimate_s",
-                   "crf": "video_crf", "preset": "video_preset", "codec": "video_codec", "audio": "video_audio"}
+                   "crf": "video_crf", "preset": "video_preset", "codec": "video_codec", "audio": "video_audio",
+                   "bitrate": "video_bitrate_kbps", "maxrate": "video_maxrate_kbps", "ss": "video_start_s",
+                   "to": "video_end_s", "max_width": "video_max_width"}
+RATE_UNITS = {"": 0.001, "k": 1.0, "m": 1000.0}  # --bitrate 8M / 8000k / 8000000 (bit/s), in kbit/s
 HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
@@ -55,6 +58,32 @@ def _positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"{value} is not a positive whole number")
     return value
+
+
+def _seconds(text: str) -> float:
+    """A time as ffmpeg takes one: seconds (``90``, ``90.5``) or ``[HH:]MM:SS[.fff]`` (``1:30``)."""
+    try:
+        parts = [float(part) for part in text.split(":")]
+    except ValueError:
+        parts = []
+    if not 1 <= len(parts) <= 3 or any(part < 0 or part != part for part in parts):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a time; give seconds (90.5) or [HH:]MM:SS (1:30.5)")
+    value = 0.0
+    for part in parts:
+        value = 60 * value + part
+    return value
+
+
+def _rate_kbps(text: str) -> int:
+    """A bit rate as ffmpeg takes one (``8M``, ``8000k``, ``8000000``) in whole kbit/s."""
+    number, unit = (text[:-1], text[-1].lower()) if text[-1:].lower() in ("k", "m") else (text, "")
+    try:
+        kbps = round(float(number) * RATE_UNITS[unit])
+    except ValueError:
+        kbps = 0
+    if kbps < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a bit rate; give e.g. 8M, 8000k or 8000000 (bit/s)")
+    return kbps
 
 
 def _output_options() -> argparse.ArgumentParser:
@@ -96,6 +125,46 @@ def _overwrite_options() -> argparse.ArgumentParser:
     return p
 
 
+def _video_options() -> argparse.ArgumentParser:
+    """Options of a video stitch (settings too), for ``video`` and for every video job of ``batch``."""
+    p = argparse.ArgumentParser(add_help=False)
+    span = p.add_argument_group("span (times of the left video, after --offset)")
+    span.add_argument("--ss", type=_seconds, metavar="TIME",
+                      help="start at this time: seconds or [HH:MM:]SS; reached by seeking (default: the beginning)")
+    span.add_argument("--to", type=_seconds, metavar="TIME", help="end before this time (default: where the videos end)")
+    span.add_argument("-t", dest="duration", type=_seconds, metavar="TIME", help="or: end this long after --ss")
+    rig = p.add_argument_group("rig")
+    rig.add_argument("--offset", type=_offset, default=0.0, metavar="S|auto",
+                     help="seconds the right video started after the left one, or auto: estimated from the "
+                          "audio of both (else their motion), refused when unclear (default: 0)")
+    rig.add_argument("--rig", choices=CHOICES["video_rig"],
+                     help=f"static: maps estimated once (and moved with a camera that drifts); moving: "
+                          f"re-estimated now and then (default: {Config.video_rig})")
+    rig.add_argument("--reestimate", type=float, metavar="S",
+                     help=f"seconds between re-estimations of a moving rig (default: {Config.video_reestimate_s:g})")
+    size = p.add_argument_group("output picture")
+    size.add_argument("--crop", action="store_true",
+                      help="crop to the largest rectangle the first estimate covers (a video: for all of it)")
+    size.add_argument("--max-width", dest="max_width", type=_positive_int, metavar="W",
+                      help="at most W pixels wide, aspect kept, made by the stitch's maps (default: as stitched)")
+    encoding = p.add_argument_group("encoding")
+    encoding.add_argument("--codec", choices=CHOICES["video_codec"],
+                          help="encoder: H.264 (libx264, h264_nvenc) or HEVC (libx265, hevc_nvenc); NVENC falls "
+                               "back to the software encoder where it cannot open (default: h264_nvenc on a CUDA "
+                               "device, else libx264)")
+    encoding.add_argument("--crf", type=int,
+                          help=f"constant quality, 0-51, lower is better and larger (default: {Config.video_crf})")
+    encoding.add_argument("--bitrate", type=_rate_kbps, metavar="RATE",
+                          help="average bit rate instead of --crf, e.g. 8M or 8000k")
+    encoding.add_argument("--maxrate", type=_rate_kbps, metavar="RATE",
+                          help="peak bit rate, capping --crf or --bitrate (a buffer of 2 s of it)")
+    encoding.add_argument("--preset", choices=CHOICES["video_preset"], metavar="PRESET",
+                          help=f"x264/x265 speed preset, ultrafast ... placebo (default: {Config.video_preset})")
+    encoding.add_argument("--audio", choices=CHOICES["video_audio"],
+                          help=f"whose audio to copy (default: {Config.video_audio})")
+    return p
+
+
 def _settings(args: argparse.Namespace) -> dict:
     """Config changes asked for: the --config file's, then the options given on the command line (a bad
     value is refused naming the option)."""
@@ -104,6 +173,13 @@ def _settings(args: argparse.Namespace) -> dict:
     settings = load_settings(args.config) if args.config else {}
     given = {field: check_value(field, getattr(args, dest), f"--{dest.replace('_', '-')}")
              for dest, field in SETTING_OPTIONS.items() if getattr(args, dest, None) is not None}
+    if getattr(args, "duration", None) is not None:  # -t: the span's end from its start
+        if "video_end_s" in given:
+            raise InputError("--to and -t both end the span; give one of them")
+        given["video_end_s"] = check_value("video_end_s", given.get("video_start_s", settings.get(
+            "video_start_s", Config.video_start_s)) + args.duration, "-t")
+    if "video_crf" in given and "video_bitrate_kbps" in given:
+        raise InputError("--crf and --bitrate are two ways to set the rate; give one of them")
     return {**settings, **given}
 
 
@@ -162,7 +238,7 @@ def cmd_video(args: argparse.Namespace) -> int:
         raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
     return _run_job(Job("video", (args.left, args.right), args.output, args.settings, report=args.report,
                         reference=args.reference, crop=args.crop, offset_s=args.offset, strict=args.strict,
-                        figures=args.figures, overwrite=args.overwrite))
+                        figures=args.figures, debug=args.debug, overwrite=args.overwrite))
 
 
 def cmd_config(args: argparse.Namespace) -> int:
@@ -183,7 +259,7 @@ def _offset(text: str) -> float | str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    common, settings, overwrite = _output_options(), _settings_options(), _overwrite_options()
+    common, settings, overwrite, video = _output_options(), _settings_options(), _overwrite_options(), _video_options()
     parser = _Parser(
         prog="sena-warp",
         description="Parallax-tolerant two-camera stitching (SENA) for image pairs and paired videos.",
@@ -212,26 +288,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="input kept unwarped (default: auto = the right or bottom view)")
     p.set_defaults(run=cmd_image)
 
-    p = command("video", "stitch two synchronised videos", settings, overwrite)
+    p = command("video", "stitch two synchronised videos", settings, video, overwrite)
     p.add_argument("left", help="left (or top) video; its frames and times drive the output")
     p.add_argument("right", help="right (or bottom) video, paired to the left one by time")
-    p.add_argument("-o", "--output", required=True, help="output video (.mp4, .mov or .mkv), H.264")
-    p.add_argument("--offset", type=_offset, default=0.0, metavar="S|auto",
-                   help="seconds the right video started after the left one, or auto: estimated from the "
-                        "audio of both (else their motion), refused when unclear (default: 0)")
-    p.add_argument("--rig", choices=CHOICES["video_rig"],
-                   help=f"static: maps estimated once (and moved with a camera that drifts); moving: "
-                        f"re-estimated now and then (default: {Config.video_rig})")
-    p.add_argument("--crop", action="store_true",
-                   help="crop to the largest rectangle the first estimate covers, fixed for the whole video")
-    p.add_argument("--reestimate", type=float, metavar="S",
-                   help=f"seconds between re-estimations of a moving rig (default: {Config.video_reestimate_s})")
-    p.add_argument("--crf", type=int, help=f"constant quality, lower is better (default: {Config.video_crf})")
-    p.add_argument("--preset", choices=CHOICES["video_preset"], help=f"libx264 preset (default: {Config.video_preset})")
-    p.add_argument("--codec", choices=CHOICES["video_codec"],
-                   help="H.264 encoder (default: h264_nvenc when the device is cuda and it opens, else libx264)")
-    p.add_argument("--audio", choices=CHOICES["video_audio"], help=f"whose audio to copy (default: {Config.video_audio})")
+    p.add_argument("-o", "--output", required=True,
+                   help="output video (.mp4, .mov or .mkv), or a picture (.png or .jpg) of the stitched frame at "
+                        "--ss, made in about the time of the estimate: a look at the rig before a long encode")
     p.add_argument("--report", help="write a JSON report (docs/report.md)")
+    p.add_argument("--debug", metavar="DIR", help="write a picture of each stage of the first estimate into DIR")
     p.add_argument("--figures", action="store_true",
                    help="measure the video over time (seam motion, exposure step, misalignment at the seam, "
                         "stability) into the report's 'figures'; slows the run")
@@ -241,7 +305,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fail (exit 5) on damaged frames or a truncated input instead of replacing them with a warning")
     p.set_defaults(run=cmd_video)
 
-    p = command("batch", "stitch many pairs on local worker processes or a Ray cluster", settings)
+    p = command("batch", "stitch many pairs on local worker processes or a Ray cluster", settings, video, overwrite)
     p.add_argument("jobs", metavar="JOBS",
                    help="folder of pair folders (a.* + b.* images, or left.* + right.* videos), or a .toml/.csv job list")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for the outputs, reports and summary")

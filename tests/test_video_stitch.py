@@ -14,6 +14,7 @@ from dataclasses import replace
 from fractions import Fraction
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -515,3 +516,16 @@ def test_looked_ahead_pairs_keep_their_order_and_are_seen_that_many_pairs_early(
         assert seen[-1] == min(pair[0] + 3, 6)  # the newest pair seen is 3 ahead (or the last)
     assert out == list(range(7)) and seen == list(range(7))
     assert [p[0] for p in looked_ahead(((i, i) for i in range(4)), lambda a, b: None, 0)] == [0, 1, 2, 3]
+
+
+def test_a_picture_output_is_the_frame_a_video_from_there_starts_with(clips, tmp_path):
+    left, right = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4"
+    cfg = FAST.replace(video_start_s=1.0, video_audio="none")
+    still = stitch_videos(left, right, tmp_path / "at1.png", cfg, VideoOptions.from_config(cfg))
+    video = stitch_videos(left, right, tmp_path / "from1.mp4", cfg.replace(video_end_s=1.2),
+                          VideoOptions.from_config(cfg.replace(video_end_s=1.2)))
+    assert still["still"]["left_time_s"] == 1.0 and "frames_out" not in still and video["frames_out"] == 6
+    picture = cv2.imread(str(tmp_path / "at1.png"))
+    first = decoded_frames(tmp_path / "from1.mp4")[0].to_bgr()
+    assert picture.shape == first.shape == (video["output"]["height"], video["output"]["width"], 3)
+    assert float(np.mean(cv2.absdiff(picture, first))) < 2.0  # the same stitch of the same frame, less the encoding

@@ -24,6 +24,7 @@ from collections import deque
 from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -41,13 +42,14 @@ from .estimate import (Attempt, best_first_estimate, estimate_pair, paired_frame
                        spaced_span)
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, cell_px
-from .loop import VideoOptions, run_video
+from .loop import VideoOptions, run_still, run_video
 from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, MapsBlend, PlaneMaps, chroma_lines, drifted_maps, lerp_maps,
                    map_change_px, plane_maps, sampled_mask, seam_change_px, seam_per_target_line, target_offset)
 from .reader import YuvFrame, probe_video
 from .writer import even_size
 
 RIGS = CHOICES["video_rig"]
+STILL_SUFFIXES = (".png", ".jpg", ".jpeg")  # an output of these types is the one stitched frame at the span's start
 JITTER_PERCENTILE = 99.0  # "largest map change" = this percentile of |delta M_s| per frame (robust to edge pixels)
 JITTER_STRIDE = 4  # ... over every this-th canvas row and column (a 1080p frame's full maps took 0.1 s)
 LUMA_FILL = (BLACK_Y,)  # output Y where no input is sampled
@@ -532,6 +534,8 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
                   observer: FrameObserver | None = None) -> dict:
     """Stitch two videos into ``output`` with SENA maps; return the run's report.
 
+    An ``output`` of a ``STILL_SUFFIXES`` type gets the stitched frame at the span's start and nothing
+    more (:func:`loop.run_still`), a video file every frame of the span (:func:`loop.run_video`).
     ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
     ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
     ``plan``: commit the video with that plan's other outputs (see ``sena_warp.outputs``).
@@ -554,8 +558,9 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
             built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference, observer))
         return built[0]
 
+    run = run_still if Path(output).suffix.lower() in STILL_SUFFIXES else run_video
     try:
-        report = run_video(left, right, output, factory, options, plan)
+        report = run(left, right, output, factory, options, plan)
     finally:
         for compositor in built:
             compositor.close()
