@@ -43,8 +43,9 @@ from .estimate import (Attempt, best_first_estimate, estimate_pair, paired_frame
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_still, run_video
-from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, MapsBlend, PlaneMaps, chroma_lines, drifted_maps, lerp_maps,
-                   map_change_px, plane_maps, sampled_mask, seam_change_px, seam_per_target_line, target_offset)
+from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, MapsBlend, PlaneMaps, canvas_scale, chroma_lines, drifted_maps,
+                   lerp_maps, map_change_px, output_shape, plane_maps, sampled_mask, scaled_plane_maps,
+                   seam_change_px, seam_on_canvas_lines, seam_per_target_line, target_offset)
 from .reader import YuvFrame, probe_video
 from .writer import even_size
 
@@ -170,19 +171,23 @@ class SenaFrameCompositor:
         # A static rig's views are checked for drift this often (``drift.py``); None: not checked.
         self._drift_s = cfg.video_drift_check_s if cfg.video_rig == "static" and cfg.video_drift_check_s > 0 else None
         x0, y0, width, height = fixed_canvas(first, self._rig.pick(*frame_shapes), cfg.video_crop)
-        shape = (height, width)
         self.crop_xywh = (x0, y0, width, height) if cfg.video_crop else None
+        # The output is the fixed canvas, or that canvas made at most video_max_width wide by the maps
+        # themselves (``maps.scaled_plane_maps``): each output pixel samples the inputs once.
+        self._canvas_shape = (height, width)
+        shape = self._shape_out = output_shape(self._canvas_shape, cfg.video_max_width)
+        self._scale = canvas_scale(self._canvas_shape, shape)
         self._band = band_half_width(shape, cfg)
         self._offset_tgt = target_offset(first.map_tgt_input) - np.array([x0, y0], np.float64)
-        self._maps = self._on_canvas(first, shape)
+        self._maps = self._on_canvas(first)
         self.output_size = (shape[1], shape[0])
         self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.seam_luma, cfg, WHITE_Y)
         self._chroma = Compositor(self._maps.map_src_chroma, self._maps.map_tgt_chroma, self._maps.seam_chroma, cfg,
                                   None)
         self._border_set = None  # the border offsets last uploaded
         self._set_border()
-        self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, cell_px(frame_shapes, cfg),
-                               self._reestimate_s is None, fps, cfg)
+        cell = max(1, round(cell_px(frame_shapes, cfg) * float(self._scale.min())))
+        self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, cell, self._reestimate_s is None, fps, cfg)
         self._fps = fps
         self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
         self._plane_shapes: tuple[tuple[int, int], tuple[int, int]] | None = None
@@ -226,9 +231,10 @@ class SenaFrameCompositor:
             self._luma.set_border_offsets(*border)
             self._border_set = border
 
-    def _on_canvas(self, maps: StitchMaps, shape: tuple[int, int]) -> PlaneMaps:
-        """An estimate on the fixed canvas, its plan band wide enough for the per-frame seam."""
-        plane = plane_maps(maps, shape, self._offset_tgt)
+    def _on_canvas(self, maps: StitchMaps) -> PlaneMaps:
+        """An estimate on the fixed canvas, scaled to the output, its plan band wide enough for the
+        per-frame seam."""
+        plane = scaled_plane_maps(plane_maps(maps, self._canvas_shape, self._offset_tgt), self._shape_out)
         reach = self._band + plane.seam_luma.band_px
         return replace(plane, seam_luma=replace(plane.seam_luma, band_px=reach),
                        seam_chroma=replace(plane.seam_chroma, band_px=0.5 * reach))
@@ -329,13 +335,15 @@ class SenaFrameCompositor:
         self._drift_log["applied"].append({"time_s": round(time_s, 4), "source_px": np.round(shifts[0], 2).tolist(),
                                            "target_px": np.round(shifts[1], 2).tolist()})
         frames = int(np.ceil(change / self._cfg.video_drift_speed_px))
-        return drifted_maps(self._drift_base, *shifts), frames
+        return drifted_maps(self._drift_base, *shifts, self._scale), frames
 
     def _prior_seam_tgt(self) -> np.ndarray:
         """The current seam per working-frame target row, in target pixels: where a re-estimate's seam
         should stay (``stitch.estimate_maps``'s ``prior_seam_tgt``)."""
         offset = self._offset_tgt[::-1] if self._rig.vertical else self._offset_tgt
-        return seam_per_target_line(self._seam.positions, offset)
+        lines = self._canvas_shape[1] if self._rig.vertical else self._canvas_shape[0]
+        seam = seam_on_canvas_lines(self._seam.positions, lines, self._scale, not self._rig.vertical)
+        return seam_per_target_line(seam, offset)
 
     def _submit(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         self._last_estimate_s = float(frame_l.time_s)
@@ -356,7 +364,7 @@ class SenaFrameCompositor:
             estimate = estimate_pair(frame_l, frame_r, self._cfg, self._rig.target, prior_seam_tgt=prior)
             if estimate.rig.vertical != self._rig.vertical:
                 return None, "rig orientation changed"
-            candidate = self._on_canvas(estimate, self._maps.shape)
+            candidate = self._on_canvas(estimate)
             reason = rejection_reason(candidate, self._maps, self._first_inliers, shape_src, shape_tgt, self._cfg)
             return (candidate, None) if reason is None else (None, reason)
         except StitchError as exc:
@@ -472,6 +480,7 @@ class SenaFrameCompositor:
                     "vertical": self._rig.vertical, "reestimate_s": self._reestimate_s},
             "first_estimate": self._first_info,
             "canvas": {"width": self.output_size[0], "height": self.output_size[1],
+                       "stitched_width": self._canvas_shape[1], "stitched_height": self._canvas_shape[0],
                        "crop_xywh": None if self.crop_xywh is None else list(self.crop_xywh),
                        "offset_tgt": [float(v) for v in self._offset_tgt],
                        "seam_x_working": [None if np.isnan(x) else round(float(x), 2)
