@@ -36,7 +36,8 @@ class Job:
     whole video); ``offset_s`` (videos): seconds the right video started after the left one, or "auto"
     to estimate them; ``strict`` (videos): damaged or truncated inputs fail the job instead of a
     warning; ``figures`` (videos): measure the video over time into the report's ``figures``
-    (``evaluation.video_figures``); ``debug`` (images): folder for one picture per stage;
+    (``evaluation.video_figures``); ``debug``: folder for one picture per stage (a video's: of its first
+    estimate);
     ``overwrite``: what an existing output gets, one of ``outputs.OVERWRITE_MODES`` (the CLI's default
     refuses it, ``-y`` replaces it, ``-n`` skips the job).
     """
@@ -166,7 +167,7 @@ def _video(job: Job, cfg: Config) -> dict | None:
         observer = VideoFigures(cfg)
     with plan:  # every output or none
         report = stitch_videos(*job.inputs, job.output, cfg, options, reference=job.reference, plan=plan,
-                               observer=observer)
+                               observer=observer, debug=job.debug)
         if observer is not None:
             report["figures"] = observer.figures()
         report["sync"] = (sync.as_dict() if sync is not None

@@ -280,13 +280,19 @@ def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     with naming_scale_ratio(img_a, img_b, cfg):
         maps = estimate_maps(img_a, img_b, cfg, reference, transparent=transparent)
     clock.seconds.update(maps.seconds)
-    img_src, img_tgt = maps.rig.pick(img_a, img_b)
     stage("compositing")
     with clock("composite"):
-        compositor = panorama_compositor(maps, cfg, transparent)
-        out = compositor.apply(img_src, img_tgt)
-        coverage = compositor.coverage(img_src.shape, img_tgt.shape)
-    return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
+        image = panorama_image(img_a, img_b, maps, cfg, transparent)
+    return Panorama(image, maps, clock.seconds)
+
+
+def panorama_image(img_a: np.ndarray, img_b: np.ndarray, maps: StitchMaps, cfg: Config,
+                   transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> np.ndarray:
+    """The BGRA panorama of BGR images ``img_a``, ``img_b`` composited with ``maps`` (alpha 0 where
+    neither covers the canvas); ``transparent`` as :func:`stitch_images`'."""
+    img_src, img_tgt = maps.rig.pick(img_a, img_b)
+    compositor = panorama_compositor(maps, cfg, transparent)
+    return np.dstack([compositor.apply(img_src, img_tgt), compositor.coverage(img_src.shape, img_tgt.shape)])
 
 
 def _prior_on_canvas(prior_seam_tgt: np.ndarray | None, canvas) -> np.ndarray | None:

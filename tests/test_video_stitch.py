@@ -571,3 +571,21 @@ def test_a_narrower_output_is_the_stitch_made_smaller_by_its_maps(clips, tmp_pat
     moving = small_cfg.replace(video_rig="moving", video_reestimate_s=0.5, video_estimate_workers=0)
     report = stitch_videos(left, right, tmp_path / "moving.mp4", moving, VideoOptions.from_config(moving))
     assert report["stitch"]["reestimations"]["accepted"] == 3 and report["output"]["width"] == 166
+
+
+@pytest.mark.parametrize("max_side", [1920, 256])  # the frames as they are, and made smaller for the estimate
+def test_debug_writes_the_first_estimate_s_stage_pictures(clips, tmp_path, max_side):
+    cfg = FAST.replace(video_audio="none", video_estimate_max_side=max_side, video_end_s=0.5)
+    report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "o.mp4", cfg,
+                           VideoOptions.from_config(cfg), debug=tmp_path / "debug")
+    names = sorted(p.name for p in (tmp_path / "debug").iterdir())
+    assert names == ["01_matches.jpg", "02_overlap_cells.jpg", "03_ffd_field.jpg", "05_warped_over_target.jpg",
+                     "06_zone_chain_seam.jpg", "07_alpha.jpg"]
+    seam = cv2.imread(str(tmp_path / "debug" / "06_zone_chain_seam.jpg"))
+    canvas = report["stitch"]["canvas"]
+    # The panorama the seam is drawn on: the video's canvas (up to its even crop), or the estimate's smaller one.
+    scale = max(480 / max_side, 1.0)
+    assert abs(seam.shape[1] * scale - canvas["stitched_width"]) <= 2 * scale
+    assert abs(seam.shape[0] * scale - canvas["stitched_height"]) <= 2 * scale
+    matches = cv2.imread(str(tmp_path / "debug" / "01_matches.jpg"))
+    assert matches.shape[1] == round(2 * 270 / scale)  # the pair side by side, as the estimate saw it

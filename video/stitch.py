@@ -33,10 +33,11 @@ from ..composite import Compositor
 from ..config import CHOICES, Config
 from ..crop import largest_inner_rectangle
 from ..errors import InputError, StitchError, VideoError
-from ..outputs import OutputPlan
+from ..outputs import OutputPlan, staged
 from ..report import run_info
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
+from .debug import dump_first_estimate
 from .drift import DriftWatch, overlap_boxes
 from .estimate import (Attempt, best_first_estimate, estimate_pair, paired_frames, rejection_reason, spaced_pairs,
                        spaced_span)
@@ -135,6 +136,9 @@ class CompositedFrame:
     offsets_luma: tuple[np.ndarray, np.ndarray]
     weights: Callable[[], tuple[np.ndarray, np.ndarray]]
 
+
+FirstEstimateHook = Callable[[StitchMaps, YuvFrame, YuvFrame], None]
+"""Shown the first estimate and the (left, right) frames it was made on (``video --debug``)."""
 
 FrameObserver = Callable[[CompositedFrame], None]
 """Called once per composited frame, on the loop's thread, before the frame is encoded; its time is
@@ -241,21 +245,33 @@ class SenaFrameCompositor:
 
     @classmethod
     def from_pairs(cls, pairs: Iterator[tuple[YuvFrame, YuvFrame]], left: str | os.PathLike,
-                   right: str | os.PathLike, cfg: Config, reference: str,
-                   observer: FrameObserver | None = None) -> "SenaFrameCompositor":
+                   right: str | os.PathLike, cfg: Config, reference: str, observer: FrameObserver | None = None,
+                   on_first: FirstEstimateHook | None = None) -> "SenaFrameCompositor":
         """The compositor of two videos ``left`` and ``right``: maps from the best of their first frame
         ``pairs`` (``estimate.best_first_estimate``; it takes pairs up to the last it tries);
-        ``reference`` as ``stitch_videos``; ``cfg.device`` resolved."""
-        maps, pair, attempts = best_first_estimate(spaced_pairs(pairs, cfg), cfg, reference)
+        ``reference`` as ``stitch_videos``; ``cfg.device`` resolved. ``on_first``: shown the first
+        estimate and the pair it was made on."""
+        tried: dict[int, tuple[YuvFrame, YuvFrame]] = {}
+
+        def remembered(spaced: Iterator[tuple[int, YuvFrame, YuvFrame]]) -> Iterator[tuple[int, YuvFrame, YuvFrame]]:
+            for index, frame_l, frame_r in spaced:
+                if on_first is not None:
+                    tried[index] = (frame_l, frame_r)
+                yield index, frame_l, frame_r
+
+        maps, pair, attempts = best_first_estimate(remembered(spaced_pairs(pairs, cfg)), cfg, reference)
+        if on_first is not None:
+            on_first(maps, *tried[pair])
         return cls(maps, attempts, pair, float(probe_video(left).fps), video_shapes(left, right), cfg, observer)
 
     @classmethod
     def from_videos(cls, left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
-                    reference: str, observer: FrameObserver | None = None) -> "SenaFrameCompositor":
+                    reference: str, observer: FrameObserver | None = None,
+                    on_first: FirstEstimateHook | None = None) -> "SenaFrameCompositor":
         """:meth:`from_pairs` on decoders of its own (``offset_s`` as ``VideoOptions.offset_s``), for a
         compositor made apart from a frame loop."""
         with paired_frames(left, right, offset_s, cfg) as pairs:
-            return cls.from_pairs(pairs, left, right, cfg, reference, observer)
+            return cls.from_pairs(pairs, left, right, cfg, reference, observer, on_first)
 
     def source_target(self, item_left, item_right) -> tuple:
         """A (left, right) pair of per-input things (frames, planes, shapes) as (source, target)."""
@@ -540,7 +556,7 @@ def check_rig_settings(cfg: Config) -> None:
 
 def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike, cfg: Config,
                   options: VideoOptions, reference: str = "auto", plan: OutputPlan | None = None,
-                  observer: FrameObserver | None = None) -> dict:
+                  observer: FrameObserver | None = None, debug: str | os.PathLike | None = None) -> dict:
     """Stitch two videos into ``output`` with SENA maps; return the run's report.
 
     An ``output`` of a ``STILL_SUFFIXES`` type gets the stitched frame at the span's start and nothing
@@ -550,7 +566,8 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
     ``plan``: commit the video with that plan's other outputs (see ``sena_warp.outputs``).
     The report is :func:`loop.run_video`'s plus ``run`` (tool, device, settings) and ``stitch`` (see
     :meth:`SenaFrameCompositor.report`), its times in one ``timing_s`` block (``docs/report.md``).
-    ``observer``: called with every composited frame (:class:`CompositedFrame`).
+    ``observer``: called with every composited frame (:class:`CompositedFrame`). ``debug``: a folder for
+    the first estimate's stage pictures (``debug.py``), written with ``plan``'s outputs.
     The Warp device of ``cfg`` is resolved here, once for the whole video.
     """
     check_rig_settings(cfg)
@@ -559,17 +576,27 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
     prewarm(cfg.device)  # before the run's clock: a first run's kernel compile is not frame time
     load_kernels_s = time.perf_counter() - t0
     built: list[SenaFrameCompositor] = []
+    first: list[tuple[StitchMaps, YuvFrame, YuvFrame]] = []  # kept for the debug pictures
+
+    def keep_first(maps: StitchMaps, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
+        first.append((maps, frame_l, frame_r))
+
+    hook = keep_first if debug is not None else None
 
     def factory(pairs: Iterator[tuple[YuvFrame, YuvFrame]]) -> SenaFrameCompositor:
         if spaced_span(cfg) * pair_mib(video_shapes(left, right)) <= cfg.video_estimate_lookahead_mib:
-            built.append(SenaFrameCompositor.from_pairs(pairs, left, right, cfg, reference, observer))
+            built.append(SenaFrameCompositor.from_pairs(pairs, left, right, cfg, reference, observer, hook))
         else:  # too large to hold that many pairs for the loop: the estimate decodes its own
-            built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference, observer))
+            built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference, observer,
+                                                         hook))
         return built[0]
 
     run = run_still if Path(output).suffix.lower() in STILL_SUFFIXES else run_video
     try:
         report = run(left, right, output, factory, options, plan)
+        if debug is not None:
+            with staged(plan, debug, (left, right), folder=True) as debug_plan, debug_plan.writing(debug) as folder:
+                dump_first_estimate(folder, *first[0], cfg)
     finally:
         for compositor in built:
             compositor.close()
