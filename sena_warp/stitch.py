@@ -274,8 +274,8 @@ def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     """
     cfg = runtime.resolve_config(cfg)
     clock = StageClock()
-    with clock("load_kernels"):  # a first run's compile gets its own time, not a stage's
-        runtime.prewarm(cfg.device)
+    with clock("load_kernels"):  # a first run's compile starts in the background (a launch waits for its module)
+        runtime.prewarm(cfg.device, channels=(3,), wait=False)  # BGR images: the 3-channel frame kernel
     stage("estimating maps")
     with naming_scale_ratio(img_a, img_b, cfg):
         maps = estimate_maps(img_a, img_b, cfg, reference, transparent=transparent)

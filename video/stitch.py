@@ -54,6 +54,7 @@ RIGS = CHOICES["video_rig"]
 STILL_SUFFIXES = (".png", ".jpg", ".jpeg")  # an output of these types is the one stitched frame at the span's start
 JITTER_PERCENTILE = 99.0  # "largest map change" = this percentile of |delta M_s| per frame (robust to edge pixels)
 JITTER_STRIDE = 4  # ... over every this-th canvas row and column (a 1080p frame's full maps took 0.1 s)
+PLANE_CHANNELS = (1, 2)  # the frame kernels' channel counts: the Y pass, and U and V stacked
 LUMA_FILL = (BLACK_Y,)  # output Y where no input is sampled
 CHROMA_FILL = (BLACK_UV, BLACK_UV)  # output U, V likewise
 
@@ -573,7 +574,9 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
     check_rig_settings(cfg)
     cfg = resolve_config(cfg)
     t0 = time.perf_counter()
-    prewarm(cfg.device)  # before the run's clock: a first run's kernel compile is not frame time
+    # Shipped builds load at once; what must be compiled is, in the background, the estimate's modules
+    # first: a launch waits for its own module only. The planes are composited with 1 (Y) and 2 (UV) channels.
+    prewarm(cfg.device, channels=PLANE_CHANNELS, wait=False)
     load_kernels_s = time.perf_counter() - t0
     built: list[SenaFrameCompositor] = []
     first: list[tuple[StitchMaps, YuvFrame, YuvFrame]] = []  # kept for the debug pictures
