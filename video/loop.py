@@ -161,14 +161,8 @@ def run_video(
         return _run(left, right, output, compositor_factory, options, plan)
 
 
-def run_still(
-    left: str | os.PathLike,
-    right: str | os.PathLike,
-    output: str | os.PathLike,
-    compositor_factory: CompositorFactory,
-    options: VideoOptions,
-    plan: OutputPlan | None = None,
-) -> dict:
+def run_still(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike,
+              compositor_factory: CompositorFactory, options: VideoOptions, plan: OutputPlan | None = None) -> dict:
     """Write the stitched frame at ``options.start_s`` (the first pair of the span) as the image ``output``
     (.png or .jpg, by its suffix) and stop: a look at the rig in about the time of the estimate. The
     compositor is built as :func:`run_video` builds it, so the frame is the one a video from there
