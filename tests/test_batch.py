@@ -235,7 +235,8 @@ def test_a_video_job_in_a_list_can_crop(bundled_dir, tmp_path):
     clips = bundled_dir / "video"
     jobs = tmp_path / "jobs.toml"
     jobs.write_text(f'[[job]]\nleft = "{clips / "rooftop_left.mp4"}"\nright = "{clips / "rooftop_right.mp4"}"\n'
-                    f'crop = true\nvideo_start_s = 1.0\n')
+                    f'crop = true\nvideo_start_s = 1.0\nvideo_max_width = 200\noutput = "check.png"\n')
     (entry,) = read_jobs(jobs, tmp_path / "out", {}, {"crop": False, "offset": 0.25})
     assert (entry.job.kind, entry.job.crop, entry.job.offset_s) == ("video", True, 0.25)
-    assert entry.job.settings == {"video_start_s": 1.0}
+    assert entry.job.settings == {"video_start_s": 1.0, "video_max_width": 200}
+    assert entry.job.output == str(tmp_path / "out" / "check.png")  # a still of the frame at 1 s
