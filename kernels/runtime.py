@@ -63,7 +63,10 @@ _loads: dict[tuple[str, str], Future] = {}  # (module name, device) -> its load,
 _loads_lock = threading.Lock()
 _compile_pool = ThreadPoolExecutor(max_workers=os.cpu_count() or 1, thread_name_prefix="sena-warp-load")
 _compile_count: "_CompileCount | None" = None
-BUILT = Path(__file__).resolve().parent / "built"  # shipped builds, one folder per module (tools/ship_kernels.py)
+# Shipped builds, one folder per module (tools/ship_kernels.py), under the Warp version they were built with:
+# a CPU object holds that version's native code, so another version compiles instead of loading it.
+SHIPPED = Path(__file__).resolve().parent / "built"
+BUILT = SHIPPED / wp.config.version
 SHIPPED_PTX_ARCH = 75  # the CUDA build shipped: PTX that the driver compiles on load for any GPU from sm_75 on
 # The kernel modules in the order a stitch first launches them: the estimate's (the lattice, the gate, the warp
 # map and its samples, the seam), then the frames'. Loaded in this order, the estimate's come first.

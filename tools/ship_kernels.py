@@ -7,8 +7,8 @@ Usage (from the repository root, after any change to ``kernels/``)::
 For each module of ``sena_warp.kernels`` (``runtime.kernel_modules``, every frame-kernel variant): the CPU
 object as a launch loads it (block size 1), built for any x86-64 CPU (``MODULE_OPTIONS``), and PTX for
 sm_75, which the CUDA driver compiles on load for any GPU from sm_75 on. Each lands in a folder named as
-Warp names the module (its code's and options' hash), with its metadata; folders of modules that no
-longer exist are removed. ``tests/test_kernels_runtime.py`` fails while the builds are not those of the
+Warp names the module (its code's and options' hash), with its metadata, under the installed Warp's version;
+folders of modules that no longer exist, and other versions' builds, are removed. ``tests/test_kernels_runtime.py`` fails while the builds are not those of the
 kernels as they are. CUDA compiles here without a GPU: NVRTC ships in the warp-lang wheel.
 """
 
@@ -31,7 +31,11 @@ def main() -> int:
     from sena_warp.kernels import runtime
 
     modules = runtime.kernel_modules("cpu")["cpu"]
-    runtime.BUILT.mkdir(exist_ok=True)
+    runtime.BUILT.mkdir(parents=True, exist_ok=True)
+    for other in runtime.SHIPPED.iterdir():
+        if other != runtime.BUILT:
+            shutil.rmtree(other)
+            print(f"removed the builds of Warp {other.name}")
     kept = set()
     for module in modules:
         t0 = time.perf_counter()
