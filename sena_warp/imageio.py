@@ -8,13 +8,12 @@ were fully transparent. Inputs are never modified; outputs go through ``sena_war
 from __future__ import annotations
 
 import os
-import sys
-import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from . import native_stderr
 from .errors import InputError, OutputError
 from .image_header import apply_orientation, read_header
 from .outputs import OutputPlan, atomic_output
@@ -138,22 +137,13 @@ def _decode_quietly(data: np.ndarray) -> tuple[np.ndarray | None, str]:
     incomplete" for a truncated file), which would break the CLI's one-line error; the text is caught
     here so it can go into the InputError instead. Warnings on a file that still decodes are dropped.
     """
-    sys.stderr.flush()
-    saved_fd = os.dup(2)
-    with tempfile.TemporaryFile() as sink:
-        os.dup2(sink.fileno(), 2)
+    error = ""
+    with native_stderr.caught() as said:
         try:
             img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
         except cv2.error as exc:  # e.g. a size the decoder refuses to allocate
             img, error = None, exc.err
-        else:
-            error = ""
-        finally:
-            os.dup2(saved_fd, 2)
-            os.close(saved_fd)
-        sink.seek(0)
-        decoder_says = " ".join(f"{sink.read().decode(errors='replace')} {error}".split())
-    return img, decoder_says
+    return img, " ".join(f"{said.text} {error}".split())
 
 
 def encode_image(path: str | os.PathLike, img: np.ndarray, params: tuple[int, ...] = ()) -> np.ndarray:

@@ -19,11 +19,14 @@ import os
 
 import cv2
 import numpy as np
-import onnxruntime as ort
 
+from . import native_stderr
 from .bilinear import sample_bilinear
 from .config import Config
 from .errors import InputError
+
+with native_stderr.caught():  # its import says on stderr when HOME cannot keep its telemetry identifier
+    import onnxruntime as ort
 
 MODEL_FILE = "xfeat.onnx"
 OUTPUT_NAMES = ("feats", "keypoint_logits", "reliability")
