@@ -57,6 +57,21 @@ def _positive_int(text: str) -> int:
     return value
 
 
+MAX_BENCH_SECONDS = 3600.0  # bench --seconds and --rss: clips of at most an hour
+
+
+def _clip_seconds(text: str) -> float:
+    """``bench --seconds`` / ``--rss``: a clip length in seconds, in (0, MAX_BENCH_SECONDS]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not 0 < value <= MAX_BENCH_SECONDS:  # also refuses nan
+        raise argparse.ArgumentTypeError(f"{text} s is not a clip length; give more than 0 and at most "
+                                         f"{MAX_BENCH_SECONDS:g} seconds")
+    return value
+
+
 def _output_options() -> argparse.ArgumentParser:
     """Options every subcommand takes: version, verbosity, progress style."""
     p = argparse.ArgumentParser(add_help=False)
@@ -259,13 +274,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = command("bench", "frame-rate benchmark: transcode baseline vs stitch, per stage, kernel", overwrite)
     p.add_argument("--sizes", nargs="+", metavar="SIZE",
-                   help="clip sizes: 720p, 1080p, 4k or WIDTHxHEIGHT (default: 720p 1080p 4k)")
-    p.add_argument("--seconds", type=float, default=10.0, help="clip length in seconds (default: %(default)s)")
+                   help="clip sizes: 720p, 1080p, 4k or WIDTHxHEIGHT, even sides from 16 up to 8K (default: 720p 1080p 4k)")
+    p.add_argument("--seconds", type=_clip_seconds, default=10.0,
+                   help=f"clip length in seconds, at most {MAX_BENCH_SECONDS:g} (default: %(default)s)")
     p.add_argument("--markdown", metavar="FILE", help="also write the table as Markdown")
     p.add_argument("--work", default="bench_work", help="folder for the clips and outputs (default: %(default)s)")
     p.add_argument("--data", help="the shared data set holding pairs/rew_lawn_2160 (default: ../shared/data "
                                   "beside the source tree)")
-    p.add_argument("--rss", type=float, nargs="*", default=[], metavar="S",
+    p.add_argument("--rss", type=_clip_seconds, nargs="*", default=[], metavar="S",
                    help="also measure the peak RSS of 1080p stitches of these lengths in seconds (e.g. 10 60)")
     p.add_argument("--device", choices=CHOICES["device"], default=Config.device,
                    help="where the Warp kernels run (default: %(default)s)")
