@@ -181,9 +181,9 @@ def cmd_video(args: argparse.Namespace) -> int:
 
 
 def cmd_config(args: argparse.Namespace) -> int:
-    from .config_file import check_config, config_toml
+    from .config_file import config_toml, settings_config
 
-    print(config_toml(check_config(Config().replace(**args.settings), "settings")), end="")
+    print(config_toml(settings_config(args.settings, "settings")), end="")
     return 0
 
 

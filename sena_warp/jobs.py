@@ -15,7 +15,7 @@ from pathlib import Path
 from sena_warp.kernels.runtime import resolve_config
 
 from .config import OFFSET_AUTO, Config
-from .config_file import check_config
+from .config_file import settings_config
 from .imageio import IMAGE_SUFFIXES
 from .outputs import OutputPlan
 from .progress import LOGGER, stage
@@ -60,7 +60,7 @@ def job_config(settings: dict) -> Config:
     The Warp device is resolved here; the encoder is h264_nvenc where that device is CUDA and the
     settings chose no codec (the writer falls back to libx264, saying so, where NVENC cannot open).
     """
-    cfg = resolve_config(check_config(Config().replace(**settings), "settings"))
+    cfg = resolve_config(settings_config(settings, "settings"))
     codec = cfg.video_codec if "video_codec" in settings or cfg.device != "cuda" else "h264_nvenc"
     return cfg.replace(video_codec=codec)
 
