@@ -97,8 +97,9 @@ def read_image_masked(path: str | os.PathLike, max_megapixels: float | None = No
     InputError saying what is wrong with it.
 
     Returns (BGR uint8 (H, W, 3), (H, W) bool transparent mask or None when no pixel is). The size
-    is checked against ``max_megapixels`` from the header, before decoding; the EXIF orientation
-    is applied (see ``image_header``).
+    is checked against ``max_megapixels`` from the header, before decoding; a file whose header gives
+    no size (a format ``image_header`` does not read, or a damaged header) is refused undecoded. The
+    EXIF orientation is applied (see ``image_header``).
     """
     path = existing_file(path)
     try:
@@ -106,15 +107,14 @@ def read_image_masked(path: str | os.PathLike, max_megapixels: float | None = No
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror})") from exc
     header = read_header(memoryview(data))
-    if header.pixels is not None:
-        check_size(str(path), header.width, header.height, max_megapixels)
-    img, decoder_says = _decode_quietly(data) if data.size else (None, "")
+    if not header.pixels:  # no size to check: the decoder could allocate anything, so it is not asked
+        raise InputError(f"{path}: not a readable image (corrupt, truncated or unsupported format)")
+    check_size(str(path), header.width, header.height, max_megapixels)
+    img, decoder_says = _decode_quietly(data)
     if img is None:
         reason = f"; the decoder says: {decoder_says}" if decoder_says else ""
         raise InputError(f"{path}: not a readable image (corrupt, truncated or unsupported format{reason})")
     del data
-    if header.pixels is None:  # a format whose header we do not read: check what was decoded
-        check_size(str(path), img.shape[1], img.shape[0], max_megapixels)
     img = apply_orientation(img, header.orientation)
     transparent = transparent_mask(img)
     img = to_bgr8(img, str(path))

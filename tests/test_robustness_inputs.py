@@ -21,8 +21,8 @@ from sena_warp.features import match_images
 from sena_warp.image_header import read_header
 from sena_warp.imageio import read_image, read_image_masked
 from sena_warp.video.loop import VideoOptions, run_video
-from helpers import (assert_one_line_error, decoded_frames, png_claiming, reencode_with_black_start, run_cli,
-                     with_orientation)
+from helpers import (assert_one_line_error, bigtiff, decoded_frames, encoded, png_claiming, reencode_with_black_start,
+                     run_cli, with_orientation)
 from test_video_loop import SideBySide
 
 FAST_VIDEO = ["--audio", "none", "--crf", "35"]
@@ -81,6 +81,105 @@ def claiming(ext: str, width: int, height: int, img: np.ndarray) -> bytes:
     elif ext == ".bmp":
         struct.pack_into("<ii", data, 18, width, height)
     return bytes(data)
+
+
+def claiming_more(fmt: str, width: int, height: int, img: np.ndarray) -> bytes:
+    """A small real file of a format beyond ``claiming``'s, whose header claims width x height."""
+    if fmt == "bigtiff":
+        return bigtiff(width, height, bytes(1000))  # what the 19 KB BigTIFF bomb is: a size and a token of data
+    data = bytearray(encoded(fmt, img))
+    if fmt == ".gif":
+        struct.pack_into("<HH", data, 6, width, height)
+    elif fmt == ".ras":
+        struct.pack_into(">II", data, 4, width, height)
+    elif fmt in (".jp2", "j2k"):
+        if fmt == ".jp2":
+            at = data.find(b"ihdr")
+            struct.pack_into(">II", data, at + 4, height, width)
+        at = data.find(b"\xff\x4f\xff\x51")
+        struct.pack_into(">IIII", data, at + 8, width, height, 0, 0)
+    elif fmt == ".hdr":
+        blank = data.find(b"\n\n")
+        end = data.find(b"\n", blank + 2)
+        data[blank + 2:end] = b"-Y %d +X %d" % (height, width)
+    elif fmt == ".pam":
+        end = data.find(b"ENDHDR")
+        data[:end] = b"P7\nWIDTH %d\nHEIGHT %d\nDEPTH 3\nMAXVAL 255\nTUPLTYPE RGB\n" % (width, height)
+    else:  # PNM and PFM: "P6\n37 23\n..."
+        first, second = data.find(b"\n"), data.find(b"\n", data.find(b"\n") + 1)
+        data[first + 1:second] = b"%d %d" % (width, height)
+    return bytes(data)
+
+
+MORE_FORMATS = ["bigtiff", ".gif", ".jp2", "j2k", ".hdr", ".pfm", ".ppm", ".pgm", ".pbm", ".pam", ".ras"]
+
+
+@pytest.mark.parametrize("fmt", [".png", ".jpg", ".tif", ".webp", ".bmp", *MORE_FORMATS])
+def test_every_format_the_decoder_is_given_has_its_size_read_from_the_header(fmt, img_a):
+    """The size the header gives is the size the decoder makes, for every format that reaches it."""
+    data = encoded(fmt, img_a[:48, :70])
+    header = read_header(data)
+    decoded = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert (header.width, header.height) == (decoded.shape[1], decoded.shape[0]) == (70, 48)
+
+
+@pytest.mark.parametrize("fmt", MORE_FORMATS)
+def test_a_huge_image_of_any_other_format_is_refused_from_its_header_before_decoding(fmt, pair, img_a, dirs, capfd,
+                                                                                    warp_device, monkeypatch):
+    """The bombs: a 19 KB BigTIFF, a 300 KB GIF, JPEG 2000 and Radiance HDR files took gigabytes before
+    the refusal (docs/benchmarks.md has the peak RSS before and after)."""
+    folder_in, folder_out = dirs
+    huge = folder_in / "huge.img"  # the decoder goes by the content, not by the name
+    huge.write_bytes(claiming_more(fmt, 20000, 15000, img_a[:48, :70]))
+    assert (read_header(huge.read_bytes()).width, read_header(huge.read_bytes()).height) == (20000, 15000)
+    monkeypatch.setattr(imageio, "_decode_quietly", lambda data: pytest.fail("decoded a refused image"))
+    before = huge.read_bytes()
+    rc, err, _ = run_cli(["image", huge, pair[0], "-o", folder_out / "p.png"], capfd, warp_device)
+    assert rc == InputError.exit_code
+    assert_one_line_error(err, str(huge), "20000x15000 px (300 MP)", "above the limit of 100 MP per input")
+    assert list(folder_out.iterdir()) == [] and huge.read_bytes() == before
+
+
+@pytest.mark.parametrize("make", [
+    lambda img: encoded(".avif", img),  # a format whose size is not read here
+    lambda img: encoded(".gif", img)[:8],  # a header cut before its size
+    lambda img: b"P6\nwide tall\n255\n" + bytes(100),  # a garbled header
+], ids=["avif", "cut gif", "garbled ppm"])
+def test_an_image_whose_size_cannot_be_read_is_refused_without_decoding(make, pair, img_a, dirs, capfd, warp_device,
+                                                                        monkeypatch):
+    folder_in, folder_out = dirs
+    odd = folder_in / "odd.png"
+    odd.write_bytes(make(img_a[:48, :70]))
+    monkeypatch.setattr(imageio, "_decode_quietly", lambda data: pytest.fail("decoded an image of unknown size"))
+    rc, err, _ = run_cli(["image", odd, pair[0], "-o", folder_out / "p.png"], capfd, warp_device)
+    assert rc == InputError.exit_code
+    assert_one_line_error(err, str(odd), "not a readable image (corrupt, truncated or unsupported format)")
+    assert list(folder_out.iterdir()) == []
+
+
+def test_a_video_frame_too_large_is_refused_from_the_streams_coded_size_before_decoding(bundled_dir, dirs, capfd,
+                                                                                       warp_device, monkeypatch):
+    """A small file can hold one huge frame (a 1.5 MB .mov, one 16000x16000 MJPEG frame): the probe decoded
+    it for its display rotation before any limit was checked."""
+    from sena_warp.video import reader
+
+    folder_in, folder_out = dirs
+    big = folder_in / "big.mov"
+    with av.open(str(big), "w") as c:
+        stream = c.add_stream("mjpeg", rate=1)
+        stream.width, stream.height, stream.pix_fmt = 1280, 1024, "yuvj420p"
+        frame = av.VideoFrame(1280, 1024, "yuvj420p")
+        frame.pts, frame.time_base = 0, Fraction(1, 1)
+        c.mux(stream.encode(frame))
+        c.mux(stream.encode(None))
+    monkeypatch.setattr(reader, "_first_frame_rotation", lambda container: pytest.fail("decoded a refused frame"))
+    reader._probe_version.cache_clear()
+    for offset in ("0", "auto"):
+        rc, err, _ = run_cli(["video", big, bundled_dir / "video" / "rooftop_right.mp4", "-o", folder_out / "v.mp4",
+                              "--max-megapixels", "1", "--offset", offset], capfd, warp_device)
+        assert rc == InputError.exit_code
+        assert_one_line_error(err, str(big), "a frame is 1280x1024 px (1 MP), above the limit of 1 MP per input")
+    assert list(folder_out.iterdir()) == []
 
 
 @pytest.mark.parametrize("ext, size", [(".png", (25000, 25000)), (".jpg", (30000, 20000)), (".tif", (20000, 20000)),

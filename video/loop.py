@@ -27,7 +27,6 @@ import numpy as np
 from ..config import Config
 from ..config_file import check_value
 from ..errors import InputError, VideoError
-from ..imageio import check_size
 from ..outputs import OutputPlan, staged
 from ..progress import LOGGER, Count, stage
 from .pairing import PairingStats, pair_by_time
@@ -148,9 +147,7 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
     t_run = time.perf_counter()
     started = datetime.now(timezone.utc)
     stage("opening videos")
-    infos = {"left": probe_video(left), "right": probe_video(right)}
-    for info in infos.values():
-        check_size(str(info.path), info.width, info.height, options.max_megapixels, "a frame")
+    infos = {"left": probe_video(left, options.max_megapixels), "right": probe_video(right, options.max_megapixels)}
     offsets = {"left": Fraction(0), "right": Fraction(str(options.offset_s))}
     notes: list[str] = []
     audio_side = None if options.audio == "none" else options.audio

@@ -36,7 +36,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, VideoError
-from ..imageio import existing_file
+from ..imageio import check_size, existing_file
 
 PIX_FMT = "yuv420p"
 _POLL_S = 0.1  # how often a blocked decoder thread re-checks whether it was asked to stop
@@ -106,30 +106,33 @@ def open_input(path: str | os.PathLike) -> av.container.InputContainer:
     return container
 
 
-def probe_video(path: str | os.PathLike) -> VideoInfo:
+def probe_video(path: str | os.PathLike, max_megapixels: float | None = None) -> VideoInfo:
     """Size, rate, start, duration and audio presence of a video input.
 
-    Probed once per version of the file (inode, size, modification time): the loop, the first estimate
-    and the compositor each ask, and a probe decodes a frame (about 30 ms at 1080p).
+    A probe decodes the first frame (for its display rotation, about 30 ms at 1080p), so the stream's
+    coded size is checked against ``max_megapixels`` first (InputError; None: no limit of ours): a
+    small file can hold one huge frame. Probed once per version of the file (inode, size,
+    modification time) and limit: the loop, the first estimate and the compositor each ask.
     """
     path = Path(path)
     try:
         stat = path.stat()
     except OSError:
-        return _probe(path)  # open_input says what is wrong
+        return _probe(path, max_megapixels)  # open_input says what is wrong
     version = (stat.st_ino, stat.st_size, stat.st_mtime_ns)
-    return dataclasses.replace(_probe_version(path.resolve(), version), path=path)
+    return dataclasses.replace(_probe_version(path.resolve(), version, max_megapixels), path=path)
 
 
 @functools.lru_cache(maxsize=16)
-def _probe_version(path: Path, version: tuple[int, int, int]) -> VideoInfo:
-    return _probe(path)
+def _probe_version(path: Path, version: tuple[int, int, int], max_megapixels: float | None) -> VideoInfo:
+    return _probe(path, max_megapixels)
 
 
-def _probe(path: Path) -> VideoInfo:
+def _probe(path: Path, max_megapixels: float | None) -> VideoInfo:
     with open_input(path) as container:
         stream = container.streams.video[0]
         ctx = stream.codec_context
+        check_size(str(path), ctx.width, ctx.height, max_megapixels, "a frame")
         rate = stream.average_rate or stream.guessed_rate
         if not rate:
             raise VideoError(f"{path}: the video stream declares no frame rate")
