@@ -414,3 +414,15 @@ def config_problem(cfg: Config) -> str | None:
         if not _RELATIONS[relation](value, bound):
             return f"{name} = {value} must be {relation} {other} = {bound} ({why})"
     return None
+
+
+def require_config(cfg, where: str) -> Config:
+    """``cfg`` when it is a :class:`Config` (a public function's argument check), else InputError."""
+    if not isinstance(cfg, Config):
+        raise InputError(f"{where}: cfg must be a Config (sena_warp.config.Config(...)), got {type(cfg).__name__}")
+    return cfg
+
+
+def is_seconds(value) -> bool:
+    """Whether ``value`` is a finite real number (not a bool): a time in seconds such as an offset."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)

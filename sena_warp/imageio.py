@@ -50,6 +50,29 @@ def to_bgr8(img: np.ndarray, name: str = "image") -> np.ndarray:
     raise InputError(f"{name}: unsupported image shape {img.shape}")
 
 
+def described(value) -> str:
+    """What ``value`` is, for an error about an argument: an array's shape and type, else its type."""
+    if isinstance(value, np.ndarray):
+        return f"a {value.dtype} array of shape {value.shape}"
+    return "None" if value is None else f"a {type(value).__name__}"
+
+
+def check_image(img, name: str, channels: int = 3) -> np.ndarray:
+    """``img`` when it is a uint8 array of shape (H, W, ``channels``) with both sides at least
+    ``MIN_SIDE_PX`` (BGR for 3, BGRA for 4); else InputError saying what was expected (a public
+    function's argument check)."""
+    kind = {3: "BGR", 4: "BGRA"}[channels]
+    if not (isinstance(img, np.ndarray) and img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == channels):
+        how = ("read_image() reads a file as one; to_bgr8() converts grey, BGRA, 16-bit or float arrays"
+               if channels == 3 else "stitch_images() gives one as Panorama.image")
+        raise InputError(f"{name}: expected a {kind} uint8 array of shape (H, W, {channels}), got {described(img)}; "
+                         f"{how}")
+    if min(img.shape[:2]) < MIN_SIDE_PX:
+        raise InputError(f"{name}: image is {img.shape[1]}x{img.shape[0]} px; at least {MIN_SIDE_PX} px per side "
+                         f"is needed")
+    return img
+
+
 def _float_to_uint8(img: np.ndarray) -> np.ndarray:
     colour = img[:, :, :3] if img.ndim == 3 and img.shape[2] == 4 else img  # alpha does not set the range
     finite = colour[np.isfinite(colour)]

@@ -446,3 +446,62 @@ def test_audio_the_muxer_refuses_is_reencoded_or_left_out_with_a_note(codec, lay
     assert len(left_out) == (1 if mode is None else 0)
     with av.open(str(out)) as c:
         assert len(c.streams.audio) == (0 if mode is None else 1)
+
+
+# --- the Python API checks its arguments: InputErrors that say what was expected ------------------------
+
+def _api_calls(img, pano_bgra):
+    from sena_warp.crop import crop_to_covered
+    from sena_warp.jobs import Job
+    from sena_warp.stitch import stitch_images
+
+    return {
+        "stitch_images None": (lambda: stitch_images(None, img, Config()), "img_a: expected a BGR uint8 array"),
+        "stitch_images grey": (lambda: stitch_images(img[:, :, 0], img, Config()), "of shape (512, 512); read_image"),
+        "stitch_images BGRA": (lambda: stitch_images(img, pano_bgra, Config()), "img_b: expected a BGR uint8 array of "
+                                                                               "shape (H, W, 3), got a uint8 array of "
+                                                                               "shape (40, 60, 4)"),
+        "stitch_images empty": (lambda: stitch_images(img[:0], img, Config()), "image is 512x0 px"),
+        "stitch_images float": (lambda: stitch_images(img.astype(np.float32), img, Config()), "got a float32 array"),
+        "stitch_images mask": (lambda: stitch_images(img, img, Config(), transparent=(np.zeros((3, 3), bool), None)),
+                               "the transparent mask of img_a must be None or a bool array of shape (512, 512)"),
+        "stitch_images cfg dict": (lambda: stitch_images(img, img, {"grid_x": 8}), "cfg must be a Config"),
+        "crop_to_covered BGR": (lambda: crop_to_covered(img), "crop_to_covered: expected a BGRA uint8 array"),
+        "Job bogus": (lambda: Job("bogus", ("a.jpg", "b.jpg"), "p.png"), "kind 'bogus' unknown; use one of image"),
+        "Job one input": (lambda: Job("image", "a.jpg", "p.png"), "inputs must be two paths (a and b)"),
+        "Job bad setting": (lambda: Job("image", ("a.jpg", "b.jpg"), "p.png", {"grid_x": "8"}),
+                            'grid_x = "8" is not a whole number'),
+        "Job offset": (lambda: Job("video", ("l.mp4", "r.mp4"), "v.mp4", offset_s="abc"), "offset_s must be a finite"),
+        "Job overwrite": (lambda: Job("image", ("a.jpg", "b.jpg"), "p.png", overwrite=True), "overwrite must be one of"),
+        "VideoOptions offset": (lambda: VideoOptions(offset_s="abc"), "offset 'abc' s is not a time"),
+        "VideoOptions crf": (lambda: VideoOptions(crf=99), "video_crf = 99 is out of range [0, 51]"),
+    }
+
+
+@pytest.mark.parametrize("case", sorted(_api_calls(np.zeros((1, 1, 3), np.uint8), None)))
+def test_the_python_api_refuses_a_wrong_argument_with_an_input_error_saying_what_was_expected(case, img_a):
+    pano_bgra = np.zeros((40, 60, 4), np.uint8)
+    before = img_a.copy()
+    call, words = _api_calls(img_a, pano_bgra)[case]
+    with pytest.raises(InputError) as caught:
+        call()
+    assert words in str(caught.value) and "\n" not in str(caught.value)
+    assert np.array_equal(img_a, before)
+
+
+def test_stitch_videos_replaces_an_existing_output_only_when_asked(bundled_dir, tmp_path, warp_device):
+    from sena_warp.errors import OutputError
+    from sena_warp.video.stitch import stitch_videos
+
+    clips = bundled_dir / "video"
+    left, right = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4"
+    out = tmp_path / "v.mp4"
+    out.write_bytes(b"an earlier result")
+    cfg = Config(device=warp_device, video_audio="none", video_crf=35, video_estimate_pairs=1)
+    with pytest.raises(OutputError, match="exists"):
+        stitch_videos(left, right, out, cfg)  # options=None: taken from cfg
+    assert out.read_bytes() == b"an earlier result" and sorted(p.name for p in tmp_path.iterdir()) == ["v.mp4"]
+    with pytest.raises(InputError, match="options must be a VideoOptions or None, got dict"):
+        stitch_videos(left, right, out, cfg, {"offset_s": 0})
+    report = stitch_videos(left, right, out, cfg, overwrite=True)
+    assert report["frames_out"] > 0 and len(decoded_frames(out)) == report["frames_out"]

@@ -8,7 +8,6 @@ every pair on YUV 4:2:0 planes, so frames never go through RGB on the hot path.
 
 from __future__ import annotations
 
-import math
 import os
 import queue
 import threading
@@ -24,7 +23,7 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from ..config import Config
+from ..config import Config, is_seconds
 from ..config_file import check_value
 from ..errors import InputError, VideoError
 from ..outputs import OutputPlan, staged
@@ -90,8 +89,8 @@ class VideoOptions:
     max_megapixels: float = Config.max_input_megapixels
 
     def __post_init__(self) -> None:
-        if not math.isfinite(self.offset_s):
-            raise InputError(f"offset {self.offset_s} s is not a time; give a finite number of seconds (--offset)")
+        if not is_seconds(self.offset_s):
+            raise InputError(f"offset {self.offset_s!r} s is not a time; give a finite number of seconds (--offset)")
         # The encoder settings take the values of their Config fields, checked by the same rule.
         for name, value in (("video_audio", self.audio), ("video_crf", self.crf), ("video_preset", self.preset),
                             ("video_encoder_thread_type", self.thread_type)):

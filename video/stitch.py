@@ -29,10 +29,10 @@ from typing import Callable
 import numpy as np
 
 from ..composite import Compositor
-from ..config import CHOICES, Config
+from ..config import CHOICES, Config, require_config
 from ..crop import largest_inner_rectangle
 from ..errors import InputError, StitchError, VideoError
-from ..outputs import OutputPlan
+from ..outputs import OutputPlan, staged
 from ..report import run_info
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
@@ -528,18 +528,30 @@ def check_rig_settings(cfg: Config) -> None:
 
 
 def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike, cfg: Config,
-                  options: VideoOptions, reference: str = "auto", plan: OutputPlan | None = None,
-                  observer: FrameObserver | None = None) -> dict:
+                  options: VideoOptions | None = None, reference: str = "auto", plan: OutputPlan | None = None,
+                  observer: FrameObserver | None = None, overwrite: bool = False) -> dict:
     """Stitch two videos into ``output`` with SENA maps; return the run's report.
 
     ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
+    ``options``: offset, encoder and limits (None: ``VideoOptions.from_config(cfg)``).
     ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
-    ``plan``: commit the video with that plan's other outputs (see ``sena_warp.outputs``).
+    An existing ``output`` is refused (OutputError, before any work) unless ``overwrite`` is True, as
+    the CLI's ``-y``; the output appears only once complete. ``plan``: commit the video with that
+    plan's other outputs (see ``sena_warp.outputs``), under that plan's rule for existing outputs.
     The report is :func:`loop.run_video`'s plus ``run`` (tool, device, settings) and ``stitch`` (see
     :meth:`SenaFrameCompositor.report`), its times in one ``timing_s`` block (``docs/report.md``).
     ``observer``: called with every composited frame (:class:`CompositedFrame`).
     The Warp device of ``cfg`` is resolved here, once for the whole video.
     """
+    options = VideoOptions.from_config(require_config(cfg, "stitch_videos")) if options is None else options
+    if not isinstance(options, VideoOptions):
+        raise InputError(f"stitch_videos: options must be a VideoOptions or None, got {type(options).__name__}")
+    with staged(plan, output, (left, right), overwrite="overwrite" if overwrite else "refuse") as plan:
+        return _stitch_videos(left, right, output, cfg, options, reference, plan, observer)
+
+
+def _stitch_videos(left, right, output, cfg: Config, options: VideoOptions, reference: str, plan: OutputPlan,
+                   observer: FrameObserver | None) -> dict:
     check_rig_settings(cfg)
     cfg = resolve_config(cfg)
     t0 = time.perf_counter()
