@@ -170,3 +170,36 @@ def encoded(fmt: str, img: np.ndarray) -> bytes:
     elif fmt in (".pbm", ".pgm"):
         img = img[:, :, 0]
     return cv2.imencode(fmt, img)[1].tobytes()
+
+
+def ts_clip(frames, path, first_pts: int = 0, size: tuple[int, int] | None = None, pts_step: int = 3000) -> None:
+    """``frames`` (YuvFrame) encoded as an MPEG-TS file (90 kHz clock, H.264 without B-frames) whose frame
+    ``i`` has pts ``first_pts + i * pts_step`` (3000: 30 fps); ``size`` (width, height) rescales them.
+    TS files joined byte by byte play as one stream: what a camera's split recording or ``cat`` makes."""
+    height, width = frames[0].y.shape if size is None else size[::-1]
+    with av.open(str(path), "w", format="mpegts") as c:
+        stream = c.add_stream("libx264", rate=30, options={"bf": "0", "preset": "ultrafast"})
+        stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
+        for i, f in enumerate(frames):
+            frame = av.VideoFrame.from_ndarray(np.concatenate([f.y.ravel(), f.u.ravel(), f.v.ravel()]).reshape(
+                -1, f.y.shape[1]), format="yuv420p").reformat(width=width, height=height)
+            frame.pts, frame.time_base = first_pts + i * pts_step, Fraction(1, 90000)
+            c.mux(stream.encode(frame))
+        c.mux(stream.encode(None))
+
+
+def with_repeated_pts(src, dst, repeats: range) -> None:
+    """``src`` (a 30 fps TS file without B-frames, 90 kHz) remuxed with each packet in ``repeats`` given the
+    presentation time of the packet before it: duplicate pts. (Decoding times stay increasing, one frame
+    behind, as a muxer needs.)"""
+    with av.open(str(src)) as c_in, av.open(str(dst), "w", format="mpegts") as c_out:
+        stream_in = c_in.streams.video[0]
+        stream_out = c_out.add_stream_from_template(stream_in)
+        previous = None
+        for i, packet in enumerate(p for p in c_in.demux(stream_in) if p.size):
+            packet.dts = packet.pts - 3000
+            if i in repeats:
+                packet.pts, packet.dts = previous[0], previous[1] + 1
+            previous = packet.pts, packet.dts
+            packet.stream = stream_out
+            c_out.mux(packet)

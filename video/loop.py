@@ -112,6 +112,7 @@ def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
         "rotation_deg": info.rotation_deg, "pix_fmt": info.pix_fmt, "converted_from": reader.converted_from,
         "offset_s": float(reader.offset_s), "frames_decoded": reader.decoded, "damaged": reader.damaged,
         "damaged_span_s": None if span is None else [round(float(t), 4) for t in span],
+        "time_stamps_dropped": reader.out_of_order, "rescaled": reader.rescaled,
         "decode_wait_s": round(reader.wait_s, 4), "decode_s": round(reader.decode_s, 4),
         "decoder_threads": reader.decoder_threads,
     }
@@ -244,7 +245,8 @@ def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], s
 
 
 def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]) -> list[tuple[str, str]]:
-    """Damaged frames and truncated inputs: (what is the matter, what was done), see ``reader.py``."""
+    """Damaged frames, time stamps that go back, a resolution that changes and truncated inputs: (what is
+    the matter, what was done), see ``reader.py``."""
     problems = []
     for side, reader in readers.items():
         if reader.damaged:
@@ -252,6 +254,17 @@ def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]
             where = f" between {float(span[0]):.2f} s and {float(span[1]):.2f} s" if span is not None else ""
             problems.append((f"{side} input has {reader.damaged} damaged frames{where}",
                              "each replaced by the last good frame (--strict fails instead)"))
+        if reader.out_of_order:
+            last_s, time_s = reader.out_of_order_at
+            problems.append((f"{side} input has {reader.out_of_order} frames whose time stamps go back or repeat "
+                             f"(the first: {float(time_s):.3f} s after {float(last_s):.3f} s)",
+                             "they were dropped (--strict fails instead)"))
+        if reader.rescaled:
+            (width, height), time_s = reader.rescaled_from
+            problems.append((f"{side} input changes resolution from {reader.size[0]}x{reader.size[1]} to "
+                             f"{width}x{height} at {float(time_s):.2f} s",
+                             f"{reader.rescaled} frames were rescaled to {reader.size[0]}x{reader.size[1]} "
+                             f"(--strict fails instead)"))
         declared = infos[side].frame_count
         if declared and reader.decoded + reader.damaged < declared:
             problems.append((f"{side} input ended after {reader.decoded + reader.damaged} of the {declared} frames "
