@@ -22,7 +22,7 @@ import time
 
 from . import __version__
 from .config import CHOICES, OFFSET_AUTO, Config
-from .errors import InputError, StitchError
+from .errors import InputError, StitchError, out_of_memory
 from .outputs import OutputPlan
 from .progress import LOGGER, ConsoleHandler, echo
 
@@ -350,9 +350,12 @@ def main(argv: list[str] | None = None) -> int:
     except StitchError as exc:
         LOGGER.error(str(exc))
         return exc.exit_code
-    except MemoryError:  # a raised --max-megapixels, or a machine busy with other work
-        LOGGER.error("out of memory; lower --max-megapixels, downscale the inputs or free some memory")
-        return StitchError.exit_code
+    except Exception as exc:  # out of memory (a raised --max-megapixels, a busy machine) in numpy, Warp or onnxruntime
+        error = out_of_memory(exc)
+        if error is None:
+            raise
+        LOGGER.error(str(error))
+        return error.exit_code
     except KeyboardInterrupt as exc:
         signum = getattr(exc, "signum", signal.SIGINT)
         by = "" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"
