@@ -54,6 +54,7 @@ class Config:
     ransac_max_iters: int = 2000  # RANSAC iterations (at least)
     global_model_choice: str = "support"  # "support": the model with more matches within fit_match_px; "inliers": more RANSAC inliers (paper)
     global_model_margin: float = 0.02  # support: supports closer than this fraction are a tie, and the inliers decide
+    min_overlap_correlation: float = 0.2  # no stitch when the views A_glob aligns correlate less where they overlap
     # --- warp, fine tuning: overlap and cells c_j (step 2) ------------------------------------
     grid_x: int = 6  # G_x: cells across the overlap's bounding box (authors: 2; sweep in evaluation.md)
     grid_y: int = 6  # G_y: cells down the overlap's bounding box
@@ -292,7 +293,7 @@ RANGES: dict[str, Range] = {
     # warp
     "lattice_nodes": Range(2, 200), "min_inliers": Range(3, 10000), "ransac_reproj_px": _above(0, 1000),
     "max_canvas_area_ratio": Range(1, 100), "ransac_confidence": _above(0, 1), "ransac_max_iters": Range(1, 100000),
-    "global_model_margin": Range(0, 1), "grid_x": Range(1, 64), "grid_y": Range(1, 64), "min_global_det": Range(0, 1),
+    "global_model_margin": Range(0, 1), "min_overlap_correlation": Range(0, 1), "grid_x": Range(1, 64), "grid_y": Range(1, 64), "min_global_det": Range(0, 1),
     "min_overlap_area_px": Range(0, 1e9), "local_match_px": _above(0, 10000), "alpha": _above(0, 100),
     "lambda1": Range(0, 1000), "lambda2": _above(0, 1000), "beta": _above(0, 10000), "conf_min": _above(0, 100),
     "conf_max": _above(0, 100), "unstable_min_points": Range(0, 10000), "unstable_rmse_px": _above(0, 10000),

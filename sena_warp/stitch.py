@@ -34,7 +34,7 @@ from .features import Matches, match_images, neighbour_supported
 from .ffd import LatticeFit, field_from_lattice, fitted_lattice, smoothed_blend_lattice
 from .gains import Gains, compensated_views, view_gains
 from .gate import gate_canvas, guard_field
-from .global_affine import GlobalAffine, fit_global_affine, near_model
+from .global_affine import GlobalAffine, check_views_alike, fit_global_affine, near_model
 from .imageio import check_image, described
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
@@ -146,6 +146,7 @@ def estimate_warp(img_src: np.ndarray, img_tgt: np.ndarray, pts_src: np.ndarray,
         raise InputError(f"ffd_model must be one of {CHOICES['ffd_model']} and gate_model one of {CHOICES['gate_model']}")
     with clock("global_affine"):
         glob = fit_global_affine(pts_src, pts_tgt, cfg)
+        check_views_alike(img_src, img_tgt, glob, cfg)
     affine = glob.affine_src_to_tgt
     near = near_model(affine, pts_src, pts_tgt, cfg.local_match_px)
     with clock("overlap"):
