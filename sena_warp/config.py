@@ -286,7 +286,7 @@ def _above(low: float, high: float) -> Range:
 # Every number setting's range, grouped as the class is (a test checks that none is missing).
 RANGES: dict[str, Range] = {
     # features
-    "xfeat_max_side": Range(64, 4096), "xfeat_top_k": Range(16, 16384), "xfeat_detection_threshold": Range(0, 1),
+    "xfeat_max_side": Range(32, 4096), "xfeat_top_k": Range(16, 16384), "xfeat_detection_threshold": Range(0, 1),
     "xfeat_nms_size": Range(1, 63), "min_cossim": Range(0, 1), "sift_ratio": _above(0, 1),
     "support_neighbours": Range(1, 64), "support_tol_px": _above(0, 1000), "support_min": Range(1, 64),
     "alpha_margin_px": Range(0, 1000), "scale_hint_ratio": Range(1, 1000),
@@ -295,7 +295,7 @@ RANGES: dict[str, Range] = {
     "max_canvas_area_ratio": Range(1, 100), "ransac_confidence": _above(0, 1), "ransac_max_iters": Range(1, 100000),
     "global_model_margin": Range(0, 1), "min_overlap_correlation": Range(0, 1), "grid_x": Range(1, 64), "grid_y": Range(1, 64), "min_global_det": Range(0, 1),
     "min_overlap_area_px": Range(0, 1e9), "local_match_px": _above(0, 10000), "alpha": _above(0, 100),
-    "lambda1": Range(0, 1000), "lambda2": _above(0, 1000), "beta": _above(0, 10000), "conf_min": _above(0, 100),
+    "lambda1": Range(0, 1e12), "lambda2": _above(0, 1e12), "beta": _above(0, 10000), "conf_min": _above(0, 100),
     "conf_max": _above(0, 100), "unstable_min_points": Range(0, 10000), "unstable_rmse_px": _above(0, 10000),
     "unstable_min_det": Range(0, 100), "unstable_max_cond": _above(0, 1e12), "unstable_max_disp_px": Range(0, 10000),
     "instability_grid": Range(1, 64), "w_cond": Range(0, 1000), "w_det": Range(0, 1000), "tau_det": Range(0, 100),
@@ -325,7 +325,7 @@ RANGES: dict[str, Range] = {
     "video_gain_stride_px": Range(1, 256), "video_gain_settle_s": Range(0, 3600), "video_gain_step_grey": _above(0, 255),
     # video
     "video_reestimate_s": _above(0, 3600), "video_estimate_pairs": Range(1, 100), "video_estimate_spacing": Range(1, 1000),
-    "video_screen_max_side": Range(64, 4096), "video_estimate_max_side": Range(64, 8192),
+    "video_screen_max_side": Range(32, 4096), "video_estimate_max_side": Range(64, 8192),
     "video_min_inlier_ratio": Range(0, 1), "video_max_median_change_px": Range(0, 10000),
     "video_drift_check_s": Range(0, 3600), "video_drift_px": _above(0, 10000), "video_drift_speed_px": _above(0, 10000),
     "video_blend_frames": Range(0, 10000), "video_seam_speed_px": _above(0, 10000), "video_warp_follow": _above(0, 1),
