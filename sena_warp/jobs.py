@@ -71,8 +71,8 @@ class Job:
         if self.overwrite not in OVERWRITE_MODES:
             raise InputError(f"Job: overwrite must be one of {', '.join(OVERWRITE_MODES)}, not {self.overwrite!r}")
         if self.offset_s != OFFSET_AUTO and not is_seconds(self.offset_s):
-            raise InputError(f"Job: offset_s must be a finite number of seconds or {OFFSET_AUTO!r}, "
-                             f"not {self.offset_s!r}")
+            raise InputError(f"offset {self.offset_s!r} s is not a time; give a finite number of seconds or "
+                             f"{OFFSET_AUTO!r} (--offset)")
 
 
 def job_config(settings: dict) -> Config:

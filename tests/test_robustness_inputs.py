@@ -471,7 +471,7 @@ def _api_calls(img, pano_bgra):
         "Job one input": (lambda: Job("image", "a.jpg", "p.png"), "inputs must be two paths (a and b)"),
         "Job bad setting": (lambda: Job("image", ("a.jpg", "b.jpg"), "p.png", {"grid_x": "8"}),
                             'grid_x = "8" is not a whole number'),
-        "Job offset": (lambda: Job("video", ("l.mp4", "r.mp4"), "v.mp4", offset_s="abc"), "offset_s must be a finite"),
+        "Job offset": (lambda: Job("video", ("l.mp4", "r.mp4"), "v.mp4", offset_s="abc"), "offset 'abc' s is not a time"),
         "Job overwrite": (lambda: Job("image", ("a.jpg", "b.jpg"), "p.png", overwrite=True), "overwrite must be one of"),
         "VideoOptions offset": (lambda: VideoOptions(offset_s="abc"), "offset 'abc' s is not a time"),
         "VideoOptions crf": (lambda: VideoOptions(crf=99), "video_crf = 99 is out of range [0, 51]"),
