@@ -17,9 +17,12 @@ and launches with ``cfg.cpu_threads``::
 
 from __future__ import annotations
 
+import atexit
 import importlib
 import os
 import pkgutil
+import shutil
+import tempfile
 import threading
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -27,14 +30,36 @@ from pathlib import Path
 
 import numpy as np
 import warp as wp
+import warp._src.build  # init_kernel_cache: where Warp keeps compiled kernels
 
 from sena_warp.config import Config
 from sena_warp.errors import InputError
+from sena_warp import native_stderr
 from sena_warp.progress import LOGGER, Count, stage
 
 # The init banner would go to stdout of every CLI run; Warp reads the level when it initialises
 # (``config.quiet`` is deprecated in favour of this in Warp 1.19).
 wp.config.log_level = wp.LOG_WARNING
+
+
+def _usable_kernel_cache() -> None:
+    """Point Warp at a temporary kernel cache, saying so once, when its own cannot be written.
+
+    Warp keeps compiled kernels under ``WARP_CACHE_PATH`` or the user's cache folder (under HOME) and
+    fails to start when that cannot be created; a read-only HOME or a mistyped path would stop every
+    run with a traceback. The temporary cache is removed at exit, so such runs compile every time.
+    """
+    try:
+        # Warp's own resolution of the folder (WARP_CACHE_PATH, else the user cache), as wp.init() does it.
+        warp._src.build.init_kernel_cache(wp.config.kernel_cache_dir)
+        with tempfile.TemporaryFile(dir=wp.config.kernel_cache_dir):
+            pass
+    except OSError as exc:
+        unusable = exc.filename or wp.config.kernel_cache_dir or os.environ.get("WARP_CACHE_PATH", "")
+        wp.config.kernel_cache_dir = tempfile.mkdtemp(prefix="sena-warp-kernels-")
+        atexit.register(shutil.rmtree, wp.config.kernel_cache_dir, ignore_errors=True)
+        LOGGER.warning(f"kernel cache {unusable} cannot be written ({exc.strerror}): using a temporary one, so "
+                       f"kernels compile on every run; set WARP_CACHE_PATH to a writable folder")
 
 
 def _init_without_driver_noise() -> None:
@@ -44,16 +69,11 @@ def _init_without_driver_noise() -> None:
     driver" on every run: a second stderr line in front of the CLI's one-line messages. Whether
     CUDA is there is decided by ``resolve_device``, which says so in its own words.
     """
-    saved = os.dup(2)
-    try:
-        with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), 2)
-            wp.init()
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
+    with native_stderr.caught():
+        wp.init()
 
 
+_usable_kernel_cache()
 _init_without_driver_noise()
 
 _pools: dict[int, ThreadPoolExecutor] = {}

@@ -38,7 +38,7 @@ from typing import Callable, Iterator
 
 from .config import OFFSET_AUTO
 from .config_file import check_value, field_types, read_toml, unknown_key_error
-from .errors import InputError, StitchError
+from .errors import InputError, StitchError, out_of_memory
 from .jobs import INPUT_SUFFIXES, OUTPUT_SUFFIXES, PAIR_STEMS, Job, pair_inputs, run_job, summary_line
 from .outputs import atomic_output, make_folder
 from .progress import LOGGER, Count, echo, stage
@@ -229,8 +229,9 @@ def run_entry(entry: Entry) -> dict:
         error, exit_code = None, 0
     except StitchError as exc:
         error, exit_code = str(exc), exc.exit_code
-    except Exception as exc:  # a bug in one job must not stop the batch: recorded with its type
-        error, exit_code = f"{type(exc).__name__}: {exc}", 1
+    except Exception as exc:  # out of memory, or a bug in one job that must not stop the batch (recorded with its type)
+        known = out_of_memory(exc)
+        error, exit_code = (str(known), known.exit_code) if known else (f"{type(exc).__name__}: {exc}", 1)
     result = {
         "name": entry.name, "kind": entry.job.kind, "status": "failed" if error else "ok",
         "inputs": list(entry.job.inputs), "output": entry.job.output, "error": error, "exit_code": exit_code,

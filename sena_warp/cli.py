@@ -22,7 +22,7 @@ import time
 
 from . import __version__
 from .config import CHOICES, OFFSET_AUTO, Config
-from .errors import InputError, StitchError
+from .errors import InputError, StitchError, out_of_memory
 from .outputs import OutputPlan
 from .progress import LOGGER, ConsoleHandler, echo
 
@@ -84,6 +84,21 @@ def _rate_kbps(text: str) -> int:
     if kbps < 1:
         raise argparse.ArgumentTypeError(f"{text!r} is not a bit rate; give e.g. 8M, 8000k or 8000000 (bit/s)")
     return kbps
+
+
+MAX_BENCH_SECONDS = 3600.0  # bench --seconds and --rss: clips of at most an hour
+
+
+def _clip_seconds(text: str) -> float:
+    """``bench --seconds`` / ``--rss``: a clip length in seconds, in (0, MAX_BENCH_SECONDS]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not 0 < value <= MAX_BENCH_SECONDS:  # also refuses nan
+        raise argparse.ArgumentTypeError(f"{text} s is not a clip length; give more than 0 and at most "
+                                         f"{MAX_BENCH_SECONDS:g} seconds")
+    return value
 
 
 def _add_messages(parser: argparse.ArgumentParser) -> None:
@@ -236,9 +251,9 @@ def cmd_video(args: argparse.Namespace) -> int:
 
 
 def cmd_config(args: argparse.Namespace) -> int:
-    from .config_file import check_config, config_toml
+    from .config_file import config_toml, settings_config
 
-    print(config_toml(check_config(Config().replace(**args.settings), "settings")), end="")
+    print(config_toml(settings_config(args.settings, "settings")), end="")
     return 0
 
 
@@ -332,14 +347,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = command("bench", "frame-rate benchmark: transcode baseline vs stitch, per stage, compositing vs OpenCV")
     p.add_argument("--sizes", nargs="+", metavar="SIZE",
-                   help="clip sizes: 720p, 1080p, 4k or WIDTHxHEIGHT (default: 720p 1080p 4k)")
-    p.add_argument("--seconds", type=float, default=10.0, help="clip length in seconds (default: %(default)s)")
+                   help="clip sizes: 720p, 1080p, 4k or WIDTHxHEIGHT, even sides from 16 up to 8K (default: 720p 1080p 4k)")
+    p.add_argument("--seconds", type=_clip_seconds, default=10.0,
+                   help=f"clip length in seconds, at most {MAX_BENCH_SECONDS:g} (default: %(default)s)")
     p.add_argument("--markdown", metavar="FILE", help="also write the table with every column as Markdown")
     p.add_argument("--work", default="bench_work", help="folder for the clips and outputs (default: %(default)s)")
     p.add_argument("--data", metavar="DIR",
                    help="the shared data set holding pairs/rew_lawn_2160 (default: ../shared/data beside the source "
                         "tree where it is there, else a pair the package ships)")
-    p.add_argument("--rss", type=float, nargs="*", default=[], metavar="S",
+    p.add_argument("--rss", type=_clip_seconds, nargs="*", default=[], metavar="S",
                    help="also measure the peak RSS of 1080p stitches of these lengths in seconds (e.g. 10 60)")
     p.add_argument("--device", choices=CHOICES["device"], default=Config.device,
                    help="where the Warp kernels run (default: %(default)s)")
@@ -403,9 +419,12 @@ def main(argv: list[str] | None = None) -> int:
     except StitchError as exc:
         LOGGER.error(str(exc))
         return exc.exit_code
-    except MemoryError:  # a raised --max-megapixels, or a machine busy with other work
-        LOGGER.error("out of memory; lower --max-megapixels, downscale the inputs or free some memory")
-        return StitchError.exit_code
+    except Exception as exc:  # out of memory (a raised --max-megapixels, a busy machine) in numpy, Warp or onnxruntime
+        error = out_of_memory(exc)
+        if error is None:
+            raise
+        LOGGER.error(str(error))
+        return error.exit_code
     except KeyboardInterrupt as exc:
         signum = getattr(exc, "signum", signal.SIGINT)
         by = "" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"

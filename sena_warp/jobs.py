@@ -14,11 +14,13 @@ from pathlib import Path
 
 from sena_warp.kernels.runtime import resolve_config
 
-from .config import OFFSET_AUTO, Config
-from .config_file import check_config
+from .config import OFFSET_AUTO, Config, is_seconds
+from .config_file import check_settings, settings_config
+from .errors import InputError
 from .imageio import IMAGE_SUFFIXES
-from .outputs import OutputPlan
+from .outputs import OVERWRITE_MODES, OutputPlan
 from .progress import LOGGER, stage
+from .rig import REFERENCES
 
 KINDS = ("image", "video")
 PAIR_STEMS = {"image": ("a", "b"), "video": ("left", "right")}  # file stems of a pair folder
@@ -55,6 +57,25 @@ class Job:
     debug: str | None = None
     overwrite: str = "refuse"
 
+    def __post_init__(self) -> None:
+        """InputError for a field of the wrong kind, before anything runs (settings: names and values)."""
+        if self.kind not in KINDS:
+            raise InputError(f"Job: kind {self.kind!r} unknown; use one of {', '.join(KINDS)}")
+        paths = (*self.inputs, self.output) if isinstance(self.inputs, (tuple, list)) else ()
+        if len(paths) != 3 or not all(isinstance(p, (str, os.PathLike)) for p in paths):
+            raise InputError(f"Job: inputs must be two paths ({' and '.join(PAIR_STEMS[self.kind])}) and output one "
+                             f"path, got {self.inputs!r} and {self.output!r}")
+        if not isinstance(self.settings, dict):
+            raise InputError(f"Job: settings must be a dict of Config changes, got {type(self.settings).__name__}")
+        check_settings(self.settings, "Job settings")
+        if self.reference not in REFERENCES:
+            raise InputError(f"Job: reference must be one of {', '.join(REFERENCES)}, not {self.reference!r}")
+        if self.overwrite not in OVERWRITE_MODES:
+            raise InputError(f"Job: overwrite must be one of {', '.join(OVERWRITE_MODES)}, not {self.overwrite!r}")
+        if self.offset_s != OFFSET_AUTO and not is_seconds(self.offset_s):
+            raise InputError(f"offset {self.offset_s!r} s is not a time; give a finite number of seconds or "
+                             f"{OFFSET_AUTO!r} (--offset)")
+
 
 def job_config(settings: dict) -> Config:
     """The Config for ``settings`` (names and values already checked one by one), on this machine.
@@ -62,7 +83,7 @@ def job_config(settings: dict) -> Config:
     The Warp device is resolved here; the encoder is h264_nvenc where that device is CUDA and the
     settings chose no codec (the writer falls back to libx264, saying so, where NVENC cannot open).
     """
-    cfg = resolve_config(check_config(Config().replace(**settings), "settings"))
+    cfg = resolve_config(settings_config(settings, "settings"))
     codec = cfg.video_codec if "video_codec" in settings or cfg.device != "cuda" else "h264_nvenc"
     return cfg.replace(video_codec=codec)
 

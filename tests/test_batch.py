@@ -133,10 +133,10 @@ def test_a_csv_list_reads_each_cell_as_its_column_takes_it(bundled_dir, tmp_path
 
 
 @pytest.mark.parametrize("text, message", [
-    ('[[job]]\na = "x.jpg"\nb = "y.jpg"\ngrid_xx = 2\n', "unknown setting 'grid_xx'; did you mean 'grid_x'?"),
+    ('[[job]]\na = "x.jpg"\nb = "y.jpg"\ngrid_xx = 2\n', "unknown setting 'grid_xx'; did you mean 'grid_x' or 'grid_y'?"),
     ('[[job]]\na = "x.jpg"\n', "give the inputs as a and b (images) or left and right (videos)"),
     ('[[job]]\na = "x.jpg"\nb = "y.jpg"\noffset = 0.5\n', "offset is for video jobs; this one is a image job"),
-    ('[[job]]\na = "x.jpg"\nb = "y.jpg"\ngrid_x = 0\n', "grid_x = 0 must be > 0"),
+    ('[[job]]\na = "x.jpg"\nb = "y.jpg"\ngrid_x = 0\n', "grid_x = 0 is out of range \\[1, 64\\]"),
     ('[[job]]\na = "x.mp4"\nb = "y.jpg"\n', "a = 'x.mp4' is not a image file"),
     ('[[job]]\nname="n"\na = "x.jpg"\nb = "y.jpg"\n[[job]]\nname="n"\na = "x.jpg"\nb = "z.jpg"\n',
      "two jobs have the name n"),

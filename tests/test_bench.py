@@ -129,6 +129,26 @@ def test_bench_refuses_a_bad_size_before_making_its_work_folder(tmp_path, capfd)
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["--seconds", "nan"], ("--seconds", "nan s is not a clip length")),
+    (["--seconds", "inf"], ("--seconds", "inf s is not a clip length")),
+    (["--seconds=-5"], ("--seconds", "-5 s is not a clip length", "at most 3600")),
+    (["--seconds", "0"], ("--seconds", "0 s")),
+    (["--seconds", "ten"], ("--seconds", "'ten' is not a number of seconds")),
+    (["--rss", "10", "nan"], ("--rss", "nan s")),
+    (["--sizes", "100000x100000"], ("size '100000x100000'", "at most 8192 px a side")),
+    (["--sizes", "8192x8192"], ("size '8192x8192'", "33.2 MP (8K)")),
+])
+def test_bench_refuses_lengths_and_sizes_out_of_range_before_any_work(argv, words, tmp_path, capfd):
+    from sena_warp.cli import main
+
+    capfd.readouterr()
+    assert main(["bench", *argv, "--work", str(tmp_path / "w")]) == 2
+    err = capfd.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("sena-warp: error: ") and all(w in err[0] for w in words), err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_bench_keeps_the_stitch_child_s_exit_code_and_message(tmp_path, monkeypatch):
     from sena_warp.evaluation import bench
     from sena_warp.errors import MatchError

@@ -133,3 +133,24 @@ def test_every_kernel_is_built_forward_only():
     assert len(kernels) >= 20
     for kernel in kernels:
         assert kernel.module.options["enable_backward"] is False, kernel.key
+
+
+@pytest.mark.parametrize("unwritable", ["WARP_CACHE_PATH", "HOME"])
+def test_an_unwritable_kernel_cache_falls_back_to_a_temporary_one_with_one_warning(unwritable, bundled_dir, tmp_path):
+    """A WARP_CACHE_PATH that is a file, or a HOME that cannot hold a cache folder: the run goes on with a
+    temporary cache (one warning line, exit 0), removed when the process ends."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    env = {k: v for k, v in os.environ.items() if k not in ("WARP_CACHE_PATH", "XDG_CACHE_HOME")}
+    env.update({unwritable: str(blocker), "TMPDIR": str(tmp_path)})
+    pair = bundled_dir / "udisd_test_000001"
+    done = subprocess.run([sys.executable, "-m", "sena_warp.cli", "match", pair / "a.jpg", pair / "b.jpg",
+                           "--features", "sift", "-q"], capture_output=True, text=True, env=env, cwd=tmp_path,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("sena-warp: warning: kernel cache"), lines
+    assert "cannot be written" in lines[0] and "WARP_CACHE_PATH" in lines[0]
+    assert json.loads(done.stdout)["matches"] > 0
+    assert not list(tmp_path.glob("sena-warp-kernels-*"))  # the temporary cache is gone
+    assert blocker.read_text() == "not a folder"

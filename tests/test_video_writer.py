@@ -89,7 +89,7 @@ def test_hevc_nvenc_falls_back_to_libx265_where_it_cannot_open():
 
 
 def test_a_bad_rate_or_codec_is_refused_before_any_file_opens():
-    with pytest.raises(InputError, match="video_bitrate_kbps = -5 must be >= 0"):
+    with pytest.raises(InputError, match=r"video_bitrate_kbps = -5 is out of range \[0, 1000000\]"):
         VideoOptions(bitrate_kbps=-5)
     with pytest.raises(InputError, match='video_codec = "libvpx" is not one of'):
         VideoOptions(codec="libvpx")

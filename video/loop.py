@@ -8,7 +8,6 @@ every pair on YUV 4:2:0 planes, so frames never go through RGB on the hot path.
 
 from __future__ import annotations
 
-import math
 import os
 import queue
 import threading
@@ -25,10 +24,9 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from ..config import Config
+from ..config import Config, is_seconds
 from ..config_file import check_value
 from ..errors import InputError, VideoError
-from ..imageio import check_size
 from ..outputs import OutputPlan, staged
 from ..progress import LOGGER, Count, stage
 from .pairing import PairingStats, pair_by_time
@@ -99,8 +97,8 @@ class VideoOptions:
     max_megapixels: float = Config.max_input_megapixels
 
     def __post_init__(self) -> None:
-        if not math.isfinite(self.offset_s):
-            raise InputError(f"offset {self.offset_s} s is not a time; give a finite number of seconds (--offset)")
+        if not is_seconds(self.offset_s):
+            raise InputError(f"offset {self.offset_s!r} s is not a time; give a finite number of seconds (--offset)")
         # The encoder and span settings take the values of their Config fields, checked by the same rule.
         for name, value in (("video_audio", self.audio), ("video_crf", self.crf), ("video_preset", self.preset),
                             ("video_encoder_thread_type", self.thread_type), ("video_codec", self.codec),
@@ -131,6 +129,7 @@ def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
         "offset_s": float(reader.offset_s), "frames_decoded": reader.decoded, "frames_skipped": reader.skipped,
         "damaged": reader.damaged,
         "damaged_span_s": None if span is None else [round(float(t), 4) for t in span],
+        "time_stamps_dropped": reader.out_of_order, "rescaled": reader.rescaled,
         "decode_wait_s": round(reader.wait_s, 4), "decode_s": round(reader.decode_s, 4),
         "decoder_threads": reader.decoder_threads,
     }
@@ -205,10 +204,7 @@ SIDES = ("left", "right")
 def _probed(left, right, options: VideoOptions) -> dict[str, VideoInfo]:
     """Both inputs probed ("left", "right"), their frames checked against ``options.max_megapixels``."""
     stage("opening videos")
-    infos = {"left": probe_video(left), "right": probe_video(right)}
-    for info in infos.values():
-        check_size(str(info.path), info.width, info.height, options.max_megapixels, "a frame")
-    return infos
+    return {"left": probe_video(left, options.max_megapixels), "right": probe_video(right, options.max_megapixels)}
 
 
 @contextmanager
@@ -339,7 +335,8 @@ def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], s
 
 
 def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]) -> list[tuple[str, str]]:
-    """Damaged frames and truncated inputs: (what is the matter, what was done), see ``reader.py``."""
+    """Damaged frames, time stamps that go back, a resolution that changes and truncated inputs: (what is
+    the matter, what was done), see ``reader.py``."""
     problems = []
     for side, reader in readers.items():
         if reader.damaged:
@@ -347,6 +344,17 @@ def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]
             where = f" between {float(span[0]):.2f} s and {float(span[1]):.2f} s" if span is not None else ""
             problems.append((f"{side} input has {reader.damaged} damaged frames{where}",
                              "each replaced by the last good frame (--strict fails instead)"))
+        if reader.out_of_order:
+            last_s, time_s = reader.out_of_order_at
+            problems.append((f"{side} input has {reader.out_of_order} frames whose time stamps go back or repeat "
+                             f"(the first: {float(time_s):.3f} s after {float(last_s):.3f} s)",
+                             "they were dropped (--strict fails instead)"))
+        if reader.rescaled:
+            (width, height), time_s = reader.rescaled_from
+            problems.append((f"{side} input changes resolution from {reader.size[0]}x{reader.size[1]} to "
+                             f"{width}x{height} at {float(time_s):.2f} s",
+                             f"{reader.rescaled} frames were rescaled to {reader.size[0]}x{reader.size[1]} "
+                             f"(--strict fails instead)"))
         declared = infos[side].frame_count
         # Counted only over a whole file: a trimmed input was not decoded from its start or to its end.
         whole = reader.span_s[0] is None and not reader.stopped_at_end

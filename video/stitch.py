@@ -30,10 +30,10 @@ from typing import Callable
 import numpy as np
 
 from ..composite import Compositor
-from ..config import CHOICES, Config
+from ..config import CHOICES, Config, require_config
 from ..crop import largest_inner_rectangle
 from ..errors import InputError, StitchError, VideoError
-from ..outputs import OutputPlan, staged
+from ..outputs import OutputPlan
 from ..report import run_info
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
@@ -556,21 +556,41 @@ def check_rig_settings(cfg: Config) -> None:
 
 
 def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike, cfg: Config,
-                  options: VideoOptions, reference: str = "auto", plan: OutputPlan | None = None,
-                  observer: FrameObserver | None = None, debug: str | os.PathLike | None = None) -> dict:
+                  options: VideoOptions | None = None, reference: str = "auto", plan: OutputPlan | None = None,
+                  observer: FrameObserver | None = None, debug: str | os.PathLike | None = None,
+                  overwrite: bool = False) -> dict:
     """Stitch two videos into ``output`` with SENA maps; return the run's report.
 
     An ``output`` of a ``STILL_SUFFIXES`` type gets the stitched frame at the span's start and nothing
     more (:func:`loop.run_still`), a video file every frame of the span (:func:`loop.run_video`).
     ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
+    ``options``: offset, encoder and limits (None: ``VideoOptions.from_config(cfg)``).
     ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
-    ``plan``: commit the video with that plan's other outputs (see ``sena_warp.outputs``).
+    An existing ``output`` is refused (OutputError, before any work) unless ``overwrite`` is True, as
+    the CLI's ``-y``; the output appears only once complete. ``plan``: commit the video with that
+    plan's other outputs (see ``sena_warp.outputs``), under that plan's rule for existing outputs.
     The report is :func:`loop.run_video`'s plus ``run`` (tool, device, settings) and ``stitch`` (see
     :meth:`SenaFrameCompositor.report`), its times in one ``timing_s`` block (``docs/report.md``).
     ``observer``: called with every composited frame (:class:`CompositedFrame`). ``debug``: a folder for
     the first estimate's stage pictures (``debug.py``), written with ``plan``'s outputs.
     The Warp device of ``cfg`` is resolved here, once for the whole video.
     """
+    options = VideoOptions.from_config(require_config(cfg, "stitch_videos")) if options is None else options
+    if not isinstance(options, VideoOptions):
+        raise InputError(f"stitch_videos: options must be a VideoOptions or None, got {type(options).__name__}")
+    if plan is not None:
+        return _stitch_videos(left, right, output, cfg, options, reference, plan, observer, debug)
+    own = OutputPlan((left, right), overwrite="overwrite" if overwrite else "refuse")
+    own.add(output, "the output")
+    if debug is not None:
+        own.add(debug, "debug", folder=True)
+    own.check()
+    with own:
+        return _stitch_videos(left, right, output, cfg, options, reference, own, observer, debug)
+
+
+def _stitch_videos(left, right, output, cfg: Config, options: VideoOptions, reference: str, plan: OutputPlan,
+                   observer: FrameObserver | None, debug: str | os.PathLike | None) -> dict:
     check_rig_settings(cfg)
     cfg = resolve_config(cfg)
     t0 = time.perf_counter()
@@ -598,7 +618,7 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
     try:
         report = run(left, right, output, factory, options, plan)
         if debug is not None:
-            with staged(plan, debug, (left, right), folder=True) as debug_plan, debug_plan.writing(debug) as folder:
+            with plan.writing(debug) as folder:
                 dump_first_estimate(folder, *first[0], cfg)
     finally:
         for compositor in built:

@@ -41,6 +41,8 @@ from sena_warp.outputs import OutputPlan, atomic_output, make_folder
 from sena_warp.progress import LOGGER, stage
 
 SIZES = {"720p": (1280, 720), "1080p": (1920, 1080), "4k": (3840, 2160)}
+MAX_SIDE_PX = 8192  # --sizes: each side at most this, and ...
+MAX_PIXELS = 7680 * 4320  # ... at most 8K's pixels (the clips of both views are encoded at that size)
 REPO = Path(__file__).resolve().parents[2]
 DATA_DIR = REPO.parent / "shared" / "data"
 PAIR = "rew_lawn_2160"
@@ -80,6 +82,8 @@ def parse_size(text: str) -> tuple[str, tuple[int, int]]:
         raise InputError(f"size {text!r} unknown; use {', '.join(SIZES)} or WIDTHxHEIGHT") from None
     if width < 16 or height < 16 or width % 2 or height % 2:
         raise InputError(f"size {text!r}: width and height must be even and at least 16")
+    if max(width, height) > MAX_SIDE_PX or width * height > MAX_PIXELS:
+        raise InputError(f"size {text!r}: at most {MAX_SIDE_PX} px a side and {MAX_PIXELS / 1e6:.1f} MP (8K)")
     return f"{width}x{height}", (width, height)
 
 
