@@ -603,7 +603,7 @@ def _composite_pixel_kernel(channels: int):
     """The per-pixel frame kernel (CUDA's) for images of ``channels`` (1 to 4) channels: the full rule at
     every pixel, no runs; the same planes as the row-run kernel's."""
 
-    @wp.kernel(module="unique", module_options={"enable_backward": False})
+    @wp.kernel(module="unique", module_options=MODULE_OPTIONS)
     def composite_pixels(
         row0: int,
         planes: Planes,
