@@ -8,6 +8,7 @@ were fully transparent. Inputs are never modified; outputs go through ``sena_war
 from __future__ import annotations
 
 import os
+import stat
 import sys
 import tempfile
 from pathlib import Path
@@ -69,14 +70,22 @@ def transparent_mask(img: np.ndarray) -> np.ndarray | None:
     return transparent if transparent.any() else None
 
 
+def input_stat(path: str | os.PathLike) -> os.stat_result:
+    """``os.stat`` of input ``path``, or InputError when it is missing or a name the file system refuses
+    (too long, a loop of links)."""
+    try:
+        return os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        raise InputError(f"{path}: file not found") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be opened ({exc.strerror})") from None
+
+
 def existing_file(path: str | os.PathLike) -> Path:
-    """``path`` as a Path, or InputError when it is missing or not a regular file."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: file not found")
-    if not path.is_file():
+    """``path`` as a Path, or InputError when it is missing, not a regular file or cannot be looked up."""
+    if not stat.S_ISREG(input_stat(path).st_mode):
         raise InputError(f"{path}: not a file")
-    return path
+    return Path(path)
 
 
 def check_size(name: str, width: int, height: int, max_megapixels: float | None, what: str = "image") -> None:

@@ -91,12 +91,12 @@ def default_outputs(command: str, folder_out: Path) -> dict[str, Path]:
 
 def run_refused(command, outs, ins, folder_out, capfd, warp_device, code, *words, extra=()):
     """Run a command that must be refused; check the code, the one line, nothing left, inputs unchanged."""
-    before_out, before_in = tree(folder_out), digest(p for p in ins if p.is_file())
+    before_out, before_in = tree(folder_out), digest(p for p in ins if os.path.isfile(p))
     rc, err, _ = run_cli([*argv_for(command, ins, outs), *extra], capfd, warp_device)
     assert rc == code, err
     assert_one_line_error(err, *words)
     assert tree(folder_out) == before_out
-    assert digest(p for p in ins if p.is_file()) == before_in
+    assert digest(p for p in ins if os.path.isfile(p)) == before_in
 
 
 # --- 1. outputs colliding with inputs and with each other: exit 6, before any work -------------------
@@ -356,3 +356,40 @@ def test_an_output_name_of_244_characters_is_written(inputs, dirs, capfd, warp_d
 
 def test_outputs_module_names_fit_the_file_system(tmp_path):
     assert os.pathconf(tmp_path, "PC_NAME_MAX") >= outputs.NAME_MAX_BYTES
+
+
+# --- 9: names longer than the file system allows: one line, exit 2 for an input, 6 for an output ---------
+
+LONG = "n" * 300
+LONG_OUTPUTS = [(command, option, how) for command, spec in COMMANDS.items() for option in spec["outputs"]
+                for how in ("name", "folder")] + [("batch", "--out", "name"), ("batch", "--out", "folder")]
+
+
+@pytest.mark.parametrize("command, option, how", LONG_OUTPUTS, ids=lambda v: str(v))
+def test_an_output_name_longer_than_the_file_system_allows_is_refused_before_work(
+        command, option, how, inputs, dirs, capfd, warp_device, no_work):
+    _, folder_out = dirs
+    ins = inputs["eval" if command == "batch" else command]
+    outs = default_outputs(command, folder_out) if command in COMMANDS else {"--out": folder_out / "b"}
+    name = outs[option].name
+    outs[option] = folder_out / (LONG + Path(name).suffix) if how == "name" else folder_out / LONG / name
+    run_refused(command, outs, ins, folder_out, capfd, warp_device, OutputError.exit_code,
+                f"{option} has a name of 30", "bytes, longer than the 255 this file system allows")
+
+
+LONG_INPUTS = [(command, 0) for command in COMMANDS] + [("video", 1), ("batch", 0), ("image", "--config")]
+
+
+@pytest.mark.parametrize("command, where", LONG_INPUTS, ids=lambda v: str(v))
+def test_an_input_name_longer_than_the_file_system_allows_is_one_line_exit_2(command, where, inputs, dirs, capfd,
+                                                                            warp_device):
+    folder_in, folder_out = dirs
+    ins = list(inputs["eval" if command == "batch" else command])
+    outs = default_outputs(command, folder_out) if command in COMMANDS else {"--out": folder_out / "b"}
+    extra = []
+    if where == "--config":
+        extra = ["--config", folder_in / (LONG + ".toml")]
+    else:
+        ins[where] = folder_in / (LONG + ins[where].suffix)
+    run_refused(command, outs, ins, folder_out, capfd, warp_device, InputError.exit_code, "File name too long",
+                extra=extra)
