@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -12,6 +13,7 @@ import pytest
 from sena_warp.batch import REPORTS, SUMMARY, read_jobs
 from sena_warp.cli import main
 from sena_warp.errors import InputError
+from helpers import assert_one_line_error
 
 PAIRS = ("udisd_test_000001", "graf_gt")
 VARYING = {"seconds", "host", "timing_s", "decode_wait_s", "decode_s", "output_fps", "summary"}  # differ run to run
@@ -192,3 +194,143 @@ def test_the_max_megapixels_option_reaches_every_job(bundled_dir, tmp_path, capf
     rc, _, _ = batch([bundled_dir / PAIRS[0], "--out", out, "--max-megapixels", "0.01", "-q"], capfd, warp_device)
     job = json.loads((out / REPORTS / f"{PAIRS[0]}.json").read_text())["job"]
     assert rc == 7 and job["exit_code"] == InputError.exit_code and "--max-megapixels" in job["error"]
+
+
+# --- outputs: resolved, inside DIR, never an input, never shared; refused before any job runs (exit 2) ----
+
+def job_list(tmp_path, jobs: list[dict], kind: str = "toml") -> Path:
+    """A job list of ``jobs`` (key -> text) beside the copies of a pair in tmp_path/lst/c/."""
+    lst = tmp_path / "lst"
+    if kind == "toml":
+        path = lst / "jobs.toml"
+        path.write_text("".join("[[job]]\n" + "".join(f'{k} = "{v}"\n' for k, v in job.items()) for job in jobs))
+    else:
+        keys = sorted({k for job in jobs for k in job})
+        path = lst / "jobs.csv"
+        path.write_text(",".join(keys) + "\n" + "".join(",".join(job.get(k, "") for k in keys) + "\n" for job in jobs))
+    return path
+
+
+@pytest.fixture
+def lst(bundled_dir, tmp_path):
+    """tmp_path/lst/c/{a,b}.jpg; tmp_path/victim.png, a file outside every DIR."""
+    shutil.copytree(bundled_dir / PAIRS[0], tmp_path / "lst" / "c")
+    (tmp_path / "victim.png").write_bytes(b"victim")
+    return tmp_path / "lst"
+
+
+PAIR = {"a": "c/a.jpg", "b": "c/b.jpg"}
+ESCAPES = [  # (jobs, words of the one error line)
+    ([{**PAIR, "name": "one", "output": "../victim.png"}], ("output = '../victim.png' lies outside --out",)),
+    ([{**PAIR, "name": "one", "output": "{tmp}/victim.png"}], ("lies outside --out",)),
+    ([{**PAIR, "name": "one", "output": "g/../../victim.png"}], ("lies outside --out",)),
+    ([{**PAIR, "name": "one", "output": "link/x.png"}], ("lies outside --out",)),  # DIR/link -> tmp_path
+    ([{**PAIR, "name": "one", "output": "../lst/c/a.jpg"}], ("lies outside --out",)),
+    ([{**PAIR, "name": "one", "output": "x.png"}, {**PAIR, "name": "two", "output": "g/../x.png"}],
+     ("jobs one and two have the same output", "x.png; give each job its own")),
+    ([{**PAIR, "name": "one", "output": "x.png"}, {**PAIR, "name": "two", "output": "./x.png"}],
+     ("jobs one and two have the same output",)),
+    ([{**PAIR, "name": "one"}, {"a": "../out/one.png", "b": "c/b.jpg", "name": "two"}],
+     ("the output of job one,", "is an input of job two; give it another name")),
+    ([{**PAIR, "name": "one", "output": "in.jpg"}, {"a": "../out/in.jpg", "b": "c/b.jpg", "name": "two"}],
+     ("the output of job one,", "is an input of job two")),
+]
+
+
+@pytest.mark.parametrize("kind", ["toml", "csv"])
+@pytest.mark.parametrize("jobs, words", ESCAPES, ids=lambda v: None if isinstance(v, list) else "-".join(v)[:40])
+def test_outputs_outside_dir_onto_inputs_or_shared_are_refused_before_any_job(jobs, words, kind, lst, tmp_path,
+                                                                              capfd, warp_device):
+    jobs = [{k: v.replace("{tmp}", str(tmp_path)) for k, v in job.items()} for job in jobs]
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "g").mkdir()
+    (out / "link").symlink_to(tmp_path)
+    (out / "in.jpg").write_bytes((lst / "c" / "a.jpg").read_bytes())
+    before = {p: p.read_bytes() for p in (*tmp_path.rglob("*.jpg"), *tmp_path.rglob("*.png")) if p.is_file()}
+    rc, stdout, err = batch([job_list(tmp_path, jobs, kind), "--out", out, "-q"], capfd, warp_device)
+    assert rc == InputError.exit_code and stdout == []
+    assert_one_line_error(err, *words)
+    assert sorted(p.name for p in out.iterdir()) == ["g", "in.jpg", "link"]  # no job ran: no report, no summary
+    assert {p: p.read_bytes() for p in before} == before
+
+
+def test_a_batch_refused_on_its_job_list_leaves_no_out_folder(lst, tmp_path, capfd, warp_device):
+    jobs = job_list(tmp_path, [{**PAIR, "grid_xx": "2"}])
+    rc, _, err = batch([jobs, "--out", tmp_path / "new", "-q"], capfd, warp_device)
+    assert rc == InputError.exit_code and "unknown setting 'grid_xx'" in err[0]
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_csv_list_with_a_byte_order_mark_reads_as_without(lst, tmp_path):
+    jobs = job_list(tmp_path, [{**PAIR, "name": "one"}], "csv")
+    jobs.write_bytes(b"\xef\xbb\xbf" + jobs.read_bytes())  # as spreadsheets save "CSV UTF-8"
+    (entry,) = read_jobs(jobs, tmp_path / "out", {})
+    assert entry.name == "one" and entry.job.inputs == (str(lst / "c" / "a.jpg"), str(lst / "c" / "b.jpg"))
+
+
+@pytest.mark.parametrize("header, column", [("name,a,b,name", "name"), ("name,a, b,b ", "b"),
+                                            ("name,a,b,grid_x,grid_x", "grid_x")])
+def test_a_csv_column_given_twice_is_refused(lst, tmp_path, header, column):
+    jobs = lst / "jobs.csv"
+    jobs.write_text(f"{header}\none,c/a.jpg,c/b.jpg,{'8,9' if 'grid_x' in header else 'two'}\n")
+    with pytest.raises(InputError, match=f"line 1: the column '{column}' appears twice; keep one"):
+        read_jobs(jobs, tmp_path / "out", {})
+
+
+@pytest.mark.parametrize("name", ["a\nb", "tab\there", "x" * 251, "../up", ".hidden"])
+def test_a_job_name_that_cannot_name_a_file_is_refused(lst, tmp_path, name):
+    jobs = lst / "jobs.toml"
+    jobs.write_text(f'[[job]]\nname = {json.dumps(name)}\na = "c/a.jpg"\nb = "c/b.jpg"\n')
+    with pytest.raises(InputError, match="job name .* (cannot name a file|too long for a file name)"):
+        read_jobs(jobs, tmp_path / "out", {})
+
+
+# --- pair folders: one that tries to be a pair and is not is a failed job saying why -------------------------
+
+MALFORMED = {  # folder -> (files, the reason in its report)
+    "two_a": (("a.jpg", "a.png", "b.jpg"), "2 files for a.* (a.jpg, a.png); keep one"),
+    "typo": (("a.jpg", "c.jpg"), "no b.* image (found a.jpg, c.jpg)"),
+    "both": (("a.jpg", "b.jpg", "left.mp4", "right.mp4"), "holds both an image pair and a video pair"),
+    "one_video": (("left.mp4", "notes.txt"), "no right.* video (found left.mp4, notes.txt)"),
+    "unknown": (("x.png", "y.png"), "no a.* and b.* image (found x.png, y.png)"),
+}
+
+
+def test_pair_folders_that_are_not_ones_are_failed_jobs_and_case_variants_are_pairs(bundled_dir, tmp_path, capfd,
+                                                                                    warp_device):
+    root = tmp_path / "jobs"
+    pair, clip = bundled_dir / PAIRS[0], bundled_dir / "video" / "office_cam1.mp4"
+    for folder, (files, _) in MALFORMED.items():
+        (root / folder).mkdir(parents=True)
+        for name in files:
+            source = clip if name.endswith(".mp4") else pair / "a.jpg"
+            (root / folder / name).write_bytes(source.read_bytes() if not name.endswith(".txt") else b"notes")
+    (root / "upper").mkdir()  # A.JPG / B.JPG: a pair, as a camera names its files
+    shutil.copy(pair / "a.jpg", root / "upper" / "A.JPG")
+    shutil.copy(pair / "b.jpg", root / "upper" / "B.JPG")
+    (root / "empty").mkdir()  # no input of either kind: not a pair folder, not a job
+    (root / "upper" / ".DS_Store").write_bytes(b"x")
+    out = tmp_path / "out"
+    rc, _, err = batch([root, "--out", out, "-q"], capfd, warp_device)
+    assert rc == 7
+    summary = json.loads((out / SUMMARY).read_text())
+    status = {r["name"]: (r["status"], r["exit_code"]) for r in summary["results"]}
+    assert status == {**{folder: ("failed", InputError.exit_code) for folder in MALFORMED}, "upper": ("ok", 0)}
+    for folder, (_, reason) in MALFORMED.items():
+        job = json.loads((out / REPORTS / f"{folder}.json").read_text())["job"]
+        assert job["error"] == f"{root / folder}: {reason}" or job["error"].startswith(f"{root / folder}: {reason}")
+        assert f"{folder}: failed: {root / folder}: {reason}" in "\n".join(err)
+    assert sorted(p.name for p in out.iterdir()) == [REPORTS, SUMMARY, "upper.png"]
+    assert sorted(p.name for p in (root / "upper").iterdir()) == [".DS_Store", "A.JPG", "B.JPG"]
+
+
+def test_a_pair_folder_given_itself_that_is_not_one_is_refused(bundled_dir, tmp_path, capfd, warp_device):
+    folder = tmp_path / "typo"
+    folder.mkdir()
+    shutil.copy(bundled_dir / PAIRS[0] / "a.jpg", folder / "a.jpg")
+    shutil.copy(bundled_dir / PAIRS[0] / "b.jpg", folder / "c.jpg")
+    rc, _, err = batch([folder, "--out", tmp_path / "out", "-q"], capfd, warp_device)
+    assert rc == InputError.exit_code
+    assert_one_line_error(err, f"{folder}: no b.* image (found a.jpg, c.jpg)")
+    assert not (tmp_path / "out").exists()
