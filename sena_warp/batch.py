@@ -36,6 +36,7 @@ import os
 import signal
 import socket
 import stat
+import sys
 import threading
 import time
 from dataclasses import dataclass, replace
@@ -349,7 +350,13 @@ def local_runner(workers: int) -> Callable[[list[Entry]], tuple[str, Iterator[di
 
 
 def ray_runner(address: str, cpus: int) -> Callable[[list[Entry]], tuple[str, Iterator[dict]]]:
-    """A runner for :func:`run_batch`: Ray tasks on the cluster at ``address`` (see :func:`run_ray`)."""
+    """A runner for :func:`run_batch`: Ray tasks on the cluster at ``address`` (see :func:`run_ray`).
+    InputError now, before any work, when Ray is not installed or the address does not answer."""
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        raise InputError("--ray needs Ray: pip install 'sena-warp[cluster]'") from None
+    check_reachable(address)
     return lambda todo: (f"ray {address}", run_ray(todo, address, cpus))
 
 
@@ -370,9 +377,9 @@ def check_reachable(address: str) -> None:
     try:
         socket.create_connection((host.strip("[]"), int(port)), timeout=RAY_CONNECT_TIMEOUT_S).close()
     except OSError as exc:
-        why = exc.strerror or str(exc) or type(exc).__name__
-        raise InputError(f"--ray {address}: cannot reach {host}:{port} within {RAY_CONNECT_TIMEOUT_S:g} s "
-                         f"({why}); check the address and that the cluster is up") from None
+        why = f"no answer in {RAY_CONNECT_TIMEOUT_S:g} s" if isinstance(exc, TimeoutError) else exc.strerror or str(exc)
+        raise InputError(f"--ray {address}: cannot reach {host}:{port} ({why}); check the address and that the "
+                         f"cluster is up") from None
 
 
 @contextlib.contextmanager
@@ -388,19 +395,31 @@ def _own_sigterm() -> Iterator[None]:
         signal.signal(signal.SIGTERM, handler)
 
 
+@contextlib.contextmanager
+def _stderr_to_devnull() -> Iterator[None]:
+    """Point file descriptor 2 at /dev/null: Ray's C++ core writes its connection retries there, several
+    lines a second, and the processes a local Ray starts inherit it (they log to their own files)."""
+    sys.stderr.flush()
+    saved, null = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
 def run_ray(entries: list[Entry], address: str, cpus: int) -> Iterator[dict]:
     """Run ``entries`` as Ray tasks on the cluster at ``address`` (or a Ray started here with ``cpus``);
     yield each result as its job finishes. A task reserves its job's threads as CPUs (one unless a
     setting says otherwise), and a GPU when the job asks for CUDA. Leaving early (a signal)
     cancels every task; a running one ends as Ctrl-C ends a command, leaving nothing."""
-    try:
-        import ray
-    except ImportError:
-        raise InputError("--ray needs Ray: pip install 'sena-warp[cluster]'") from None
-    check_reachable(address)
+    import ray
+
     quiet = dict(logging_level=logging.ERROR, log_to_driver=False)
     try:
-        with _own_sigterm():
+        with _own_sigterm(), _stderr_to_devnull():
             if address == RAY_LOCAL:
                 ray.init(num_cpus=cpus, include_dashboard=False, **quiet)
             else:
@@ -489,9 +508,16 @@ def summary_table(summary: dict) -> str:
 def cmd_batch(args: argparse.Namespace) -> int:
     """``sena-warp batch``: run every job, print the table; BatchError (exit 7) when any failed."""
     entries = read_jobs(args.jobs, args.out, args.settings)
-    out_dir = make_folder(args.out, "--out")  # only once the job list is known good
     runner = ray_runner(args.ray, args.workers or os.cpu_count() or 1) if args.ray else local_runner(args.workers or 1)
-    summary = run_batch(entries, out_dir, runner)
+    made = not os.path.isdir(args.out)
+    out_dir = make_folder(args.out, "--out")  # only once the job list and the runner are known good
+    try:
+        summary = run_batch(entries, out_dir, runner)
+    except BaseException:
+        if made:  # a batch that wrote nothing (Ray refused, a signal before any job ended) leaves no DIR
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()
+        raise
     echo(summary_table(summary))
     if summary["failed"]:
         raise BatchError(f"{summary['failed']} of {summary['jobs']} jobs failed; their reports in "

@@ -19,6 +19,7 @@ import signal
 import sys
 import threading
 import time
+from typing import Iterator
 
 from . import __version__
 from .config import CHOICES, OFFSET_AUTO, Config
@@ -40,7 +41,6 @@ class Interrupted(KeyboardInterrupt):
 
     def __init__(self, signum: int):
         super().__init__(signal.Signals(signum).name)
-        self.signum = signum
 
 
 class _Parser(argparse.ArgumentParser):
@@ -298,13 +298,15 @@ def _console(args: argparse.Namespace) -> ConsoleHandler:
 
 
 @contextlib.contextmanager
-def _signals_as_interrupts():
+def _signals_as_interrupts() -> Iterator[list[int]]:
     """While the command runs, SIGINT, SIGTERM and SIGHUP raise :class:`Interrupted` (once: a second
-    signal must not break the clean-up of the first). Only the main thread can set handlers."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+    signal must not break the clean-up of the first). Yields the list of the signal received: a
+    library that catches the interrupt may raise a KeyboardInterrupt of its own instead (Ray does).
+    Only the main thread can set handlers."""
     received: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
 
     def interrupt(signum, frame):
         if not received:
@@ -313,7 +315,7 @@ def _signals_as_interrupts():
 
     previous = {signum: signal.signal(signum, interrupt) for signum in HANDLED_SIGNALS}
     try:
-        yield
+        yield received
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
@@ -326,8 +328,9 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0)
     level = LOGGER.level
     console = _console(args)
+    received: list[int] = []
     try:
-        with _signals_as_interrupts():
+        with _signals_as_interrupts() as received:
             if hasattr(args, "config"):
                 args.settings = _settings(args)
             return args.run(args)
@@ -337,8 +340,8 @@ def main(argv: list[str] | None = None) -> int:
     except MemoryError:  # a raised --max-megapixels, or a machine busy with other work
         LOGGER.error("out of memory; lower --max-megapixels, downscale the inputs or free some memory")
         return StitchError.exit_code
-    except KeyboardInterrupt as exc:
-        signum = getattr(exc, "signum", signal.SIGINT)
+    except KeyboardInterrupt:
+        signum = received[0] if received else signal.SIGINT
         by = "" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"
         LOGGER.error(f"interrupted{by}", extra={"label": ""})
         return 128 + signum

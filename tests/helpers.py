@@ -1,10 +1,12 @@
 """Helpers shared by several test modules (imported as ``helpers``: pytest puts tests/ on sys.path) and
 by ``benchmarks/soak.py``: running the CLI, reading media back, making damaged, huge-claiming,
-rotated or black-starting inputs from the bundled data."""
+rotated or black-starting inputs from the bundled data, a worker task, a process's children."""
 
 from __future__ import annotations
 
+import os
 import struct
+import time
 import zlib
 from fractions import Fraction
 from pathlib import Path
@@ -14,6 +16,7 @@ import numpy as np
 
 from sena_warp.cli import main
 from sena_warp.imageio import read_image
+from sena_warp.outputs import OutputPlan
 from sena_warp.video.reader import FrameReader, YuvFrame, probe_video
 from sena_warp.video.writer import VideoWriter
 
@@ -139,3 +142,42 @@ def reencode_with_black_start(src, dst, black_frames: int) -> None:
                 writer.write(np.full_like(f.y, 16), np.full_like(f.u, 128), np.full_like(f.v, 128), pts=i)
             else:
                 writer.write(f.y, f.u, f.v, pts=i)
+
+
+def worker_task(task):
+    """A task for ``sena_warp.workers`` in tests: ("double", n) -> 2n; ("die", code) ends its process
+    with that code; ("hold", folder) writes a temporary of folder/out.bin and waits to be stopped."""
+    what, arg = task
+    if what == "die":
+        os._exit(arg)
+    if what == "hold":
+        plan = OutputPlan()
+        plan.add(Path(arg) / "out.bin", "-o")
+        plan.check()
+        with plan, plan.writing(Path(arg) / "out.bin") as tmp:
+            tmp.write_bytes(b"partial")
+            time.sleep(600)
+    return 2 * arg
+
+
+def child_processes(pid: int, marker: str) -> list[int]:
+    """The live child processes of ``pid`` whose command line holds ``marker`` (Linux /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit() and alive(int(entry.name)):
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+                cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            except (OSError, IndexError, ValueError):
+                continue
+            if ppid == pid and marker in cmdline:
+                found.append(int(entry.name))
+    return found
+
+
+def alive(pid: int) -> bool:
+    """Process ``pid`` exists and is not a zombie (one nobody reaped counts as gone)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False

@@ -2,18 +2,24 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from sena_warp.batch import REPORTS, SUMMARY, read_jobs
+from sena_warp.batch import REPORTS, SUMMARY, local_runner, read_jobs
 from sena_warp.cli import main
 from sena_warp.errors import InputError
-from helpers import assert_one_line_error
+from helpers import alive, assert_one_line_error, child_processes
 
 PAIRS = ("udisd_test_000001", "graf_gt")
 VARYING = {"seconds", "host", "timing_s", "decode_wait_s", "decode_s", "output_fps", "summary"}  # differ run to run
@@ -334,3 +340,132 @@ def test_a_pair_folder_given_itself_that_is_not_one_is_refused(bundled_dir, tmp_
     assert rc == InputError.exit_code
     assert_one_line_error(err, f"{folder}: no b.* image (found a.jpg, c.jpg)")
     assert not (tmp_path / "out").exists()
+
+
+# --- signals: no job starts after one, running jobs stop and leave nothing, workers die with the parent -----
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def start_video_batch(bundled_dir, tmp_path, jobs: int = 6, ray: bool = False) -> tuple[subprocess.Popen, Path]:
+    """``sena-warp batch`` of ``jobs`` video jobs (the rooftop clips) on 2 workers (or 2 CPUs of a local
+    Ray), as a process of its own."""
+    clips = bundled_dir / "video"
+    listing = tmp_path / "jobs.toml"
+    listing.write_text('[defaults]\nvideo_estimate_pairs = 1\nvideo_audio = "none"\nvideo_crf = 35\n' + "".join(
+        f'[[job]]\nname = "v{i}"\nleft = "{clips / "rooftop_left.mp4"}"\nright = "{clips / "rooftop_right.mp4"}"\n'
+        for i in range(jobs)))
+    out = tmp_path / "out"
+    code = "import sys; from sena_warp.cli import main; sys.exit(main(sys.argv[1:]))"
+    child = subprocess.Popen([sys.executable, "-c", code, "batch", str(listing), "--out", str(out), "--jobs", "2",
+                              *(["--ray", "local"] if ray else []), "--device", "cpu", "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             cwd=REPO)
+    return child, out
+
+
+def wait_for_a_job_writing(out: Path, child: subprocess.Popen, timeout_s: float = 120.0) -> None:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        with contextlib.suppress(OSError):
+            if any(p.name.startswith(".") and ".part" in p.name and p.stat().st_size for p in out.iterdir()):
+                return
+        assert child.poll() is None, child.communicate()
+        time.sleep(0.02)
+    raise AssertionError("no job was ever writing its output")
+
+
+def assert_nothing_half_done(out: Path, running: int) -> None:
+    """No temporary anywhere; each output there is a job complete with its ok report; no more of them than
+    jobs were running when the batch was stopped (none started after)."""
+    assert not [p for p in out.rglob(".*")], sorted(out.rglob("*"))
+    outputs = sorted(p.stem for p in out.glob("*.mp4"))
+    assert len(outputs) <= running, outputs
+    for name in outputs:
+        assert json.loads((out / REPORTS / f"{name}.json").read_text())["job"]["status"] == "ok"
+    assert sorted(p.stem for p in out.glob(f"{REPORTS}/*.json")) == outputs
+    assert not (out / SUMMARY).exists()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT], ids=lambda s: s.name)  # SIGHUP: the same handler
+def test_a_signal_stops_the_batch_at_once_no_job_starts_and_nothing_is_left(signum, bundled_dir, tmp_path):
+    child, out = start_video_batch(bundled_dir, tmp_path)
+    wait_for_a_job_writing(out, child)
+    pids = child_processes(child.pid, "sena_warp.workers")
+    child.send_signal(signum)  # Ctrl-C reaches the batch alone: its workers run in sessions of their own
+    _, err = child.communicate(timeout=120)
+    assert child.returncode == 128 + signum
+    assert err.splitlines() == ["sena-warp: interrupted" + ("" if signum == signal.SIGINT else f" by {signum.name}")]
+    assert len(pids) == 2 and not any(alive(pid) for pid in pids)
+    assert_nothing_half_done(out, running=2)
+
+
+def test_workers_die_with_a_batch_killed_by_sigkill_and_leave_nothing(bundled_dir, tmp_path):
+    child, out = start_video_batch(bundled_dir, tmp_path)
+    wait_for_a_job_writing(out, child)
+    pids = child_processes(child.pid, "sena_warp.workers")
+    child.kill()
+    child.communicate()
+    t0 = time.monotonic()
+    while any(alive(pid) for pid in pids):
+        assert time.monotonic() - t0 < 60, "the workers outlived their parent"
+        time.sleep(0.05)
+    assert len(pids) == 2
+    assert_nothing_half_done(out, running=2)
+
+
+def test_no_more_local_workers_than_jobs_to_run(lst, tmp_path):
+    entries = read_jobs(job_list(tmp_path, [{**PAIR, "name": "one"}, {**PAIR, "name": "two"}]), tmp_path / "o", {})
+    name, runs = local_runner(1000)(entries)
+    runs.close()
+    assert name == "2 local workers"
+
+
+# --- Ray: an address that does not answer is one line at once; a signal stops the tasks like the workers ----
+
+def closed_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.mark.parametrize("address, why", [
+    ("127.0.0.1:{port}", "cannot reach 127.0.0.1:{port} (Connection refused)"),
+    ("ray://127.0.0.1:{port}", "cannot reach 127.0.0.1:{port} (Connection refused)"),
+    ("no-such-host.invalid", "cannot reach no-such-host.invalid:6379 ("),
+    ("ray://no-such-host.invalid", "cannot reach no-such-host.invalid:10001 ("),
+    ("host:port", "not a cluster address; give auto, local, HOST:PORT or ray://HOST:PORT"),
+])
+def test_a_ray_address_that_does_not_answer_is_one_line_before_ray_starts(address, why, lst, tmp_path, capfd,
+                                                                          warp_device, monkeypatch):
+    pytest.importorskip("ray", reason="the cluster extra (ray) is not installed")
+    import ray
+
+    monkeypatch.setattr(ray, "init", lambda *a, **k: pytest.fail("ray.init ran for an address that does not answer"))
+    port = closed_port()
+    address, why = address.format(port=port), why.format(port=port)
+    rc, stdout, err = batch([job_list(tmp_path, [PAIR]), "--out", tmp_path / "out", "--ray", address, "-q"], capfd,
+                            warp_device)
+    assert rc == InputError.exit_code and stdout == []
+    assert_one_line_error(err, f"--ray {address}: {why}")
+    assert not (tmp_path / "out").exists()
+
+
+def test_ray_connect_timeout_is_said_in_seconds(monkeypatch):
+    import sena_warp.batch as batch_module
+
+    def silent(*args, **kwargs):
+        raise socket.timeout("timed out")  # what a host that drops the connection gives after the timeout
+
+    monkeypatch.setattr(socket, "create_connection", silent)
+    with pytest.raises(InputError, match=r"--ray 192.0.2.1:6379: cannot reach 192.0.2.1:6379 \(no answer in 5 s\)"):
+        batch_module.check_reachable("192.0.2.1:6379")
+
+
+def test_a_signal_stops_a_ray_local_batch_one_line_nothing_left(bundled_dir, tmp_path):
+    pytest.importorskip("ray", reason="the cluster extra (ray) is not installed")
+    child, out = start_video_batch(bundled_dir, tmp_path, ray=True)
+    wait_for_a_job_writing(out, child, timeout_s=300)
+    child.send_signal(signal.SIGTERM)
+    _, err = child.communicate(timeout=120)
+    assert child.returncode == 143 and err.splitlines() == ["sena-warp: interrupted by SIGTERM"]
+    assert_nothing_half_done(out, running=2)
