@@ -15,6 +15,7 @@ import contextlib
 import importlib
 import json
 import logging
+import os
 import signal
 import sys
 import threading
@@ -25,7 +26,7 @@ from . import __version__
 from .config import CHOICES, OFFSET_AUTO, Config
 from .errors import InputError, StitchError
 from .outputs import OutputPlan
-from .progress import LOGGER, ConsoleHandler, echo
+from .progress import LOGGER, ConsoleHandler, echo, write_stdout
 
 PROGRESS_MODES = ("auto", "bar", "plain", "json")
 # Command-line options that set a Config field: option dest -> field name.
@@ -133,7 +134,7 @@ def cmd_match(args: argparse.Namespace) -> int:
     if args.output:
         with plan:
             write_image(args.output, draw_matches(img_a, img_b, matches), plan=plan)
-    print(json.dumps(summary))
+    write_stdout(json.dumps(summary) + "\n")
     return 0
 
 
@@ -168,7 +169,7 @@ def cmd_video(args: argparse.Namespace) -> int:
 def cmd_config(args: argparse.Namespace) -> int:
     from .config_file import check_config, config_toml
 
-    print(config_toml(check_config(Config().replace(**args.settings), "settings")), end="")
+    write_stdout(config_toml(check_config(Config().replace(**args.settings), "settings")))
     return 0
 
 
@@ -286,6 +287,20 @@ def _lazy(module: str, function: str):
     return run
 
 
+def _standard_streams() -> None:
+    """Put /dev/null on any of file descriptors 0, 1 and 2 that the caller closed (``2>&-``), and a
+    stream on it where Python left ``sys.stdin`` / ``stdout`` / ``stderr`` None: else the first file
+    opened takes the number (a library's stderr lines would land in an output) and code that writes
+    to ``sys.stderr`` fails."""
+    for fd, name, mode in ((0, "stdin", "r"), (1, "stdout", "w"), (2, "stderr", "w")):
+        try:
+            os.fstat(fd)
+        except OSError:
+            os.open(os.devnull, os.O_RDWR)  # the lowest free number: fd itself
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(fd, mode, closefd=False))
+
+
 def _console(args: argparse.Namespace) -> ConsoleHandler:
     """Show the run's stages, counts and messages on stderr as the output options ask."""
     mode = args.progress
@@ -322,6 +337,7 @@ def _signals_as_interrupts() -> Iterator[list[int]]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    _standard_streams()
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a malformed command line (said on one line)
@@ -333,7 +349,9 @@ def main(argv: list[str] | None = None) -> int:
         with _signals_as_interrupts() as received:
             if hasattr(args, "config"):
                 args.settings = _settings(args)
-            return args.run(args)
+            code = args.run(args)
+            write_stdout()  # flush what was printed: a full disk says so here, in one line
+            return code
     except StitchError as exc:
         LOGGER.error(str(exc))
         return exc.exit_code

@@ -92,11 +92,13 @@ def check_size(name: str, width: int, height: int, max_megapixels: float | None,
     """InputError when a ``width`` x ``height`` input is above ``max_megapixels`` (None: no limit of
     ours) or above what OpenCV decodes, before anything that size is allocated."""
     megapixels = width * height / 1e6
+    shown = f"{megapixels:.3g}" if megapixels < 1000 else f"{megapixels:.0f}"  # 0.307, 625, 1600: never "0 MP"
+    size = f"{width}x{height} px ({shown} MP)"
     if width * height > OPENCV_MAX_PIXELS:
-        raise InputError(f"{name}: {what} is {width}x{height} px ({megapixels:.0f} MP), above the "
+        raise InputError(f"{name}: {what} is {size}, above the "
                          f"{OPENCV_MAX_PIXELS / 1e6:.0f} MP OpenCV decodes; downscale it first")
     if max_megapixels is not None and megapixels > max_megapixels:
-        raise InputError(f"{name}: {what} is {width}x{height} px ({megapixels:.0f} MP), above the limit of "
+        raise InputError(f"{name}: {what} is {size}, above the limit of "
                          f"{max_megapixels:g} MP per input; downscale it first, or raise --max-megapixels if the "
                          f"machine has the memory (see the README)")
 

@@ -19,7 +19,7 @@ from .config_file import check_config
 from .errors import InputError
 from .imageio import IMAGE_SUFFIXES
 from .outputs import OutputPlan
-from .progress import LOGGER, stage
+from .progress import LOGGER, stage, write_stdout
 
 KINDS = ("image", "video")
 PAIR_STEMS = {"image": ("a", "b"), "video": ("left", "right")}  # file stems of a pair folder
@@ -105,7 +105,7 @@ def checked(plan: OutputPlan) -> bool:
     existing output (the command then does nothing)."""
     existing = plan.check()
     for path in existing:
-        print(f"{path}: exists, skipped (-n)")
+        write_stdout(f"{path}: exists, skipped (-n)\n")
     return not existing
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 
 import cv2
 import numpy as np
@@ -344,3 +345,13 @@ def test_atomic_output_gives_the_file_the_umask_mode_not_mkstemps_0600(tmp_path,
         tmp.write_bytes(b"data")
     assert (tmp_path / "x.png").stat().st_mode & 0o777 == 0o640
 
+
+
+@pytest.mark.parametrize("width, height, shown", [
+    (640, 480, "640x480 px (0.307 MP)"), (100, 100, "100x100 px (0.01 MP)"), (25000, 25000, "25000x25000 px (625 MP)"),
+    (40000, 40000, "40000x40000 px (1600 MP)")])
+def test_a_size_refusal_shows_the_megapixels_never_as_0(width, height, shown):
+    from sena_warp.imageio import check_size
+
+    with pytest.raises(InputError, match=re.escape(shown)):
+        check_size("x.png", width, height, 0.001)

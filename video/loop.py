@@ -165,6 +165,10 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
             FrameReader(right, offsets["right"], options.queue_frames, options.threads, options.strict) as reader_r:
         pairs = pair_by_time(reader_l, reader_r, 1 / infos["right"].fps, attrgetter("time_s"), stats)
         first = next(pairs, None)
+        undecoded = [path for path, reader in ((left, reader_l), (right, reader_r)) if not reader.decoded + reader.damaged]
+        if first is None and undecoded:
+            raise VideoError(f"{undecoded[0]}: no frame could be decoded: it holds no key frame (as a piece cut out of a "
+                             f"longer stream may not); re-encode it")
         if first is None:
             raise VideoError(
                 f"{left} and {right}: no frames overlap in time with offset {options.offset_s} s; check --offset"
@@ -228,8 +232,14 @@ def _note(notes: list[str], text: str) -> None:
 
 
 def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], stats: PairingStats) -> list[str]:
-    """What the report's reader should know about the inputs: rates that differ or vary, rotations."""
+    """What the report's reader should know about the inputs: left frames with no right frame (left
+    out of the output), rates that differ or vary, rotations."""
     notes = []
+    for count, where in ((stats.unpaired_ticks_start, "first"), (stats.leftover_ticks, "last")):
+        if count:
+            side = "starts after" if where == "first" else "ends before"
+            notes.append(f"the right input {side} the left one: the {where} {count} left frames have no right "
+                         f"frame and are not in the output")
     rate_l, rate_r = infos["left"].fps, infos["right"].fps
     if rate_l != rate_r:
         notes.append(f"frame rates differ (left {float(rate_l):g} fps, right {float(rate_r):g} fps): frames paired "
