@@ -144,6 +144,26 @@ def reencode_with_black_start(src, dst, black_frames: int) -> None:
                 writer.write(f.y, f.u, f.v, pts=i)
 
 
+def shortened(src: Path, dst: Path, frames: int) -> Path:
+    """The first ``frames`` frames of ``src``, re-encoded at its rate: a recording stopped early."""
+    kept = decoded_frames(src)[:frames]
+    with VideoWriter(dst, *kept[0].y.shape[::-1], probe_video(src).fps) as writer:
+        for i, frame in enumerate(kept):
+            writer.write(frame.y, frame.u, frame.v, pts=i)
+    return dst
+
+
+def without_key_frames(src: Path, dst: Path) -> Path:
+    """``src``'s video packets but its key frames: a piece cut out of a longer stream."""
+    with av.open(str(src)) as cin, av.open(str(dst), "w") as cout:
+        sin = cin.streams.video[0]
+        sout = cout.add_stream_from_template(sin)
+        for packet in cin.demux(sin):
+            if packet.dts is not None and not packet.is_keyframe:
+                packet.stream = sout
+                cout.mux(packet)
+    return dst
+
 def worker_task(task):
     """A task for ``sena_warp.workers`` in tests: ("double", n) -> 2n; ("die", code) ends its process
     with that code; ("hold", folder) writes a temporary of folder/out.bin and waits to be stopped."""

@@ -24,7 +24,7 @@ from sena_warp.video.loop import VideoOptions, run_video
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import YuvFrame, probe_video
 from sena_warp.video.writer import VideoWriter, choose_codec
-from helpers import decoded_frames, stream_spans
+from helpers import decoded_frames, shortened, stream_spans, without_key_frames
 
 
 class SideBySide:
@@ -366,27 +366,6 @@ def test_variable_frame_rate_keeps_the_input_frame_times(clips, tmp_path):
     assert np.abs(np.array(out_ms) - (np.array(in_ms) - in_ms[0])).max() < 0.5
     assert report["dropped"] == report["repeated"] == 0
     assert any("variable frame rate" in note and "20 to 50 ms" in note for note in report["notes"])
-
-
-def shortened(src: Path, dst: Path, frames: int) -> Path:
-    """The first ``frames`` frames of ``src``, re-encoded at its rate: a recording stopped early."""
-    kept = decoded_frames(src)[:frames]
-    with VideoWriter(dst, *kept[0].y.shape[::-1], probe_video(src).fps) as writer:
-        for i, frame in enumerate(kept):
-            writer.write(frame.y, frame.u, frame.v, pts=i)
-    return dst
-
-
-def without_key_frames(src: Path, dst: Path) -> Path:
-    """``src``'s video packets but its key frames: a piece cut out of a longer stream."""
-    with av.open(str(src)) as cin, av.open(str(dst), "w") as cout:
-        sin = cin.streams.video[0]
-        sout = cout.add_stream_from_template(sin)
-        for packet in cin.demux(sin):
-            if packet.dts is not None and not packet.is_keyframe:
-                packet.stream = sout
-                cout.mux(packet)
-    return dst
 
 
 @pytest.mark.parametrize("case", ["right ends first", "right starts later"])
