@@ -94,7 +94,7 @@ def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: d
     source, out_dir = Path(source).resolve(), Path(out_dir).resolve()
     if stat.S_ISDIR(input_stat(source).st_mode):
         defaults: dict = {}
-        rows = _folder_rows(source)
+        rows = _folder_rows(source, out_dir)
     elif source.suffix.lower() == ".toml":
         defaults, rows = _toml_rows(source)
     elif source.suffix.lower() == ".csv":
@@ -110,14 +110,15 @@ def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: d
     return entries
 
 
-def _folder_rows(folder: Path) -> list[tuple[str, dict | InputError]]:
+def _folder_rows(folder: Path, out_dir: Path) -> list[tuple[str, dict | InputError]]:
     """(where, row) per pair folder of ``folder`` (or ``folder`` itself when it is one); a folder that
-    tries to be a pair folder and is not gives (its name, its InputError) instead."""
+    tries to be a pair folder and is not gives (its name, its InputError) instead. ``out_dir`` (DIR,
+    whose outputs would look like one) is not looked at."""
     own = _pair_or_error(folder)
     if isinstance(own, tuple):
         return [(str(folder), _pair_row(folder, *own))]
-    pairs = [(sub, found) for sub in sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith("."))
-             if (found := _pair_or_error(sub)) is not None]
+    subs = sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith(".") and p.resolve() != out_dir)
+    pairs = [(sub, found) for sub in subs if (found := _pair_or_error(sub)) is not None]
     if not pairs:
         raise own if isinstance(own, InputError) else InputError(
             f"{folder}: no pair folders (sub-folders holding a.* + b.* images or left.* + right.* videos)")

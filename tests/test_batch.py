@@ -469,3 +469,12 @@ def test_a_signal_stops_a_ray_local_batch_one_line_nothing_left(bundled_dir, tmp
     _, err = child.communicate(timeout=120)
     assert child.returncode == 143 and err.splitlines() == ["sena-warp: interrupted by SIGTERM"]
     assert_nothing_half_done(out, running=2)
+
+
+def test_dir_inside_the_pair_folders_is_not_taken_for_a_pair_folder(bundled_dir, tmp_path):
+    root = tmp_path / "jobs"
+    shutil.copytree(bundled_dir / PAIRS[0], root / "one")
+    (root / "out").mkdir()
+    for name in ("one.png", "two.png"):  # what an earlier run to --out jobs/out left there
+        shutil.copy(bundled_dir / PAIRS[0] / "a.jpg", root / "out" / name)
+    assert [(e.name, e.error) for e in read_jobs(root, root / "out", {})] == [("one", None)]
