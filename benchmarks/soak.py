@@ -48,6 +48,7 @@ sys.path.insert(0, str(REPO / "tests"))
 from helpers import (alive, child_processes, damage_the_middle, index_first, png_claiming,  # noqa: E402
                      reencode_with_black_start, shortened, truncated, with_orientation, without_key_frames)
 from sena_warp.cli import main as cli_main  # noqa: E402
+from sena_warp.jobs import INPUT_SUFFIXES  # noqa: E402
 
 FAST_VIDEO = ["--audio", "none", "--crf", "35"]
 SIGNAL_WAIT_S = 120.0
@@ -62,7 +63,7 @@ def image_runs(data: Path):
 
 def video_runs(data: Path):
     for folder in sorted(p for p in (data / "videos").iterdir() if p.is_dir()):
-        left, right = sorted(folder.glob("*.mp4"))[:2]
+        left, right = sorted(p for p in folder.iterdir() if p.suffix.lower() in INPUT_SUFFIXES["video"])[:2]
         yield f"{folder.name} static", ["video", str(left), str(right)], ".mp4"
         yield f"{folder.name} moving", ["video", str(left), str(right), "--rig", "moving"], ".mp4"
 
