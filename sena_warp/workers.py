@@ -13,6 +13,7 @@ Tasks and results are pickles behind an 8-byte length, on two pipes per worker (
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 import pickle
@@ -112,7 +113,8 @@ def run_in_workers(tasks: list, workers: int, function: str, cleanup: Callable[[
         if worker.task is None:
             _close_tasks(worker)
         else:
-            _send(worker.tasks_fd, worker.task)
+            with contextlib.suppress(BrokenPipeError):  # it has just died: its results pipe says so next
+                _send(worker.tasks_fd, worker.task)
 
     def start() -> None:
         worker = _start(function)
