@@ -5,16 +5,18 @@ JOBS is a folder of pair folders (each holding images ``a.*`` + ``b.*`` or video
 ``a.jpg`` + ``c.jpg``, is a failed job saying why), or a job list: TOML (``[defaults]`` and
 ``[[job]]`` tables) or CSV (a header row, one job per row). A job gives its inputs (``a``/``b`` or
 ``left``/``right``, relative to the list's folder) and optionally ``name``, ``output`` (relative to
-DIR, and inside it), ``reference``, ``crop`` (images), ``offset`` (videos: seconds, or "auto" to
-estimate them) and any setting of ``sena-warp config``. Settings apply in this order, the later
-winning: defaults, ``--config``, command-line options, the list's ``[defaults]``, the job's own.
-Before any job runs, every output is resolved (``..``, links) and refused (exit 2) when it lies
-outside DIR, is any job's input, or is another job's output; DIR is made only then.
+DIR, and inside it), ``reference``, ``crop``, ``offset`` (videos: seconds, or "auto" to estimate them)
+and any setting of ``sena-warp config``. Settings and these keys apply in this order, the later
+winning: defaults, ``--config``, command-line options (``--crop``, ``--offset``, ``--ss``/``--to``,
+``--codec``, ...), the list's ``[defaults]``, the job's own. Before any job runs, every output is
+resolved (``..``, links) and refused (exit 2) when it lies outside DIR, is any job's input, or is
+another job's output; DIR is made only then.
 
 Each job writes ``DIR/NAME.png`` or ``DIR/NAME.mp4`` and then ``DIR/reports/NAME.json`` (its report
 with a ``job`` block: status, error, time). A job whose report says "ok" and whose output exists is
 complete and skipped by the next run, so an interrupted batch resumes where it stopped; a failed job
-is recorded with its error, the others go on, and it is tried again next time. At the end: a table
+is recorded with its error, the others go on, and it is tried again next time (``-y`` runs every job
+again, ``-n`` only those whose output does not exist). At the end: a table
 on stdout, ``DIR/summary.json``, and exit code 7 when any job failed.
 
 The same job function, :func:`run_entry`, runs in ``--jobs N`` local worker processes
@@ -49,11 +51,11 @@ from .errors import InputError, StitchError
 from .imageio import input_stat
 from .jobs import INPUT_SUFFIXES, OUTPUT_SUFFIXES, PAIR_STEMS, Job, pair_inputs, run_job, summary_line
 from .outputs import NAME_MAX_BYTES, atomic_output, make_folder, remove_stale_temps
-from .progress import LOGGER, Count, echo
+from .progress import LOGGER, Count, echo, stage
 from .workers import STOP_WAIT_S, run_in_workers
 
 # Job keys besides the settings: name -> (type, the kind it applies to or None for both).
-JOB_KEYS = {"name": (str, None), "output": (str, None), "reference": (str, None), "crop": (bool, "image"),
+JOB_KEYS = {"name": (str, None), "output": (str, None), "reference": (str, None), "crop": (bool, None),
             "offset": (float, "video"), "a": (str, "image"), "b": (str, "image"), "left": (str, "video"),
             "right": (str, "video")}
 WORDS = {"offset": (OFFSET_AUTO,)}  # words a number key also takes
@@ -85,8 +87,10 @@ class Entry:
     error: str | None = None
 
 
-def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: dict) -> list[Entry]:
-    """The batch's jobs from a folder of pair folders or a .toml / .csv list; ``settings``: for every job.
+def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: dict,
+              options: dict | None = None) -> list[Entry]:
+    """The batch's jobs from a folder of pair folders or a .toml / .csv list; ``settings``: for every job;
+    ``options``: job keys (``crop``, ``offset``) for every job of a kind they apply to, under the list's own.
 
     Paths come back absolute (a Ray task may run elsewhere); names, outputs and inputs are checked,
     and how the outputs lie against DIR, the inputs and each other.
@@ -104,7 +108,8 @@ def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: d
     if not rows:
         raise InputError(f"{source}: no jobs found")
     entries = [_refused(where, row, out_dir) if isinstance(row, InputError)
-               else _entry({**defaults, **row}, where, source, out_dir, settings) for where, row in rows]
+               else _entry({**defaults, **row}, where, source, out_dir, settings, options or {})
+               for where, row in rows]
     _check_unique(entries, source)
     _check_outputs(entries, source)
     return entries
@@ -190,7 +195,7 @@ def _from_text(key: str, text: str, where: str):
     return text
 
 
-def _entry(row: dict, where: str, source: Path, out_dir: Path, settings: dict) -> Entry:
+def _entry(row: dict, where: str, source: Path, out_dir: Path, settings: dict, given: dict) -> Entry:
     types = field_types()
     for key in row:
         if key not in JOB_KEYS and key not in types:
@@ -199,15 +204,16 @@ def _entry(row: dict, where: str, source: Path, out_dir: Path, settings: dict) -
     if len(kinds) != 1 or not all(stem in row for stem in PAIR_STEMS[kinds[0]]):
         raise InputError(f"{where}: give the inputs as a and b (images) or left and right (videos)")
     kind = kinds[0]
-    options = {key: _job_value(key, value, kind, where) for key, value in row.items() if key in JOB_KEYS}
+    options = {**{key: value for key, value in given.items() if JOB_KEYS[key][1] in (None, kind)},
+               **{key: _job_value(key, value, kind, where) for key, value in row.items() if key in JOB_KEYS}}
     base = source if source.is_dir() else source.parent
     inputs = tuple(str((base / options[stem]).resolve()) for stem in PAIR_STEMS[kind])
     name = options.get("name") or Path(inputs[0]).parent.name
     _check_name(name, where)
-    given = options.get("output", name + OUTPUT_SUFFIXES[kind][0])
-    output = Path(os.path.realpath(out_dir / given))  # "g/../x.png" and "x.png" are one output
+    named = options.get("output", name + OUTPUT_SUFFIXES[kind][0])
+    output = Path(os.path.realpath(out_dir / named))  # "g/../x.png" and "x.png" are one output
     if not output.is_relative_to(out_dir) or output == out_dir:
-        raise InputError(f"{where}: output = {given!r} lies outside --out {out_dir}; give a name inside it")
+        raise InputError(f"{where}: output = {named!r} lies outside --out {out_dir}; give a name inside it")
     job_settings = {**settings, **{key: check_value(key, value, where) for key, value in row.items() if key in types}}
     # A job still to run replaces what an earlier, unfinished run left (complete jobs are skipped before).
     job = Job(kind, inputs, str(output), job_settings, reference=options.get("reference", "auto"),
@@ -314,7 +320,16 @@ def _write_report(path: str, data: dict) -> None:
     write_json(path, data)
 
 
-def _failed(entry: Entry, error: str, exit_code: int = 1) -> dict:
+def _skipped(entry: Entry) -> dict:
+    """The result record of a job not run: its earlier run's record where its report has one."""
+    try:
+        earlier = json.loads(Path(entry.report).read_text())["job"]
+    except (OSError, ValueError, KeyError, TypeError):
+        earlier = {**_failed(entry, None), "exit_code": None}
+    return {**earlier, "status": "skipped"}
+
+
+def _failed(entry: Entry, error: str | None, exit_code: int = 1) -> dict:
     """The result record of a job that did not run to a result: a pair folder that is not one, a
     crashed worker process, a lost Ray task."""
     job = entry.job
@@ -334,11 +349,17 @@ def _remove_leftovers(entry: Entry) -> None:
         remove_stale_temps(Path(path))
 
 
+def _started(entry: Entry) -> None:
+    """Say that ``entry`` starts (a batch hands a job to a worker only when one is free to run it)."""
+    LOGGER.info("%s: started (%s job: %s)", entry.name, entry.job.kind, Path(entry.job.inputs[0]).parent)
+
+
 def run_local(entries: list[Entry], workers: int) -> Iterator[dict]:
-    """Run ``entries`` in ``workers`` fresh processes sharing the cores; yield each result as its job finishes."""
+    """Run ``entries`` in ``workers`` fresh processes sharing the cores, one job per worker at a time (each
+    said as it starts); yield each result as its job finishes."""
     share = max((os.cpu_count() or 1) // workers, 1)
     tasks = [_with_threads(entry, share) for entry in entries]
-    for entry, result, why in run_in_workers(tasks, workers, f"{__name__}:run_entry", _remove_leftovers):
+    for entry, result, why in run_in_workers(tasks, workers, f"{__name__}:run_entry", _started, _remove_leftovers):
         yield result if why is None else _failed(entry, f"worker failed: {why}")
 
 
@@ -419,6 +440,8 @@ def run_ray(entries: list[Entry], address: str, cpus: int) -> Iterator[dict]:
     import ray
 
     quiet = dict(logging_level=logging.ERROR, log_to_driver=False)
+    # Ray takes seconds to start or reach: said before, so the wait is not silent.
+    stage(f"starting Ray here with {cpus} CPUs" if address == RAY_LOCAL else f"connecting to the Ray cluster at {address}")
     try:
         with _own_sigterm(), _stderr_to_devnull():
             if address == RAY_LOCAL:
@@ -430,11 +453,18 @@ def run_ray(entries: list[Entry], address: str, cpus: int) -> Iterator[dict]:
     pending: dict = {}
     try:
         task = ray.remote(run_entry)
-        for entry in (_with_threads(entry, 1) for entry in entries):
-            options = dict(num_cpus=max(entry.job.settings["cpu_threads"], 1),
-                           num_gpus=1 if entry.job.settings.get("device") == "cuda" else 0, max_retries=0)
-            pending[task.options(**options).remote(entry)] = entry
-        while pending:
+        cluster_cpus = int(ray.cluster_resources().get("CPU", cpus))
+        LOGGER.info("Ray: %d CPUs%s", cluster_cpus, "" if address == RAY_LOCAL else f" at {address}")
+        waiting = [_with_threads(entry, 1) for entry in reversed(entries)]
+        while waiting or pending:
+            # Handed to Ray only while the cluster has the CPUs to start them: "started" means started.
+            while waiting and (not pending or sum(_task_cpus(e) for e in pending.values()) + _task_cpus(waiting[-1])
+                               <= cluster_cpus):
+                entry = waiting.pop()
+                _started(entry)
+                pending[task.options(num_cpus=_task_cpus(entry),
+                                     num_gpus=1 if entry.job.settings.get("device") == "cuda" else 0,
+                                     max_retries=0).remote(entry)] = entry
             done, _ = ray.wait(list(pending), num_returns=1)
             entry = pending.pop(done[0])
             try:
@@ -452,17 +482,28 @@ def run_ray(entries: list[Entry], address: str, cpus: int) -> Iterator[dict]:
                 _remove_leftovers(entry)
 
 
+def _task_cpus(entry: Entry) -> int:
+    """The CPUs a Ray task of ``entry`` reserves: its job's threads."""
+    return max(entry.job.settings.get("cpu_threads", 1), 1)
+
+
 def run_batch(entries: list[Entry], out_dir: str | os.PathLike,
-              runner: Callable[[list[Entry]], tuple[str, Iterator[dict]]]) -> dict:
-    """Record the pair folders that are not ones as failed, skip the complete entries, run the others
-    with ``runner`` (which names itself), write ``DIR/summary.json``; the summary."""
+              runner: Callable[[list[Entry]], tuple[str, Iterator[dict]]], overwrite: str = "refuse") -> dict:
+    """Record the pair folders that are not ones as failed, run the other entries with ``runner`` (which
+    names itself), write ``DIR/summary.json``; the summary.
+
+    ``overwrite`` (``outputs.OVERWRITE_MODES``, as ``-y`` / ``-n`` set it): "refuse" skips the entries an
+    earlier run completed (and redoes the others: the batch resumes), "overwrite" runs every entry
+    again, "skip" runs only those whose output does not exist.
+    """
     t0 = time.perf_counter()
     refused = [e for e in entries if e.error is not None]
-    todo = [e for e in entries if e.error is None and not is_complete(e)]
-    results = {e.name: {**json.loads(Path(e.report).read_text())["job"], "status": "skipped"}
-               for e in entries if e not in todo and e not in refused}
+    done_before = {"refuse": is_complete, "overwrite": lambda e: False, "skip": lambda e: Path(e.job.output).exists()}
+    todo = [e for e in entries if e.error is None and not done_before[overwrite](e)]
+    results = {e.name: _skipped(e) for e in entries if e not in todo and e not in refused}
     if results:
-        LOGGER.info("%d of %d jobs complete from an earlier run: skipped", len(results), len(entries))
+        why = "have an output already (-n)" if overwrite == "skip" else "complete from an earlier run"
+        LOGGER.info("%d of %d jobs %s: skipped", len(results), len(entries), why)
     for entry in refused:
         results[entry.name] = _failed(entry, entry.error, InputError.exit_code)
         _write_report(entry.report, {"job": results[entry.name]})
@@ -508,12 +549,14 @@ def summary_table(summary: dict) -> str:
 
 def cmd_batch(args: argparse.Namespace) -> int:
     """``sena-warp batch``: run every job, print the table; BatchError (exit 7) when any failed."""
-    entries = read_jobs(args.jobs, args.out, args.settings)
+    # Job keys given on the command line, for every job they apply to (a job list's own win).
+    options = {"offset": args.offset, **({"crop": True} if args.crop else {})}
+    entries = read_jobs(args.jobs, args.out, args.settings, options)
     runner = ray_runner(args.ray, args.workers or os.cpu_count() or 1) if args.ray else local_runner(args.workers or 1)
     made = not os.path.isdir(args.out)
     out_dir = make_folder(args.out, "--out")  # only once the job list and the runner are known good
     try:
-        summary = run_batch(entries, out_dir, runner)
+        summary = run_batch(entries, out_dir, runner, args.overwrite)
     except BaseException:
         if made:  # a batch that wrote nothing (Ray refused, a signal before any job ended) leaves no DIR
             with contextlib.suppress(OSError):

@@ -143,8 +143,13 @@ class Config:
     gain_min_pixels: int = 500  # fewer agreeing pixels: no compensation
 
     # --- Video I/O (no paper symbol: encoder and pipeline settings) ---------------------------
-    video_codec: str = "libx264"  # H.264 encoder: "libx264" or "h264_nvenc" (falls back to libx264)
-    video_crf: int = 20  # constant rate factor (libx264 crf, nvenc cq): lower = better, larger files
+    video_codec: str = "libx264"  # encoder: H.264 "libx264" or "h264_nvenc", HEVC "libx265" or "hevc_nvenc" (NVENC falls back to software)
+    video_crf: int = 20  # constant rate factor (libx264/libx265 crf, nvenc cq): lower = better, larger files
+    video_bitrate_kbps: int = 0  # average bit rate (kbit/s) instead of the constant quality video_crf; 0: constant quality
+    video_maxrate_kbps: int = 0  # peak bit rate (kbit/s; a buffer of 2 s of it) capping either rate control; 0: none
+    video_start_s: float = 0.0  # the output starts at this time of the left input (s, after the offset); reached by seeking
+    video_end_s: float = 0.0  # the output ends before this time of the left input (s); 0: where the inputs end
+    video_max_width: int = 0  # the output at most this wide (px; aspect kept, even sides), made by the maps; 0: as stitched
     video_preset: str = "veryfast"  # libx264 speed/size preset
     video_encoder_thread_type: str = "slice"  # libx264 threads: "slice" (parts of one frame) or "frame" (frames in flight)
     video_queue_frames: int = 8  # decoded frames buffered per input between decoder thread and loop
@@ -221,7 +226,7 @@ class Config:
 # The values a text setting may take; the CLI's choices and the settings-file checks read them here.
 CHOICES: dict[str, tuple[str, ...]] = {
     "features": ("xfeat", "sift"),
-    "video_codec": ("libx264", "h264_nvenc"),
+    "video_codec": ("libx264", "libx265", "h264_nvenc", "hevc_nvenc"),
     "video_preset": ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower",
                      "veryslow", "placebo"),
     "video_audio": ("left", "right", "none"),

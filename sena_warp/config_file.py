@@ -49,7 +49,7 @@ MAY_BE_ZERO = frozenset({
     "correction_smooth", "seam_blend_ratio", "gain_outlier_fraction", "gain_dark_level", "video_estimate_workers",
     "seam_prior_weight", "global_model_margin", "video_seam_noise", "video_seam_stay_cost", "video_seam_home_cost", "video_seam_margin",
     "video_seam_jump_cost", "video_seam_motion_cost", "video_gain_settle_s", "video_estimate_lookahead_s",
-    "video_drift_check_s",
+    "video_drift_check_s", "video_bitrate_kbps", "video_maxrate_kbps", "video_start_s", "video_end_s", "video_max_width",
 })
 # ... and those named here have an upper bound too (probabilities, ratios, correlations, x264's quality scale).
 AT_MOST = {

@@ -24,7 +24,8 @@ from .progress import LOGGER, stage, write_stdout
 KINDS = ("image", "video")
 PAIR_STEMS = {"image": ("a", "b"), "video": ("left", "right")}  # file stems of a pair folder
 INPUT_SUFFIXES = {"image": IMAGE_SUFFIXES, "video": (".mp4", ".mov", ".mkv", ".m4v", ".avi", ".webm", ".ts")}
-OUTPUT_SUFFIXES = {"image": IMAGE_SUFFIXES, "video": (".mp4", ".mov", ".mkv")}  # the first: a batch job's default
+# The first: a batch job's default. A video job's .png or .jpg is a still of its first frame (``--ss``).
+OUTPUT_SUFFIXES = {"image": IMAGE_SUFFIXES, "video": (".mp4", ".mov", ".mkv", ".png", ".jpg", ".jpeg")}
 
 
 @dataclass(frozen=True)
@@ -36,7 +37,8 @@ class Job:
     whole video); ``offset_s`` (videos): seconds the right video started after the left one, or "auto"
     to estimate them; ``strict`` (videos): damaged or truncated inputs fail the job instead of a
     warning; ``figures`` (videos): measure the video over time into the report's ``figures``
-    (``evaluation.video_figures``); ``debug`` (images): folder for one picture per stage;
+    (``evaluation.video_figures``); ``debug``: folder for one picture per stage (a video's: of its first
+    estimate);
     ``overwrite``: what an existing output gets, one of ``outputs.OVERWRITE_MODES`` (the CLI's default
     refuses it, ``-y`` replaces it, ``-n`` skips the job).
     """
@@ -186,7 +188,7 @@ def _video(job: Job, cfg: Config) -> dict | None:
         observer = VideoFigures(cfg)
     with plan:  # every output or none
         report = stitch_videos(*job.inputs, job.output, cfg, options, reference=job.reference, plan=plan,
-                               observer=observer)
+                               observer=observer, debug=job.debug)
         if observer is not None:
             report["figures"] = observer.figures()
         report["sync"] = (sync.as_dict() if sync is not None
@@ -205,15 +207,25 @@ def summary_line(kind: str, report: dict) -> str:
                 f"{report['anchors']['count']} anchors, overlap PSNR {m['overlap_psnr_db']} dB, "
                 f"{report['timing_s']['total']:.2f} s")
     out, st, timing = report["output"], report["stitch"], report["timing_s"]
+    if "still" in report:
+        return (f"{out['width']}x{out['height']} px, the frame at {report['still']['left_time_s']:.2f} s, "
+                f"source={st['rig']['source']}, {st['first_estimate']['inliers']} inliers, {timing['total']:.2f} s")
     after_estimate_s = timing["total"] - timing["compositor_setup"]
     steady = f", {report['frames_out'] / after_estimate_s:.1f} fps after the first estimate" if after_estimate_s > 0 else ""
     warnings = f", {len(report['warnings'])} warnings" if report["warnings"] else ""
     return (f"{out['width']}x{out['height']} px, {report['frames_out']} frames at {out['fps']:g} fps "
-            f"({out['encoder']['codec']}), source={st['rig']['source']}, {st['first_estimate']['inliers']} inliers, "
+            f"({_rate_control(out['encoder'])}), source={st['rig']['source']}, {st['first_estimate']['inliers']} inliers, "
             f"re-estimations {st['reestimations']['accepted']} accepted / {st['reestimations']['rejected']} rejected, "
             f"seam jitter {st['jitter']['seam_jitter_px_mean']} px, dropped {report['dropped']}, "
             f"repeated {report['repeated']}, damaged {sum(report['damaged'].values())}, "
             f"{report['output_fps']} fps overall{steady}{warnings}{_figures_summary(report.get('figures'))}")
+
+
+def _rate_control(encoder: dict) -> str:
+    """The encoder and its rate control as the report gives them, e.g. "libx265, crf 20"."""
+    rate = f"{encoder['bitrate_kbps']} kbit/s" if encoder["rate_control"] == "bitrate" else f"crf {encoder['crf']}"
+    peak = f", peak {encoder['maxrate_kbps']} kbit/s" if encoder["maxrate_kbps"] else ""
+    return f"{encoder['codec']}, {rate}{peak}"
 
 
 def _figures_summary(fig: dict | None) -> str:

@@ -41,7 +41,7 @@ from .partition import BorderOffsets, SeamMaps, SeamOffsets, border_offsets, sea
 from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .seam_path import SeamPath, seam_line
-from .warp_map import CanvasViews, canvas_views, forward_points, source_map_canvas
+from .warp_map import canvas_views, forward_points, source_map_canvas
 from .zone import Zone, adequate_zone
 from sena_warp.kernels import runtime
 
@@ -274,19 +274,25 @@ def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     """
     cfg = runtime.resolve_config(cfg)
     clock = StageClock()
-    with clock("load_kernels"):  # a first run's compile gets its own time, not a stage's
-        runtime.prewarm(cfg.device)
+    with clock("load_kernels"):  # a first run's compile starts in the background (a launch waits for its module)
+        runtime.prewarm(cfg.device, channels=(3,), wait=False)  # BGR images: the 3-channel frame kernel
     stage("estimating maps")
     with naming_scale_ratio(img_a, img_b, cfg):
         maps = estimate_maps(img_a, img_b, cfg, reference, transparent=transparent)
     clock.seconds.update(maps.seconds)
-    img_src, img_tgt = maps.rig.pick(img_a, img_b)
     stage("compositing")
     with clock("composite"):
-        compositor = panorama_compositor(maps, cfg, transparent)
-        out = compositor.apply(img_src, img_tgt)
-        coverage = compositor.coverage(img_src.shape, img_tgt.shape)
-    return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
+        image = panorama_image(img_a, img_b, maps, cfg, transparent)
+    return Panorama(image, maps, clock.seconds)
+
+
+def panorama_image(img_a: np.ndarray, img_b: np.ndarray, maps: StitchMaps, cfg: Config,
+                   transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> np.ndarray:
+    """The BGRA panorama of BGR images ``img_a``, ``img_b`` composited with ``maps`` (alpha 0 where
+    neither covers the canvas); ``transparent`` as :func:`stitch_images`'."""
+    img_src, img_tgt = maps.rig.pick(img_a, img_b)
+    compositor = panorama_compositor(maps, cfg, transparent)
+    return np.dstack([compositor.apply(img_src, img_tgt), compositor.coverage(img_src.shape, img_tgt.shape)])
 
 
 def _prior_on_canvas(prior_seam_tgt: np.ndarray | None, canvas) -> np.ndarray | None:

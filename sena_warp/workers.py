@@ -94,12 +94,13 @@ def _why(process: subprocess.Popen) -> str:
     return f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
 
 
-def run_in_workers(tasks: list, workers: int, function: str, cleanup: Callable[[object], None]
-                   ) -> Iterator[tuple[object, object, str | None]]:
+def run_in_workers(tasks: list, workers: int, function: str, started: Callable[[object], None],
+                   cleanup: Callable[[object], None]) -> Iterator[tuple[object, object, str | None]]:
     """Run ``function`` ("module:name", importable by a fresh Python) on each of ``tasks`` in at most
     ``workers`` processes; yield ``(task, result, None)`` as each finishes, or ``(task, None, why)``
     when its worker died (a replacement takes the remaining tasks).
 
+    ``started(task)`` is called as a task is handed to a worker (free to run it at once);
     ``cleanup(task)`` is called for every task whose worker died or was killed while running it,
     once that process is gone (to remove what it left). Leaving the iteration early (an exception
     in the caller, a signal) stops every worker before it returns.
@@ -113,6 +114,7 @@ def run_in_workers(tasks: list, workers: int, function: str, cleanup: Callable[[
         if worker.task is None:
             _close_tasks(worker)
         else:
+            started(worker.task)
             with contextlib.suppress(BrokenPipeError):  # it has just died: its results pipe says so next
                 _send(worker.tasks_fd, worker.task)
 

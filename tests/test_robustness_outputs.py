@@ -292,7 +292,7 @@ def test_bad_option_values_exit_2_before_any_work(command, extra, words, inputs,
 
 
 @pytest.mark.parametrize("command, name", [("image", "pano.gif"), ("image", "pano"), ("video", "pano.avi"),
-                                           ("video", "pano.png"), ("match", "m.txt")])
+                                           ("video", "pano.gif"), ("match", "m.txt")])
 def test_an_unsupported_output_type_is_a_bad_option_exit_2(command, name, inputs, dirs, capfd, warp_device, no_work):
     _, folder_out = dirs
     outs = default_outputs(command, folder_out)

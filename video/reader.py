@@ -20,6 +20,7 @@ stops the run.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import os
@@ -175,6 +176,13 @@ def _quarter_turns(rotation_deg: float) -> int:
     return round(rotation_deg / 90) % 4
 
 
+def span_of(start_s: float, end_s: float, margin_s: Fraction = Fraction(0)) -> tuple[Fraction | None, Fraction | None]:
+    """A :class:`FrameReader`'s ``span_s`` for the trim [``start_s``, ``end_s``) (``Config.video_start_s`` /
+    ``video_end_s``; 0: not trimmed there), widened by ``margin_s`` at both ends."""
+    return (Fraction(str(start_s)) - margin_s if start_s else None,
+            Fraction(str(end_s)) + margin_s if end_s else None)
+
+
 def plane_array(plane: av.video.plane.VideoPlane) -> np.ndarray:
     """A contiguous ``(height, width)`` uint8 copy of one frame plane, dropping the line padding."""
     rows = np.frombuffer(plane, dtype=np.uint8, count=plane.height * plane.line_size)
@@ -194,12 +202,21 @@ class FrameReader:
     decoder thread's time decoding and copying planes out (not its waits on a full queue).
     ``threads``: FFmpeg decoder threads (``Config.cpu_threads``; 0 lets FFmpeg choose); once decoding
     has started, ``decoder_threads`` is the count the decoder was opened with.
+
+    ``span_s`` = (start, end) on the shared clock: only frames with start <= time < end come out (None:
+    from the beginning, to the end of the file). A start inside the file is reached by seeking to the
+    key frame before it, so only the frames from there on are decoded (``skipped``: those before the
+    start); decoding stops at the first frame at or past the end (``stopped_at_end``).
     """
 
     def __init__(self, path: str | os.PathLike, offset_s: Fraction = Fraction(0), queue_frames: int = 8,
-                 threads: int = 0, strict: bool = False):
+                 threads: int = 0, strict: bool = False,
+                 span_s: tuple[Fraction | None, Fraction | None] = (None, None)):
         self.path = Path(path)
         self.offset_s = Fraction(offset_s)
+        self.span_s = span_s
+        self.stopped_at_end = False  # decoding stopped at the span's end, before the end of the file
+        self.skipped = 0  # frames decoded before the span's start (from the key frame a seek lands on)
         self.threads = threads
         self.decoder_threads: int | None = None
         self.strict = strict
@@ -276,6 +293,9 @@ class FrameReader:
         rate = Fraction(stream.average_rate or stream.guessed_rate)
         period_pts = 1 / (rate * time_base)
         last_pts = None
+        first_s, end_s = self.span_s
+        if first_s is not None and first_s - self.offset_s > 0:
+            self._seek(stream, start_pts + (first_s - self.offset_s) / time_base)
         # After damage, up to the next key frame: frames are predicted from it, and frames the decoder
         # lost leave gaps in time. (With frame threads its error comes a few packets late: the packet
         # that raises is not the damaged one, so the gaps, not the packets, say what is missing.)
@@ -286,7 +306,7 @@ class FrameReader:
                 frames = packet.decode()
             except av.error.InvalidDataError:
                 if self.strict:
-                    raise self._damage_error(self._last_good.time_s if self._last_good else Fraction(0))
+                    raise self._damage_error(self._last_good.time_s if self._last_good else Fraction(0)) from None
                 tainted = True
                 continue
             finally:
@@ -300,6 +320,12 @@ class FrameReader:
                     pts = start_pts if last_pts is None else last_pts + period_pts
                 last_pts = pts
                 time_s = (pts - start_pts) * time_base + self.offset_s
+                if first_s is not None and time_s < first_s:  # between the key frame a seek lands on and the span's start
+                    self.skipped += 1
+                    continue
+                if end_s is not None and time_s >= end_s:
+                    self.stopped_at_end = True
+                    return
                 if (was_tainted or tainted) and not self._fill_gap(time_s, 1 / rate):
                     return
                 if tainted:
@@ -311,6 +337,12 @@ class FrameReader:
                 self.decode_s += time.perf_counter() - t0
                 if not self._put(yuv):
                     return
+
+    def _seek(self, stream, pts: Fraction) -> None:
+        """Move to the key frame at or before ``pts`` (the stream's time base); where the file cannot seek,
+        decoding starts at its beginning and the frames before the span are passed over all the same."""
+        with contextlib.suppress(av.error.FFmpegError):
+            self._container.seek(int(pts), stream=stream, backward=True, any_frame=False)
 
     def _damage_error(self, time_s: Fraction) -> VideoError:
         return VideoError(f"{self.path}: damaged frame at {float(time_s):.2f} s after {self.decoded} good frames "
