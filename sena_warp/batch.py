@@ -508,7 +508,7 @@ def run_batch(entries: list[Entry], out_dir: str | os.PathLike,
         results[entry.name] = _failed(entry, entry.error, InputError.exit_code)
         _write_report(entry.report, {"job": results[entry.name]})
         LOGGER.warning("%s: failed: %s", entry.name, entry.error)
-    runner_name, stream = runner(todo) if todo else ("no jobs to run", iter(()))
+    runner_name, stream = runner(todo) if todo else ("no jobs to run", (result for result in ()))  # closable
     count = Count("jobs", len(todo), "jobs/s")
     with contextlib.closing(stream):  # a signal here stops the runner's jobs before it propagates
         for done, result in enumerate(stream, start=1):
