@@ -178,7 +178,7 @@ def test_a_video_frame_too_large_is_refused_from_the_streams_coded_size_before_d
         rc, err, _ = run_cli(["video", big, bundled_dir / "video" / "rooftop_right.mp4", "-o", folder_out / "v.mp4",
                               "--max-megapixels", "1", "--offset", offset], capfd, warp_device)
         assert rc == InputError.exit_code
-        assert_one_line_error(err, str(big), "a frame is 1280x1024 px (1 MP), above the limit of 1 MP per input")
+        assert_one_line_error(err, str(big), "a frame is 1280x1024 px (1.31 MP), above the limit of 1 MP per input")
     assert list(folder_out.iterdir()) == []
 
 
