@@ -24,7 +24,7 @@ from sena_warp.video.loop import VideoOptions
 from sena_warp.errors import GeometryError
 from sena_warp.video import estimate
 from sena_warp.video.estimate import best_first_estimate, first_pairs, rejection_reason
-from sena_warp.composite import SeamLayout
+from sena_warp.composite import BorderBlend, SeamLayout
 from sena_warp.video.maps import (ArrayLerp, MapsBlend, PlaneMaps, canvas_scale, chroma_positions, chroma_seam,
                                  lerp_maps, map_change_px, output_shape, scaled_plane_maps, seam_change_px,
                                  seam_on_canvas_lines, seam_per_target_line, target_map)
@@ -567,7 +567,7 @@ def test_a_picture_output_is_the_frame_a_video_from_there_starts_with(clips, tmp
 
 def test_scaled_maps_sample_where_the_canvas_does_and_carry_the_seam_along():
     maps = synthetic_maps(0.0, 300, shape=(40, 60))
-    border = ((9.5, 30.5), np.arange(120, dtype=np.float32).reshape(2, 60, 1), np.zeros((2, 60, 1), np.float32))
+    border = BorderBlend((9.5, 30.5), np.arange(120, dtype=np.float32).reshape(2, 60, 1), np.zeros((2, 60, 1), np.float32))
     maps = replace(maps, border_luma=border)
     half = scaled_plane_maps(maps, output_shape(maps.shape, 30))
     assert half.shape == (20, 30) and output_shape((40, 61), 30) == (20, 30) and output_shape((40, 60), 100) == (40, 60)
@@ -579,8 +579,8 @@ def test_scaled_maps_sample_where_the_canvas_does_and_carry_the_seam_along():
     # its offsets along them likewise.
     np.testing.assert_allclose(half.seam_luma.positions, 14.75)
     assert (half.seam_luma.band_px, half.seam_luma.transition_px) == (5.0, 4.0)
-    assert half.border_luma[0] == (4.5, 15.0)
-    np.testing.assert_allclose(half.border_luma[1][0, :3, 0], [0.5, 2.5, 4.5])
+    assert half.border_luma.lines == (4.5, 15.0)
+    np.testing.assert_allclose(half.border_luma.src[0, :3, 0], [0.5, 2.5, 4.5])
     # What works on the canvas gets the seam back per canvas line.
     np.testing.assert_allclose(seam_on_canvas_lines(half.seam_luma.positions, 40, canvas_scale((40, 60), (20, 30)),
                                                     True), 30.0)
