@@ -174,8 +174,8 @@ def run_hostile(case: Hostile, inputs: Path, out: Path) -> tuple[bool, str, floa
     elif len(lines) != case.lines or not lines[-1].startswith(want[case.kind]) or not all(
             line.startswith(want["warning"]) for line in lines[:-1]):
         problems.append(f"{len(lines)} stderr lines: {lines[:3]}")
-    elif not all(word in lines[-1] for word in case.words):
-        problems.append(f"missing {[w for w in case.words if w not in lines[-1]]}")
+    elif not all(any(word in line for line in lines) for word in case.words):
+        problems.append(f"missing {[w for w in case.words if not any(w in line for line in lines)]}")
     if "Traceback" in err:
         problems.append("traceback")
     if not _gone(workers):
@@ -289,7 +289,8 @@ def hostile_cases(data: Path, work: Path) -> list[tuple[Hostile, object]]:
         (Hostile("image, 244-character name", [*img, "-o", out / ("p" * 240 + ".png")], 0, "none"), clean),
         # 4. damaged video
         (Hostile("video 64 KB damage", ["video", damaged, right, "-o", pano("v.mp4"), *FAST_VIDEO], 0, "warning",
-                 ("damaged frames", "replaced by the last good frame")), clean),
+                 ("damaged frames", "replaced by the last good frame", "1 frame whose time stamp goes back"),
+                 lines=2), clean),
         (Hostile("video 64 KB damage --strict", ["video", damaged, right, "-o", pano("v.mp4"), "--strict",
                                                  *FAST_VIDEO], 5, "error", ("--strict",)), clean),
         (Hostile("video cut at 60%", ["video", cut, right, "-o", pano("v.mp4"), *FAST_VIDEO], 0, "warning",
