@@ -1,4 +1,4 @@
-"""The Python steps of the GPU check (issue 17), called by ``benchmarks/gpu_check.sh``.
+"""The Python steps of the GPU check, called by ``benchmarks/gpu_check.sh``.
 
 Each step writes one JSON file into the output folder, so a step that fails or runs out of time
 leaves the others' figures; ``summary`` gathers them. Timing is ``sena-warp bench``'s own

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The GPU check of issue 17: run from the repository root on a machine with an NVIDIA GPU.
+# The GPU check: run from the repository root on a machine with an NVIDIA GPU.
 #
 # It installs the project into .venv (an existing one is reused), prints the GPU's facts, runs the
 # CUDA tests (the kernels' [cuda] cases, parametrized by tests/test_kernels_maps.py's DEVICES) and

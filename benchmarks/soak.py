@@ -1,11 +1,11 @@
-"""Soak run (issues 7, 15 and 30): every image pair in both orders and every video pair through the real
-CLI, then the hostile classes of issues 15 and 30, each as a user would meet it, in a process of its own.
+"""Soak run: every image pair in both orders and every video pair through the real CLI, then the hostile
+classes, each as a user would meet it, in a process of its own.
 
 Real runs count outcomes by exit code and, above all, unhandled exceptions (anything that is not a
 ``StitchError`` reaching ``main``). Hostile runs (outputs colliding, existing outputs and -y / -n, the
 folder rule, huge inputs, signals and SIGKILL leftovers, damaged and truncated video with and
 without --strict, rotated and RGBA and float inputs, a variable frame rate, a full disk, bad
-options, misleading failures, eval and bench; then issue 30's: batch outputs escaping DIR or
+options, misleading failures, eval and bench; then the batch and output ones: batch outputs escaping DIR or
 clobbering, -y onto a FIFO or a device node, an output appearing mid-run, names longer than the
 file system allows, signals to a batch and its workers, Ray addresses that do not answer, pair
 folders that are not ones, and the small ones: CSV byte order mark and repeated columns, control
@@ -193,7 +193,7 @@ def run_hostile(case: Hostile, inputs: Path, out: Path) -> tuple[bool, str, floa
 
 
 def hostile_cases(data: Path, work: Path) -> list[tuple[Hostile, object]]:
-    """The issue 15 classes on the shared data: (case, setup), setup() run just before the case (each
+    """The input, output and signal classes on the shared data: (case, setup), setup() run just before the case (each
     one starts from an empty output folder, plus what the case needs there)."""
     inputs, out = work / "in", work / "out"
     inputs.mkdir()
@@ -331,7 +331,7 @@ def hostile_cases(data: Path, work: Path) -> list[tuple[Hostile, object]]:
         (Hostile("bench --sizes 17x9", ["bench", "--sizes", "17x9", "--work", out / "bench"], 2, "error",
                  ("17x9",)), clean),
     ]
-    return cases + issue_30_cases(inputs, out, clean) + input_cases(data, inputs, out, clean)
+    return cases + batch_and_output_cases(inputs, out, clean) + input_cases(data, inputs, out, clean)
 
 
 def _job_list(path: Path, jobs: list[dict], defaults: dict | None = None) -> Path:
@@ -343,8 +343,8 @@ def _job_list(path: Path, jobs: list[dict], defaults: dict | None = None) -> Pat
     return path
 
 
-def issue_30_cases(inputs: Path, out: Path, clean) -> list[tuple[Hostile, object]]:
-    """Issue 30's classes (its items 1-3, 9-11, 15 and 17) on the hostile run's inputs: (case, setup)."""
+def batch_and_output_cases(inputs: Path, out: Path, clean) -> list[tuple[Hostile, object]]:
+    """The batch, output and small reliability classes on the hostile run's inputs: (case, setup)."""
     a, b, left, right = inputs / "a.jpg", inputs / "b.jpg", inputs / "left.mp4", inputs / "right.mp4"
     (inputs / "victim.png").write_bytes(b"victim")  # outside every DIR; checked unchanged as an input
     lists = inputs / "lists"

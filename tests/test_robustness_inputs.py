@@ -1,4 +1,4 @@
-"""Issue 15 items 2, 5, 6 and 8: inputs too large, turned by metadata, with alpha or float pixels,
+"""Inputs too large, turned by metadata, with alpha or float pixels,
 and failures that say what is the matter. Through the CLI where the promise is the CLI's (one stderr
 line, exit code, nothing left, inputs unchanged); on the reader where it is about pixels.
 """

@@ -1,4 +1,5 @@
-"""Issue 15 items 1, 3 and 7, issue 16's overwrite rules: every output of every command, through the CLI.
+"""Outputs that collide, exist, or cannot be written, and the overwrite rules: every output of every command,
+through the CLI.
 
 Each class is tested over every command and output it applies to: the exit code, exactly one
 stderr line and no traceback, nothing left in the output folder (no output, no temporary), the
@@ -352,7 +353,7 @@ def _onnxruntime_out_of_memory():
                 "node. Status Message: bfc_arena.cc:360 Failed to allocate memory for requested buffer of size 671088640")
 
 
-# Where a stitch runs out of memory, and how each library says so (measured under ulimit -v: docs/benchmarks.md).
+# Where a stitch runs out of memory, and how each library says so (each message as measured under ulimit -v).
 OUT_OF_MEMORY = {
     "numpy": ("sena_warp.stitch", "stitch_images", lambda: MemoryError("Unable to allocate 12.5 GiB for an array")),
     "warp": ("sena_warp.stitch", "source_map_canvas",
