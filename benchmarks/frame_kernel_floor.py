@@ -1,4 +1,4 @@
-"""How far the per-frame Y pass is from a kernel that only samples (issue 17's per-frame CPU budget).
+"""How far the per-frame Y pass is from a kernel that only samples (the per-frame CPU target, docs/benchmarks.md).
 
 Usage (from the repository root)::
 

@@ -1,4 +1,4 @@
-"""Time of the per-frame seam (issue 14's budget: <= 3 ms CPU per 1080p frame), frame by frame.
+"""Time of the per-frame seam (its target: <= 3 ms CPU per 1080p frame), frame by frame.
 
 Usage (from the repository root)::
 

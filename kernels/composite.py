@@ -1,4 +1,4 @@
-"""Per-frame compositing along a seam (SENA.md "Maps, not images"; issue 13's gains and seam blend).
+"""Per-frame compositing along a seam (docs/method.md "Maps, not images"), with the gains and the seam blend.
 
 The source is shown on one side of the seam, the target on the other; across a transition of width T
 the two are mixed by ``kernels/seam.py``'s ``source_alpha`` (the rule the seam maps' alpha follows). Each side gets its own per-channel affine gain (exposure

@@ -2,12 +2,12 @@
 
 Fields are grouped by stage (features, warp, seam, exposure, video, sync, encoding, runtime); in each
 group the settings a user changes first come first, the fine tuning after them. Each field carries
-the paper's symbol (``docs/paper/sena_paper.tex``, summarised in SENA.md), its unit and a one-line
+the paper's symbol (``docs/method.md`` lists them by stage), its unit and a one-line
 meaning; pixel quantities are in input-image pixels unless the name says otherwise. ``RANGES`` below
 the class holds every number's range and ``CHOICES`` every text setting's values; a ``Config`` is
 checked against them (and the fields that bound each other against each other) when it is made, so
-``Config(video_crf=99)`` or ``Config(grid_x="8")`` raise InputError. Defaults are the starting points
-of SENA.md; each departure is measured in ``docs/evaluation.md``.
+``Config(video_crf=99)`` or ``Config(grid_x="8")`` raise InputError. Where a default departs from the
+paper, ``docs/method.md`` says why and ``docs/evaluation.md`` what it buys.
 """
 
 from __future__ import annotations
@@ -93,7 +93,7 @@ class Config:
     ramp_diag_ratio: float = 0.10  # b as a fraction of the larger image diagonal
     sigma_d_ratio: float = 24.0 / 512.0  # sigma_d: density blur, as a fraction of the image's long side
     gamma_p: float = 1.2  # gamma_p: ramp steepness exponent
-    gamma_min: float = 0.9  # gamma_min: gate floor where matches are sparse (SENA.md: 0.30; sweep)
+    gamma_min: float = 0.9  # gamma_min: gate floor where matches are sparse (paper: 0.30; sweep in evaluation.md)
     sigma_g_px: float = 1.1  # sigma_g: blur of the guarded field
     # --- warp, fine tuning: warp map (step 6) -------------------------------------------------
     forward_tol_px: float = 0.01  # stop inverting M_s once |M_s(u) - s| is below this (source px)

@@ -1,4 +1,4 @@
-"""The SENA stitch, one stage per line (SENA.md steps 0-9).
+"""The SENA stitch, one stage per line (docs/method.md, steps 0-9).
 
 ``estimate_maps`` turns two images into what the compositor needs over the output canvas: where to
 sample the source, where to sample the target, the seam between them (and so the alpha), each view's
@@ -10,8 +10,8 @@ every ``*_canvas`` array here is on the working-frame canvas. The final maps are
 the input frame (``*_input``: the same canvas, transposed back for a vertical rig) so the
 compositor never transposes frames.
 
-Where this departs from the paper (issue 13, ``docs/evaluation.md``), the paper's version stays one
-setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
+Where this departs from the paper (``docs/method.md``; what each departure buys: ``docs/evaluation.md``),
+the paper's version stays one setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
 ``seam_model="paper"`` (steps 8-9), ``gain_model="none"``, ``seam_blend_ratio=0``, ``border_blend=False``,
 ``transition_px=24``.
 """
@@ -363,5 +363,5 @@ def _diagonal_px(img_src: np.ndarray, img_tgt: np.ndarray) -> float:
 
 
 def _long_side_px(img_src: np.ndarray, img_tgt: np.ndarray) -> int:
-    """The longest image side, the scale of the gate's density blur sigma_d (SENA.md step 5)."""
+    """The longest image side, the scale of the gate's density blur sigma_d (docs/method.md step 5)."""
     return max(*img_src.shape[:2], *img_tgt.shape[:2])

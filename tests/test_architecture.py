@@ -1,4 +1,4 @@
-"""Layering: the evaluation subpackage imports the pipeline, never the reverse (issue 12).
+"""Layering: the evaluation subpackage imports the pipeline, never the reverse.
 
 Only the front end may reach ``sena_warp.evaluation``: the command line (lazily, for ``eval`` and
 ``bench``) and the jobs it and ``batch`` run (the figures of an image's report, and those of

@@ -1,4 +1,5 @@
-"""Issue 15 items 1, 3 and 7, issue 16's overwrite rules: every output of every command, through the CLI.
+"""Outputs that collide, exist, or cannot be written, and the overwrite rules: every output of every command,
+through the CLI.
 
 Each class is tested over every command and output it applies to: the exit code, exactly one
 stderr line and no traceback, nothing left in the output folder (no output, no temporary), the
@@ -20,6 +21,7 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
 import pytest
 
 from sena_warp import imageio, outputs
@@ -351,12 +353,15 @@ def _onnxruntime_out_of_memory():
                 "node. Status Message: bfc_arena.cc:360 Failed to allocate memory for requested buffer of size 671088640")
 
 
-# Where a stitch runs out of memory, and how each library says so (measured under ulimit -v: docs/benchmarks.md).
+# Where a stitch runs out of memory, and how each library says so (each message as measured under ulimit -v).
 OUT_OF_MEMORY = {
     "numpy": ("sena_warp.stitch", "stitch_images", lambda: MemoryError("Unable to allocate 12.5 GiB for an array")),
     "warp": ("sena_warp.stitch", "source_map_canvas",
              lambda: RuntimeError("Failed to allocate 166831664 bytes on device 'cpu'")),
     "onnxruntime": ("sena_warp.features", "detect_xfeat", _onnxruntime_out_of_memory),
+    "opencv": ("sena_warp.stitch", "field_from_lattice", lambda: cv2.error(
+        "OpenCV(5.1.0) /io/opencv/modules/core/src/alloc.cpp:73: error: (-4:Insufficient memory) Failed to allocate "
+        "33922016 bytes in function 'OutOfMemoryError'")),
 }
 
 
@@ -385,6 +390,7 @@ def test_only_a_failed_allocation_reads_as_out_of_memory_and_a_batch_job_records
     assert out_of_memory(RuntimeError("index 3 is out of bounds")) is None  # a bug stays a bug, with its traceback
     assert out_of_memory(ValueError("Failed to allocate")) is None
     assert out_of_memory(_onnxruntime_out_of_memory()).exit_code == 1
+    assert out_of_memory(cv2.error("(-215:Assertion failed) !ssize.empty()")) is None
     monkeypatch.setattr(batch, "run_job", lambda job: (_ for _ in ()).throw(RuntimeError("Failed to allocate 8 bytes")))
     entry = batch.Entry("pair", Job("image", ("a.jpg", "b.jpg"), str(tmp_path / "p.png")), str(tmp_path / "r.json"))
     result = batch.run_entry(entry)

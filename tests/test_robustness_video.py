@@ -1,4 +1,4 @@
-"""Issue 7, video path: every bad video input or output through ``sena-warp video`` ends in ONE stderr
+"""The video path: every bad video input or output through ``sena-warp video`` ends in ONE stderr
 line, the right exit code and nothing under the output name (no video, no ``.part`` temp file).
 
 Cases already covered elsewhere are not repeated here: a missing input, a text file, a WAV file,

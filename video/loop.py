@@ -2,7 +2,7 @@
 
 The stitch itself is not in here: the loop takes a *frame compositor*, built once from the first
 pairs of frames it takes (that is where a real stitch estimates its maps: "cached warps, per-frame
-seam slicing", SENA.md "Maps, not images"; the pairs it took are composited after), then called for
+seam slicing", docs/method.md "Maps, not images"; the pairs it took are composited after), then called for
 every pair on YUV 4:2:0 planes, so frames never go through RGB on the hot path.
 """
 
@@ -356,9 +356,10 @@ def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]
                              "each replaced by the last good frame (--strict fails instead)"))
         if reader.out_of_order:
             last_s, time_s = reader.out_of_order_at
-            problems.append((f"{side} input has {reader.out_of_order} frames whose time stamps go back or repeat "
-                             f"(the first: {float(time_s):.3f} s after {float(last_s):.3f} s)",
-                             "they were dropped (--strict fails instead)"))
+            frames = "1 frame whose time stamp goes back or repeats" if reader.out_of_order == 1 else \
+                f"{reader.out_of_order} frames whose time stamps go back or repeat"
+            problems.append((f"{side} input has {frames} (the first: {float(time_s):.3f} s after "
+                             f"{float(last_s):.3f} s)", "dropped (--strict fails instead)"))
         if reader.rescaled:
             (width, height), time_s = reader.rescaled_from
             problems.append((f"{side} input changes resolution from {reader.size[0]}x{reader.size[1]} to "

@@ -1,7 +1,7 @@
 """SENA canvas maps adapted to YUV 4:2:0 video planes, on a canvas fixed for the whole video.
 
 A stitch estimate gives full-resolution maps over its canvas (``sena_warp.stitch.StitchMaps``). A
-video composites the decoder's planes directly (no RGB on the hot path, SENA.md "Maps, not images"):
+video composites the decoder's planes directly (no RGB on the hot path, docs/method.md "Maps, not images"):
 Y with those maps, U and V with half-resolution maps derived from them once per estimate. The
 output size is fixed by the first estimate; later estimates are expressed on that canvas.
 
@@ -72,7 +72,7 @@ class PlaneMaps:
 def target_offset(map_tgt_canvas: np.ndarray) -> np.ndarray:
     """o = (ox, oy), the canvas position of target pixel (0, 0), read off the target map.
 
-    The target is pasted unwarped (``map_tgt = u - o`` everywhere, SENA.md step 2), so the map at
+    The target is pasted unwarped (``map_tgt = u - o`` everywhere, docs/method.md step 2), so the map at
     canvas pixel (0, 0) is -o. Float64 (2,), whole pixels, in the frame the map is in.
     """
     return -np.asarray(map_tgt_canvas[0, 0], dtype=np.float64)

@@ -1,4 +1,4 @@
-"""A video's estimates at a working resolution: the frames made small, the maps scaled up (issue 17).
+"""A video's estimates at a working resolution: the frames made small, the maps scaled up.
 
 An estimate's dear stages work per canvas pixel (the warp map, the views, the gains, the seam). Above
 ``video_estimate_max_side`` the frames are made that small for it (XFeat sees them at ``xfeat_max_side``
@@ -9,7 +9,7 @@ unwarped: its map on the full canvas is exact, at a whole-pixel offset.
 
 The default side, 1920 px, leaves frames up to 1080p as they were: the estimate's settings are in
 pixels, and a smaller working side lands on another model and seam, better on some recordings and
-worse on others (``docs/benchmarks.md``, 2026-12-02 sixth session); a 4K video is estimated as a
+worse on others (``docs/evaluation.md``, "Working resolution of a video's estimate"); a 4K video is estimated as a
 1080p one is.
 
 Conventions: pixel centres at whole coordinates at both resolutions, so a position p of a frame made

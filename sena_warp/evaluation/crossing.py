@@ -1,4 +1,4 @@
-"""The crossing clip (issue 14): a textured object moving across the overlap of a real image pair.
+"""The crossing clip: a textured object moving across the overlap of a real image pair.
 
 A static two-camera clip made from one image pair (background, the same every frame) with a square
 object, a patch cut from another image, pasted into both views: it moves at a constant speed along
