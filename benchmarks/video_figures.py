@@ -1,4 +1,4 @@
-"""Video over time (issue 14): the figures of every shared recording, with seam-over-time pictures.
+"""Video over time: the figures of every shared recording, with seam-over-time pictures.
 
 Usage (from the repository root)::
 

@@ -1,4 +1,4 @@
-"""Bilinear remap of a uint8 (H, W, C) image by a canvas map (SENA.md step 6, "apply").
+"""Bilinear remap of a uint8 (H, W, C) image by a canvas map (docs/method.md step 6, "apply").
 
 A map holds, per canvas pixel, the (x, y) position to sample; pixel centres are at integer
 coordinates. A position is valid when all four bilinear taps lie inside the image
@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import warp as wp
 
-wp.set_module_options({"enable_backward": False})  # see the package docstring
+from sena_warp.kernels import MODULE_OPTIONS
+
+wp.set_module_options(MODULE_OPTIONS)  # see the package docstring
 
 
 @wp.func

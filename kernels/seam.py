@@ -1,4 +1,4 @@
-"""Seam maps: per-pixel source map, target map and alpha around the seam (SENA.md step 9, paper
+"""Seam maps: per-pixel source map, target map and alpha around the seam (docs/method.md step 9, paper
 "Partitioning and Reconstruction").
 
 Per canvas row y the host gives the seam x ``s(y)`` (interpolated between target anchors), the
@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import warp as wp
 
+from sena_warp.kernels import MODULE_OPTIONS
 from sena_warp.kernels.gate import smootherstep
 
-wp.set_module_options({"enable_backward": False})  # see the package docstring
+wp.set_module_options(MODULE_OPTIONS)  # see the package docstring
 
 INV_SQRT2 = 0.7071067811865476
 INV_SQRT_2PI = 0.3989422804014327

@@ -1,4 +1,4 @@
-"""Step 4: the FFD displacement field over the canvas (SENA.md step 4, paper "Locally adaptive image warping").
+"""Step 4: the FFD displacement field over the canvas (docs/method.md step 4, paper "Locally adaptive image warping").
 
 The field D (source pixels) lives on a lattice over the canvas and is upsampled bicubically
 (``cv2.resize``, Keys a = -0.75) to every canvas pixel. Two ways to get the lattice (``cfg.ffd_model``):
@@ -7,7 +7,7 @@ The field D (source pixels) lives on a lattice over the canvas and is upsampled 
   node (Warp kernel ``kernels/ffd.py``), clipped to d_max and smoothed on the lattice.
 * ``"fit"``, ours: the lattice is fitted to the matches by regularised least squares. Where
   neighbouring T_j disagree the paper's blend bends straight lines (paving rows S-kinked, columns
-  bent: issue 13), and the gate that keeps the source's global shape outside the overlap ramps the
+  bent), and the gate that keeps the source's global shape outside the overlap ramps the
   correction in over a band that eats into the overlap, so alignment suffers there. The fitted D
   minimises
 

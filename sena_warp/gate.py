@@ -1,4 +1,4 @@
-"""Step 5: the seam guard G and the guarded field (SENA.md step 5).
+"""Step 5: the seam guard G and the guarded field (docs/method.md step 5).
 
 G is 0 where the source is shown alone (outside the overlap), so the source keeps its global affine
 shape there; it rises over a ramp of width b from that region's border into the overlap, and is

@@ -1,4 +1,4 @@
-"""Step 9: partition the canvas at the seam and build the seam maps (SENA.md step 9, paper
+"""Step 9: partition the canvas at the seam and build the seam maps (docs/method.md step 9, paper
 "Partitioning and Reconstruction").
 
 The seam (``seam_path.SeamPath``: one x per canvas row, through the anchors) splits every row: the
@@ -9,7 +9,7 @@ target anchor: per row, the anchor residual (dx, dy) = anchor_src - anchor_tgt i
 the rows, applied in full inside the transition and faded out (smootherstep) over
 ``cfg.seam_fade_px`` beyond it, so the source far from the seam keeps its step-6 shape. The paper
 interpolates the residual linearly between anchors, which kinks lines that cross the seam at every
-anchor (issue 13); with ``cfg.seam_model == "path"`` it is a smoothing spline through them
+anchor; with ``cfg.seam_model == "path"`` it is a smoothing spline through them
 (``smooth_curve``). The per-pixel part is ``kernels/seam.py``.
 
 What is left of an exposure difference after the gains is hidden by the seam blend's low-frequency

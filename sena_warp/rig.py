@@ -1,14 +1,15 @@
 """Which input is the source (warped, left) and which the target (reference), and rig orientation.
 
-SENA.md "Roles": source = left view, target = right view. Which input is left (or top), and whether
-the views lie side by side or one above the other, is found from how the view as a whole shifts from
-one input to the other (:func:`view_shift`): the median of the matches' shifts per region of the
-view, then the median over the regions, each region one vote. That is where the views' own strips
-lie (the left view's own strip on its left). A near object's matches, many and clustered, shift
+Roles (``docs/method.md``): source = left view, target = right view. Which input is left (or top),
+and whether the views lie side by side or one above the other, is found from how the view as a whole
+shifts from one input to the other (:func:`view_shift`): the median of the matches' shifts per region
+of the view, then the median over the regions, each region one vote. That is where the views' own
+strips lie (the left view's own strip on its left). A near object's matches, many and clustered, shift
 further than the background and may shift up or down too (cameras at slightly different heights); by
-count they would decide, by area they do not. A vertical rig is handled by transposing internally. The pipeline works in a *working frame* where the source is always left;
-for a vertical rig that frame is the transpose of the input (x and y swapped). Maps built in the
-working frame are turned back into the input frame once, so the compositor never transposes frames.
+count they would decide, by area they do not. A vertical rig is handled by transposing internally.
+The pipeline works in a *working frame* where the source is always left; for a vertical rig that
+frame is the transpose of the input (x and y swapped). Maps built in the working frame are turned
+back into the input frame once, so the compositor never transposes frames.
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ def matches_to_working(pts_a: np.ndarray, pts_b: np.ndarray, rig: Rig) -> tuple[
     canonical order: by source x, then source y, then target x and y.
 
     The order of the matches depends on which input came first (``image a b`` vs ``image b a``), and
-    RANSAC samples in that order: sorted, both orders give the same model and the same maps (issue 13).
+    RANSAC samples in that order: sorted, both orders give the same model and the same maps.
     """
     pts_src, pts_tgt = (points_to_working(pts, rig) for pts in rig.pick(pts_a, pts_b))
     order = np.lexsort((pts_tgt[:, 1], pts_tgt[:, 0], pts_src[:, 1], pts_src[:, 0]))

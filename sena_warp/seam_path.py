@@ -1,7 +1,7 @@
 """Steps 8-9 (ours): the seam follows the cheapest path through the overlap, pinned at keypoint anchors.
 
 Between anchors the paper's seam is a straight line; where it crosses something at another depth the
-two halves come from different parallax, and objects are doubled or cut (issue 13). Here the seam is
+two halves come from different parallax, and objects are doubled or cut. Here the seam is
 a path, one x per canvas row of the working frame (source left), that minimises a cost summed along
 it (dynamic programming, Warp kernel ``kernels/seam_path.py``, on the host where the cost is):
 

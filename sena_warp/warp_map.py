@@ -1,7 +1,7 @@
 """Step 6: the source sampling map, its numeric inverse for points, and warping an image by it.
 
 ``M_s(u) = A_glob^-1 (u - o) + D_guarded(u)`` gives, for canvas pixel u, the source (x, y) to
-sample (SENA.md step 6). Forward positions of source points are found by inverting M_s
+sample (docs/method.md step 6). Forward positions of source points are found by inverting M_s
 numerically, never as ``A s + o + d`` (d is defined at u, not at s).
 """
 

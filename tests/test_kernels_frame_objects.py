@@ -16,7 +16,7 @@ from test_kernels_maps import DEVICES
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_each_view_s_model_flags_what_its_spread_and_its_gain_do_not_explain(band, device, warp_device):
+def test_each_view_s_model_flags_what_its_spread_and_its_gain_do_not_explain(band, device, warp_device):  # noqa: F811
     diff, total = band
     both = diff < 0.5 * NOT_BOTH
     views = np.stack([0.5 * (total + diff), 0.5 * (total - diff)])
@@ -54,7 +54,7 @@ def test_each_view_s_model_flags_what_its_spread_and_its_gain_do_not_explain(ban
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_strip_cells_and_route_costs(band, device, warp_device):
+def test_strip_cells_and_route_costs(band, device, warp_device):  # noqa: F811
     diff, _ = band
     both = diff < 0.5 * NOT_BOTH
     starts = np.zeros((LINES, 3), np.int32)

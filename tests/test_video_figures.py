@@ -1,4 +1,4 @@
-"""The video figures of issue 14 (``sena_warp.evaluation.video_figures``) and the frame loop's observer.
+"""The video figures (``sena_warp.evaluation.video_figures``) and the frame loop's observer.
 
 The figures' parts are checked on cases with a known answer (a path that jitters by a known amount,
 a map built from a known warp, a band shifted by a known amount, a panorama with a known step);
@@ -139,7 +139,7 @@ def test_office_figures_static_rig(office):
     assert fig["seam_motion_px"]["max"] == 0.0 and fig["seam_motion_px"]["where_still_max"] == 0.0
     assert fig["seam_motion_px"]["still_lines_pct_mean"] > 95.0
     # Measured 0.86 grey levels mean (0.95 p99), changing by 0.25 p99 frame to frame (the rows where
-    # the views disagree about the scene's own change are left out of the step, issue 13).
+    # the views disagree about the scene's own change are left out of the step).
     assert 0.6 < fig["exposure_step_grey"]["mean"] < 1.2
     assert fig["exposure_step_change_grey"]["p99"] < 0.5
     # Where along the seam the settled step is: 16 runs of lines covering every line once.

@@ -1,4 +1,4 @@
-"""Exposure over time (issue 14): both views' gains re-measured on the frames and smoothed.
+"""Exposure over time: both views' gains re-measured on the frames and smoothed.
 
 Cameras adjust their exposure while they record (and settle in their first half second), so a video
 cannot keep the first estimate's gains. Every ``video_gain_period_s`` the overlap of the current frame

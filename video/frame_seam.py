@@ -1,4 +1,4 @@
-"""The seam of every video frame (issue 14): "cached warps, per-frame seam slicing".
+"""The seam of every video frame: "cached warps, per-frame seam slicing".
 
 The estimate fixes the maps and a seam; each frame the seam is re-optimised inside a band around it
 (``band`` cells each side, ``video_seam_band_ratio`` x the canvas diagonal: room to go round an

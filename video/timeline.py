@@ -35,7 +35,7 @@ from ..rig import Rig
 from sena_warp.kernels.transfer import own_stream
 from .drift import DriftWatch, overlap_boxes
 from .estimate import estimate_pair, rejection_reason
-from .maps import MapsBlend, PlaneMaps, drifted_maps, lerp_maps, maps_on_canvas
+from .maps import MapsBlend, PlaneMaps, canvas_scale, drifted_maps, lerp_maps, maps_on_canvas
 from .reader import YuvFrame
 
 
@@ -56,12 +56,14 @@ class Blend:
 
 class DriftCheck:
     """A static rig's drift check (``drift.py``), every ``cfg.video_drift_check_s`` from the first
-    estimate's pair (at ``from_s``) on: ``base`` (the first estimate's maps) moved by how far the views
-    moved. ``log``: what the checks found (the report's ``drift``)."""
+    estimate's pair (at ``from_s``) on: ``base`` (the first estimate's maps, on an output ``scale``
+    (x, y) output pixels per canvas pixel) moved by how far the views moved. ``log``: what the checks
+    found (the report's ``drift``)."""
 
-    def __init__(self, base: PlaneMaps, from_s: float, cfg: Config):
+    def __init__(self, base: PlaneMaps, from_s: float, scale: np.ndarray, cfg: Config):
         self._cfg = cfg
         self._base = base
+        self._scale = scale
         self._from_s = from_s
         self._watch: DriftWatch | None = None  # the views as the maps were made, taken on the first check's frame
         self._applied = (np.zeros(2), np.zeros(2))  # the (source, target) moves the maps were last moved by
@@ -94,18 +96,26 @@ class DriftCheck:
         self.log["applied"].append({"time_s": round(time_s, 4), "source_px": np.round(shifts[0], 2).tolist(),
                                     "target_px": np.round(shifts[1], 2).tolist()})
         frames = int(np.ceil(change / self._cfg.video_drift_speed_px))
-        return drifted_maps(self._base, *shifts), frames
+        return drifted_maps(self._base, *shifts, self._scale), frames
 
 
 @dataclass(frozen=True)
 class Canvas:
-    """The video's fixed canvas as estimates are expressed on it: (H, W) ``shape``, the target's offset
-    ``offset_tgt`` (x, y) on it, the per-frame seam's ``band_px``, and the ``rig`` (roles, orientation)."""
+    """The video's fixed canvas as estimates are expressed on it: (H, W) ``stitched_shape``, the target's
+    offset ``offset_tgt`` (x, y) on it, and the ``rig`` (roles, orientation); the output it is scaled
+    to, (H, W) ``shape`` (``video_max_width``: the maps themselves are scaled, ``maps.scaled_plane_maps``),
+    and the per-frame seam's ``band_px`` there."""
 
+    stitched_shape: tuple[int, int]
     shape: tuple[int, int]
     offset_tgt: np.ndarray
     band_px: int
     rig: Rig
+
+    @property
+    def scale(self) -> np.ndarray:
+        """(sx, sy): output pixels per canvas pixel."""
+        return canvas_scale(self.stitched_shape, self.shape)
 
 
 class Reestimates:
@@ -168,7 +178,7 @@ class Reestimates:
                 estimate = estimate_pair(frame_l, frame_r, cfg, canvas.rig.target, prior_seam_tgt=prior)
             if estimate.rig.vertical != canvas.rig.vertical:
                 return None, "rig orientation changed"
-            candidate = maps_on_canvas(estimate, canvas.shape, canvas.offset_tgt, canvas.band_px)
+            candidate = maps_on_canvas(estimate, canvas.stitched_shape, canvas.offset_tgt, canvas.band_px, canvas.shape)
             reason = rejection_reason(candidate, current(), self._first_inliers, shape_src, shape_tgt, cfg)
             return (candidate, None) if reason is None else (None, reason)
         except StitchError as exc:

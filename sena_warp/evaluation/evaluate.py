@@ -3,8 +3,8 @@
 For every pair folder of DATA_DIR (one holding ``a.*`` and ``b.*``) it runs
 
 - ``sena``: the whole SENA stitch (``stitch_images``);
-- ``sena_ba``: the same with the inputs swapped (``b a``: the same panorama, issue 13's order invariance);
-- ``sena_paper``: SENA as the paper and ``SENA.md`` write it (``PAPER_SETTINGS``), the ablation of
+- ``sena_ba``: the same with the inputs swapped (``b a``: it must give the same panorama);
+- ``sena_paper``: SENA as the paper has it (``PAPER_SETTINGS``), the ablation of
   every departure at once;
 - ``affine``: SENA's own global affine ``A_glob`` alone (no local warp, no seam);
 - ``homography``: a global homography from SIFT matches and RANSAC (3 px);
@@ -31,6 +31,7 @@ import argparse
 import csv
 import math
 import os
+import stat
 import sys
 import time
 import traceback
@@ -43,7 +44,7 @@ import numpy as np
 from sena_warp.config import Config
 from sena_warp.errors import InputError, StitchError
 from sena_warp.features import match_images
-from sena_warp.imageio import read_image, write_image
+from sena_warp.imageio import input_stat, read_image, write_image
 from sena_warp.kernels.runtime import resolve_config
 from sena_warp.outputs import OutputPlan, atomic_output, staged
 from sena_warp.progress import Count, echo
@@ -60,7 +61,7 @@ from .sheets import thumbnail, tile
 
 SENA_RUNS = ("sena", "sena_ba", "sena_paper")
 METHODS = (*SENA_RUNS, "affine", "homography", *OPENCV_MODES)
-# SENA as the paper has it: every departure of issue 13 undone (docs/evaluation.md, "Ablations").
+# SENA as the paper has it: every departure undone (docs/method.md; what each buys: docs/evaluation.md).
 PAPER_SETTINGS = dict(ffd_model="blend", gate_model="paper", seam_model="paper", gain_model="none",
                       seam_blend_ratio=0.0, border_blend=False, transition_px=24, global_model_choice="inliers")
 # The methods that make a panorama (the pictures show them), with their names on the pictures.
@@ -90,12 +91,12 @@ class MethodResult:
     lines: int = 0
     width: int = 0  # panorama size (methods that make one)
     height: int = 0
-    anchors: int = 0  # SENA's seam figures (SENA.md "Measuring: Seam")
+    anchors: int = 0  # SENA's seam figures (anchor residuals, seam and feather MAD)
     anchor_residual_px: float = math.nan  # median over the anchors
     anchor_residual_max_px: float = math.nan
     seam_mad: float = math.nan
     feather_mad: float = math.nan
-    copies: int = 0  # issue 13's figures (naturalness), SENA's runs
+    copies: int = 0  # the natural-appearance figures (naturalness), SENA's runs
     dup_lost_pct: float = math.nan
     dup_lost_over_4px: int = 0
     dup_lost_worst_px: float = math.nan
@@ -127,7 +128,7 @@ def pair_folders(data_dir: str | os.PathLike) -> list[Path]:
     """The pair folders of ``data_dir`` (each with an ``a.*`` or a ``b.*`` image: one lacking the other
     is evaluated as failed), sorted; the folder itself when it is one. InputError when there is none."""
     data_dir = Path(data_dir)
-    if not data_dir.is_dir():
+    if not stat.S_ISDIR(input_stat(data_dir).st_mode):
         raise InputError(f"{data_dir}: not a folder; give a folder of pair folders (each with a.* and b.*)")
 
     def is_pair(folder: Path) -> bool:
@@ -370,8 +371,8 @@ def summary_markdown(rows: list[MethodResult], data_dir: Path, cfg: Config, seco
 
 
 def natural_markdown(pairs: list[str], table: dict) -> list[str]:
-    """The summary's issue-13 section: the targets per SENA run over all pairs, then each pair."""
-    lines = ["", "## Natural appearance (issue 13)", "",
+    """The summary's natural-appearance section: the targets per SENA run over all pairs, then each pair."""
+    lines = ["", "## Natural appearance", "",
              "Duplicated / lost: reliable matches in the overlap whose two copies are > 2 px apart and both "
              "visible or neither (`naturalness`); seam step and border step (across the target's border beyond "
              "the seam's ends) in grey levels; bend: largest of the long lines each "

@@ -1,4 +1,4 @@
-"""The figures of a finished SENA stitch (SENA.md "Measuring"), one definition each.
+"""The figures of a finished SENA stitch (``docs/evaluation.md``), one definition each.
 
 ``sena-warp eval`` records them per pair, the benchmarks print them, and the CLI's ``image --report``
 adds them to the report: all three call the functions here. Seam figures are measured in the working
@@ -127,7 +127,7 @@ def identity(pts: np.ndarray) -> np.ndarray:
 
 
 def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
-    """Issue 13's figures of a finished stitch (``naturalness``), in the working frame on the canvas.
+    """The natural-appearance figures of a finished stitch (``naturalness``), in the working frame on the canvas.
 
     ``copies``: reliable matches whose target copy is in the overlap; ``dup_lost_pct``: of them, %
     duplicated or lost (copies > 2 px apart); ``dup_lost_over_4px`` how many by more than 4 px,

@@ -1,4 +1,4 @@
-"""Figures of a natural panorama (issue 13): what a viewer sees twice, not at all, stepped or bent.
+"""Figures of a natural panorama: what a viewer sees twice, not at all, stepped or bent.
 
 All functions work in the pipeline's working frame on the canvas (source left of a seam that runs
 top to bottom, ``seam_x[y]`` per row) on plain arrays, so that SENA's variants are measured alike.
@@ -45,7 +45,7 @@ from sena_warp.features import neighbour_supported
 
 VISIBLE_WEIGHT = 0.25  # a copy shown at a quarter or more is seen (a ghost in a blend counts)
 COINCIDE_PX = 2.0  # copies closer than this are one point
-STRICT_PX = 4.0  # the issue's second threshold: no point duplicated or lost by more than this
+STRICT_PX = 4.0  # the strict threshold: no point duplicated or lost by more than this
 EPIPOLAR_PX = 1.0  # fundamental-matrix RANSAC threshold of the reliable matches
 EPIPOLAR_SEED = 1  # USAC's random state: the same matches every run
 MAX_DISPARITY_PX = 60.0  # reliable matches lie within this of the global affine (wrong ones can sit on an epipolar line)
@@ -165,6 +165,11 @@ def seam_step(pano_grey: np.ndarray, src_grey: np.ndarray, tgt_grey: np.ndarray,
     return float(np.mean(np.abs(steps[known]))) if known.any() else float("nan")
 
 
+def _across(img: np.ndarray, outside: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """Per column, the mean of ``img`` over the rows ``outside`` a border minus that over the rows ``inside``."""
+    return img[outside].mean(axis=0) - img[inside].mean(axis=0)
+
+
 def border_step(pano_grey: np.ndarray, src_grey: np.ndarray, valid_src: np.ndarray, weight_tgt: np.ndarray,
                 borders: tuple[float, float]) -> float:
     """The border step in grey levels (module docstring); NaN where no column switches views across a border.
@@ -184,10 +189,7 @@ def border_step(pano_grey: np.ndarray, src_grey: np.ndarray, valid_src: np.ndarr
         switch = (valid_src[outside].all(axis=0) & valid_src[inside].all(axis=0)
                   & (weight_tgt[inside] >= 0.5).all(axis=0) & (weight_tgt[outside] == 0).all(axis=0))
 
-        def across(img: np.ndarray) -> np.ndarray:
-            return img[outside].mean(axis=0) - img[inside].mean(axis=0)
-
-        step = np.where(switch, across(pano_grey) - across(src_grey), 0.0)
+        step = np.where(switch, _across(pano_grey, outside, inside) - _across(src_grey, outside, inside), 0.0)
         window = np.ones(STEP_ROWS)
         count = np.convolve(switch.astype(np.float64), window, "same")
         kept = switch & (count >= STEP_ROWS / 2)

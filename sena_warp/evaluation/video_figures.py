@@ -1,4 +1,4 @@
-"""Figures of a stitched video over time (issue 14), measured by an observer of the frame loop.
+"""Figures of a stitched video over time, measured by an observer of the frame loop.
 
 :class:`VideoFigures` is a :data:`~sena_warp.video.stitch.FrameObserver`: ``stitch_videos(...,
 observer=VideoFigures(cfg))`` calls it with every composited frame, and :meth:`VideoFigures.figures`
