@@ -153,7 +153,12 @@ class Config:
     video_estimate_spacing: int = 5  # frame pairs between two of those tries
     video_screen_max_side: int = 640  # those tries are ranked by XFeat at this long side at most; the best is estimated at xfeat_max_side
     video_estimate_max_side: int = 1920  # an estimate runs on the frames made this small (long side) and is scaled up
-    video_rig: str = "static"  # "static": estimated once, moved with a drifting camera; "moving": every video_reestimate_s
+    video_rig: str = "static"  # "static": estimated once, moved with a drifting camera; "moving": every video_reestimate_s;
+    # "auto": decided from the first second and watched (video/rig_motion.py)
+    video_rig_moving_share: float = 0.004  # auto: a view drifting this x its width a second or more moves (first second)
+    video_rig_switch_share: float = 0.015  # auto: ... and a static rig whose view drifts this much later becomes moving
+    video_rig_still_share: float = 0.001  # auto: a moving rig whose views both drift less than this ...
+    video_rig_still_s: float = 2.0  # auto: ... for this long becomes static
     video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
     video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's
     video_max_median_change_px: float = 40.0  # reject a re-estimate moving M_s by more (median over the overlap)
