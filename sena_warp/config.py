@@ -176,6 +176,17 @@ class Config:
     video_estimate_lookahead_mib: int = 512  # ... holding at most this much of decoded frames (1080p: 45 pairs, 4K: 21);
     # also the most the first estimate's pairs may hold for the loop (21 pairs; more: it decodes its own, as at 8K)
     seam_prior_weight: float = 0.5  # moving rig: cost per px (per row) of a new seam's distance from the current one
+    # --- Moving rig: alignment every frame (video/align.py) -------------------------------------
+    video_align_short_px: int = 360  # the planes are aligned made smaller, their short side about this (1 up to 540 rows)
+    video_align_points: int = 300  # target corners tracked in the overlap
+    video_align_min_share: float = 0.7  # topped up with new corners when fewer than this share remain
+    video_align_min_points: int = 20  # fewer points measured: the frame keeps the predicted warp
+    video_align_window_px: int = 15  # Lucas-Kanade window (tracks and the warp's residual flow), reduced px
+    video_align_lattice_nodes: float = 12.0  # correction lattice: nodes the canvas diagonal / this apart
+    video_align_tukey_px: float = 3.0  # the fit's Tukey scale (source px): points farther off do not pull
+    video_align_prior: float = 1e-4  # the fit's pull towards the predicted lattice (per node, against the mean data term)
+    video_align_follow: float = 0.5  # the filter takes this share of a measured change at once (alpha)
+    video_align_max_lag_px: float = 1.0  # ... and never lags the measured lattice by more than this
     # --- Video over time: the per-frame seam and exposure (issue 14) ----------------------------
     video_seam_band_ratio: float = 0.05  # per-frame seam: band half-width, x the canvas diagonal (room to go round an object)
     video_seam_band_min_px: int = 8  # per-frame seam: band half-width at least this
