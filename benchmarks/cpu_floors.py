@@ -147,7 +147,8 @@ def main() -> int:
     start = time.process_time()
     stitched += [composited(pair) for pair in pairs[1:]]
     composite_ms = (time.process_time() - start) / max(1, len(pairs) - 1) * 1e3
-    y_floor = y_floor_ms(compositor, *pairs[-1], cfg, args.repeats * 5)
+    plan, luma, chroma = compositor.last_frame
+    y_floor = y_floor_ms(compositor, compositor.device.gains(plan, luma.gains, chroma.gains)[0], cfg, args.repeats * 5)
     compositor.close()
     side_by_side = SideBySide(iter(pairs))
     sbs = [side_by_side.composite_yuv(l.y, l.u, l.v, r.y, r.u, r.v) for l, r in pairs]

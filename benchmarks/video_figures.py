@@ -174,14 +174,15 @@ def main_compositor_class(observer: VideoFigures):
         def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r):
             out = super().composite_yuv(y_l, u_l, v_l, y_r, u_r, v_r)
             planes_src, planes_tgt = self.source_target((y_l, u_l, v_l), (y_r, u_r, v_r))
-            maps = self._maps
+            maps = self.maps
             home = main_stitch_filled(maps.seam_x_working)
             zeros = np.zeros((len(home), 1))
             observer(CompositedFrame(
-                index=self.frames, time_s=self.time_s, source="left" if self._rig.source == "a" else "right",
+                index=self.frames, time_s=self.time_s, source="left" if self.rig.source == "a" else "right",
                 planes_src=planes_src, planes_tgt=planes_tgt, planes_out=out, maps=maps, seam_home=home,
-                seam_reach_px=0.0, seam=home, lines_are_rows=not self._rig.vertical, gains_luma=identity,
-                offsets_luma=(zeros, zeros), weights=lambda: (maps.alpha_luma, np.zeros_like(maps.alpha_luma))))
+                seam_reach_px=0.0, seam=home, lines_are_rows=not self.rig.vertical, gains_luma=identity,
+                knee_luma=None, offsets_luma=(zeros, zeros),
+                weights=lambda: (maps.alpha_luma, np.zeros_like(maps.alpha_luma))))
             self.frames += 1
             return out
     return main_stitch, Observed

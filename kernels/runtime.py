@@ -23,11 +23,11 @@ import pkgutil
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
-import numpy as np
 import warp as wp
 
 from sena_warp.config import Config
 from sena_warp.errors import InputError
+from sena_warp.kernels import transfer
 from sena_warp.progress import stage
 
 # The init banner would go to stdout of every CLI run; Warp reads the level when it initialises
@@ -128,16 +128,6 @@ def _say_compiling() -> None:
     stage("compiling kernels (first run only)")
 
 
-def readonly_array(values, dtype, device: str) -> wp.array:
-    """A Warp array of the float32 numpy ``values`` for a kernel that only reads it.
-
-    On the CPU it shares the numpy memory (a canvas map is 8 bytes a pixel: no copy of it); on CUDA
-    it is a copy on the device. The caller must not change ``values`` while the array is in use.
-    """
-    values = np.ascontiguousarray(values, dtype=np.float32)
-    return wp.array(values, dtype=dtype, device=device, copy=device != "cpu")
-
-
 def row_bands(height: int, bands: int) -> list[tuple[int, int]]:
     """Split rows [0, height) into at most ``bands`` contiguous (row0, rows) pieces of near-equal size."""
     bands = max(1, min(bands, height))
@@ -146,18 +136,19 @@ def row_bands(height: int, bands: int) -> list[tuple[int, int]]:
 
 
 def launch_rows(kernel, height: int, width: int, inputs: list, device: str, threads: int) -> None:
-    """Run ``kernel(row0, *inputs)`` over a (height, width) grid and wait until it has finished.
+    """Run ``kernel(row0, *inputs)`` over a (height, width) grid.
 
     ``device``: a resolved Warp device ("cpu" or "cuda", :func:`resolve_device`). On "cpu" the rows
-    are split into ``cpu_threads(threads)`` bands launched in parallel; on "cuda" one launch of dim
-    (height, width). Arrays in ``inputs`` must live on ``device``.
+    are split into ``cpu_threads(threads)`` bands launched in parallel, done when this returns; on
+    "cuda" one launch of dim (height, width), queued on the thread's stream (``transfer.stream``)
+    without waiting: a download waits for it (``transfer.py``). Arrays in ``inputs`` must live on
+    ``device``.
     """
     if height <= 0 or width <= 0:
         return
     _ensure_loaded(kernel, device)
     if device != "cpu":
-        wp.launch(kernel, dim=(height, width), inputs=[0, *inputs], device=device)
-        wp.synchronize_device(device)
+        wp.launch(kernel, dim=(height, width), inputs=[0, *inputs], device=device, stream=transfer.stream(device))
         return
     bands = row_bands(height, cpu_threads(threads))
     if len(bands) == 1:
@@ -171,17 +162,8 @@ def launch_rows(kernel, height: int, width: int, inputs: list, device: str, thre
         future.result()
 
 
-def upload(array: wp.array, values) -> None:
-    """Copy ``values`` (array-like of ``array``'s shape) into the Warp ``array``: in place through its
-    numpy view on the CPU (no staging array), by ``assign`` on a GPU."""
-    if array.device.is_cpu:
-        np.copyto(array.numpy(), values, casting="unsafe")
-    else:
-        array.assign(np.ascontiguousarray(values, wp.dtype_to_numpy(array.dtype)))
-
-
 def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str, threads: int) -> None:
-    """Run ``kernel(row0, col_step, width, *inputs)`` over rows [0, height) and wait until it has finished.
+    """Run ``kernel(row0, col_step, width, *inputs)`` over rows [0, height) (as :func:`launch_rows`).
 
     For kernels whose thread (i, j) loops over columns ``j, j + col_step, ... < width`` of row
     ``row0 + i``: on "cpu" one thread per row (``col_step`` 1), rows split into parallel bands as in
@@ -192,8 +174,8 @@ def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str,
         return
     _ensure_loaded(kernel, device)
     if device != "cpu":
-        wp.launch(kernel, dim=(height, width), inputs=[0, width, width, *inputs], device=device)
-        wp.synchronize_device(device)
+        wp.launch(kernel, dim=(height, width), inputs=[0, width, width, *inputs], device=device,
+                  stream=transfer.stream(device))
         return
     bands = row_bands(height, cpu_threads(threads))
     if len(bands) == 1:
@@ -212,19 +194,29 @@ def loaded() -> frozenset[tuple[str, str]]:
     return frozenset(_loaded)
 
 
-def prewarm(device: str) -> None:
-    """Import every module of ``sena_warp.kernels`` and load (compile once, then cached) its kernels:
-    those at module level and the variants a module builds with a factory and lists in a dict. On
-    ``device``, or where a module says its kernels always run (its ``DEVICE``: work on host arrays);
-    the modules of one device together (:func:`_load`)."""
+def kernel_modules() -> list[tuple[wp.Module, str | None]]:
+    """Every Warp module of ``sena_warp.kernels`` (each of its modules imported): those of the kernels
+    at module level and of the variants a module builds with a factory and lists in a dict, each with
+    the device its kernels always run on (the module's ``DEVICE``: work on host arrays), or None: the
+    run's device."""
     package = importlib.import_module("sena_warp.kernels")
-    due: dict[str, dict[str, wp.Module]] = {}  # per device, the Warp modules not loaded yet, by name
+    found: dict[str, tuple[wp.Module, str | None]] = {}
     for info in pkgutil.iter_modules(package.__path__):
         module = importlib.import_module(f"sena_warp.kernels.{info.name}")
-        on = getattr(module, "DEVICE", device)
         for obj in vars(module).values():
             for kernel in obj.values() if isinstance(obj, dict) else (obj,):
-                if isinstance(kernel, wp.Kernel) and (kernel.module.name, on) not in _loaded:
-                    due.setdefault(on, {})[kernel.module.name] = kernel.module
+                if isinstance(kernel, wp.Kernel) and kernel.func.__module__ == module.__name__:
+                    found[kernel.module.name] = (kernel.module, getattr(module, "DEVICE", None))
+    return list(found.values())
+
+
+def prewarm(device: str) -> None:
+    """Load (compile once, then cached) every kernel module of the package (:func:`kernel_modules`): on
+    ``device``, or where a module says its kernels always run; the modules of one device together
+    (:func:`_load`)."""
+    due: dict[str, list[wp.Module]] = {}  # per device, the Warp modules not loaded yet
+    for module, on in kernel_modules():
+        if (module.name, on or device) not in _loaded:
+            due.setdefault(on or device, []).append(module)
     for on, modules in due.items():
-        _load(list(modules.values()), on)
+        _load(modules, on)

@@ -14,6 +14,8 @@ import warp as wp
 
 wp.set_module_options({"enable_backward": False})  # see the package docstring
 
+DEVICE = "cpu"  # a path is a sequential walk per segment: the DP runs on the host, where its cost is
+
 INF = wp.constant(1.0e30)
 
 

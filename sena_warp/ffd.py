@@ -35,7 +35,7 @@ from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.affine import apply_affine, invert_affine
 from sena_warp.errors import GeometryError
-from sena_warp.kernels import runtime
+from sena_warp.kernels import runtime, transfer
 from sena_warp.kernels.ffd import ffd_lattice_kernel
 
 CUBIC_A = -0.75  # cv2.resize's INTER_CUBIC kernel: the fit samples the lattice as the upsampling does
@@ -84,16 +84,16 @@ def blended_lattice(
         wp.vec2d(*canvas.offset_tgt),
         wp.mat22d(glob_tgt_to_src[:, :2]),
         wp.vec2d(glob_tgt_to_src[:, 2]),
-        wp.array(np.ascontiguousarray(local_tgt_to_src[:, :, :2]), dtype=wp.mat22d, device=device),
-        wp.array(np.ascontiguousarray(local_tgt_to_src[:, :, 2]), dtype=wp.vec2d, device=device),
-        wp.array(np.asarray(centres_tgt, dtype=np.float64).reshape(-1, 2), dtype=wp.vec2d, device=device),
-        wp.array(np.asarray(conf, dtype=np.float64).reshape(-1), dtype=wp.float64, device=device),
+        transfer.to_device(np.ascontiguousarray(local_tgt_to_src[:, :, :2]), wp.mat22d, device, "ffd"),
+        transfer.to_device(np.ascontiguousarray(local_tgt_to_src[:, :, 2]), wp.vec2d, device, "ffd"),
+        transfer.to_device(np.asarray(centres_tgt, dtype=np.float64).reshape(-1, 2), wp.vec2d, device, "ffd"),
+        transfer.to_device(np.asarray(conf, dtype=np.float64).reshape(-1), wp.float64, device, "ffd"),
         float(sigma_f),
         float(cfg.d_max_px),
         field,
     ]
     runtime.launch_rows(ffd_lattice_kernel, cfg.lattice_ny, cfg.lattice_nx, inputs, device, cfg.cpu_threads)
-    return field.numpy().reshape(cfg.lattice_ny, cfg.lattice_nx, 2)
+    return transfer.download(field, "ffd").reshape(cfg.lattice_ny, cfg.lattice_nx, 2)
 
 
 def smoothed_blend_lattice(

@@ -33,7 +33,7 @@ from sena_warp.composite import lf_weights
 from sena_warp.config import Config
 from sena_warp.errors import InputError
 from sena_warp.ffd import cubic_weights
-from sena_warp.kernels import runtime
+from sena_warp.kernels import runtime, transfer
 from sena_warp.kernels.seam import seam_maps_kernel
 from sena_warp.seam_path import SeamPath
 from sena_warp.warp_map import CanvasViews
@@ -141,10 +141,10 @@ def seam_maps(map_src_canvas: np.ndarray, canvas: Canvas, path: SeamPath, cfg: C
     map_tgt_out = wp.empty(shape, dtype=wp.vec2, device=device)
     alpha_out = wp.empty(shape, dtype=float, device=device)
     inputs = [
-        wp.array(np.ascontiguousarray(map_src_canvas, np.float32), dtype=wp.vec2, device=device),
-        wp.array(rows.seam_x, dtype=float, device=device),
-        wp.array(rows.src_row_y, dtype=float, device=device),
-        wp.array(rows.shift_x, dtype=float, device=device),
+        transfer.to_device(np.ascontiguousarray(map_src_canvas, np.float32), wp.vec2, device, "seam_maps"),
+        transfer.to_device(rows.seam_x, float, device, "seam_maps"),
+        transfer.to_device(rows.src_row_y, float, device, "seam_maps"),
+        transfer.to_device(rows.shift_x, float, device, "seam_maps"),
         wp.vec2(*canvas.offset_tgt),
         float(cfg.transition_px),
         float(cfg.seam_smooth_sigma_px),
@@ -155,9 +155,9 @@ def seam_maps(map_src_canvas: np.ndarray, canvas: Canvas, path: SeamPath, cfg: C
     ]
     runtime.launch_rows(seam_maps_kernel, canvas.height, canvas.width, inputs, device, cfg.cpu_threads)
     return SeamMaps(
-        map_src_canvas=map_src_out.numpy().reshape(*shape, 2),
-        map_tgt_canvas=map_tgt_out.numpy().reshape(*shape, 2),
-        alpha_canvas=alpha_out.numpy(),
+        map_src_canvas=transfer.download(map_src_out, "seam_maps").reshape(*shape, 2),
+        map_tgt_canvas=transfer.download(map_tgt_out, "seam_maps").reshape(*shape, 2),
+        alpha_canvas=transfer.download(alpha_out, "seam_maps"),
         seam_x_canvas=rows.seam_x,
         anchors_src_canvas=np.asarray(path.anchors_src_canvas, np.float64),
         anchors_tgt_canvas=np.asarray(path.anchors_tgt_canvas, np.float64),

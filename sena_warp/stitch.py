@@ -27,7 +27,8 @@ import cv2
 import numpy as np
 
 from .cells import grid_cells
-from .composite import Compositor, SeamLayout
+from .composite import (BorderBlend, CompositePlan, FrameState, SeamLayout, composite_image, composite_plan,
+                        coverage)
 from .config import CHOICES, Config
 from .errors import GeometryError, InputError, MatchError
 from .features import Matches, match_images, neighbour_supported
@@ -249,19 +250,25 @@ def seam_layout(seam: Seam, rig: Rig, cfg: Config, band_px: float | None = None)
                       smooth_sigma_px=float(cfg.seam_smooth_sigma_px), lf_px=seam.offsets.fade_px)
 
 
-def panorama_compositor(maps: StitchMaps, cfg: Config,
-                        transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> Compositor:
-    """A compositor for BGR images of the two inputs: the maps, the seam, both views' gains and offsets.
-    ``transparent``: per input (a, b), (H, W) bool pixels it must not sample (``without_transparent``)."""
+def panorama_plan(maps: StitchMaps, shapes: tuple[tuple[int, ...], tuple[int, ...]], cfg: Config,
+                  transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> CompositePlan:
+    """The compositing plan for BGR images of the two inputs of (H, W, C) ``shapes`` (source, target):
+    the maps, the seam and the border blend. ``transparent``: per input (a, b), (H, W) bool pixels it
+    must not sample (``without_transparent``)."""
     transparent_src, transparent_tgt = maps.rig.pick(*transparent)
-    compositor = Compositor(without_transparent(maps.map_src_input, transparent_src),
-                            without_transparent(maps.map_tgt_input, transparent_tgt), maps.seam_input, cfg)
+    border = maps.seam.border
+    blend = BorderBlend(border.lines, border.src, border.tgt) if border.on else None
+    return composite_plan(without_transparent(maps.map_src_input, transparent_src),
+                          without_transparent(maps.map_tgt_input, transparent_tgt), maps.seam_input, shapes, cfg,
+                          border=blend)
+
+
+def panorama_state(maps: StitchMaps) -> FrameState:
+    """What the panorama is composited with: the estimate's seam, both views' gains and the seam blend's
+    offsets."""
     gains, offsets = maps.seam.gains, maps.seam.offsets
-    compositor.set_gains(len(gains.gain_src), gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt)
-    compositor.set_offsets(offsets.src, offsets.tgt)
-    if maps.seam.border.on:
-        compositor.set_border_offsets(maps.seam.border.lines, maps.seam.border.src, maps.seam.border.tgt)
-    return compositor
+    return FrameState(maps.seam_input.positions, (gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt),
+                      (offsets.src, offsets.tgt))
 
 
 def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
@@ -283,10 +290,9 @@ def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     img_src, img_tgt = maps.rig.pick(img_a, img_b)
     stage("compositing")
     with clock("composite"):
-        compositor = panorama_compositor(maps, cfg, transparent)
-        out = compositor.apply(img_src, img_tgt)
-        coverage = compositor.coverage(img_src.shape, img_tgt.shape)
-    return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
+        plan = panorama_plan(maps, (img_src.shape, img_tgt.shape), cfg, transparent)
+        out = composite_image(img_src, img_tgt, plan, panorama_state(maps), cfg)
+    return Panorama(np.dstack([out, coverage(plan)]), maps, clock.seconds)
 
 
 def _prior_on_canvas(prior_seam_tgt: np.ndarray | None, canvas) -> np.ndarray | None:

@@ -108,6 +108,26 @@ def test_pairs_too_large_to_hold_are_decoded_apart_with_the_same_frames(clips, t
     assert all(np.array_equal(a.y, b.y) and np.array_equal(a.v, b.v) for a, b in zip(apart, held))
 
 
+FRAME_COUNTS = {"upload": 2, "download": 2, "sync": 2}  # planes and seam up, band and output down, a wait each
+
+
+def test_each_frame_moves_its_planes_once_each_way_and_waits_only_for_its_downloads(rooftop_static):
+    """Per frame (``kernels/transfer.py``, counted on the CPU as on a GPU): the decoded planes go up in
+    one block, the seam band's difference comes down and the frame's seam goes up (small), the output
+    planes come down in one block, and nothing else waits for the device; a new map set's plans add
+    their own uploads, on the frames whose maps changed."""
+    _, report, _ = rooftop_static
+    transfers = report["stitch"]["transfers"]
+    assert transfers["frames"] == report["frames_out"] == 60
+    assert transfers["per_frame_min"] == transfers["per_frame_max"] == FRAME_COUNTS
+    total = transfers["total"]
+    plans = total["upload"].pop("plan")
+    assert total == {"upload": {"planes": 60, "seam": 60}, "download": {"band": 60, "output": 60},
+                     "sync": {"band": 60, "output": 60}}
+    made = 1 + len(report["stitch"]["drift"]["applied"])  # the first plan, and a blend after each drift move
+    assert plans >= 6 * made  # each pass's maps and static seam, the band's cells
+
+
 def test_rooftop_frames_pts_audio(rooftop_static):
     out, report, _ = rooftop_static
     assert report["frames_out"] == 60 and report["dropped"] == 0 and report["repeated"] == 0
@@ -238,6 +258,10 @@ def test_moving_rig_reestimates_blends_and_reports_the_jitter(clips, tmp_path):
     assert 0.0 < jitter["map_change_p99_px_max"] < cfg.video_max_median_change_px
     assert frame_seam["motion_px_max"] <= cfg.video_seam_speed_px
     assert report["frames_out"] == 60 and "maps_update" in report["timing_s"]
+    # A blend makes a plan every frame; a frame's own transfers stay as few (FRAME_COUNTS).
+    transfers = report["stitch"]["transfers"]
+    assert transfers["per_frame_min"] == transfers["per_frame_max"] == FRAME_COUNTS
+    assert transfers["total"]["upload"]["plan"] >= 6 * 2 * re["accepted"]  # a blend lasts two frames at least
 
 
 def test_reestimates_on_the_worker_do_not_hold_up_the_frames(clips, tmp_path):
@@ -328,10 +352,13 @@ def test_cli_writes_video_report_and_summary(clips, tmp_path, capsys):
     assert len(summary) == 1 and "60 frames at 30 fps" in summary[0]
 
 
-def synthetic_maps(shift_px: float, inliers: int, shape=(40, 60)) -> PlaneMaps:
-    """PlaneMaps whose source map is the target map moved by ``shift_px`` in x (a rig that turned a little)."""
+def synthetic_maps(shift_px: float, inliers: int, shape=(40, 60), change=None) -> PlaneMaps:
+    """PlaneMaps whose source map is the target map moved by ``shift_px`` in x (a rig that turned a little),
+    then changed by ``change(map_src)`` (in place) before the maps are made (they are read-only after)."""
     map_tgt = target_map(shape, np.array([10.0, 0.0]))
     map_src = map_tgt + np.float32([shift_px + 20.0, 0.0])
+    if change is not None:
+        change(map_src)
     alpha = np.full(shape, 0.5, np.float32)
     seam = np.full(shape[0], 30.0 + shift_px, np.float32)
     seam_luma = SeamLayout(seam, True, 10.0, 8.0, 1.5, 0.0)
@@ -351,8 +378,7 @@ def test_reestimates_with_few_inliers_or_a_large_map_change_are_rejected():
 
 
 def test_blend_moves_maps_and_seam_linearly_and_takes_the_goal_where_the_start_had_nothing():
-    start, goal = synthetic_maps(0.0, 300), synthetic_maps(8.0, 320)
-    start.map_src_luma[0, 0] = np.nan
+    start, goal = synthetic_maps(0.0, 300, change=lambda m: m.__setitem__((0, 0), np.nan)), synthetic_maps(8.0, 320)
     half = lerp_maps(start, goal, 0.5)
     np.testing.assert_allclose(half.map_src_luma[5, 5], start.map_src_luma[5, 5] + [4.0, 0.0])
     np.testing.assert_allclose(half.map_src_luma[0, 0], goal.map_src_luma[0, 0])
@@ -366,11 +392,15 @@ def test_a_blends_steps_are_the_four_pass_lerp_bit_for_bit():
     """``MapsBlend`` works out ``goal - start`` once per blend; each step must still be exactly
     ``start + w * (goal - start)`` in float32, the goal where either side is NaN, and keep what both share."""
     rng = np.random.default_rng(3)
-    start, goal = synthetic_maps(0.0, 300), synthetic_maps(8.0, 320)
+
+    def noisy(map_src: np.ndarray) -> None:
+        map_src[:] += rng.normal(scale=3.0, size=map_src.shape).astype(np.float32)
+        map_src[rng.random(map_src.shape[:2]) < 0.2] = np.nan
+
+    start, goal = synthetic_maps(0.0, 300, change=noisy), synthetic_maps(8.0, 320, change=noisy)
     goal = replace(goal, map_tgt_luma=start.map_tgt_luma)  # as in a drift: the target map is shared
-    for maps in (start, goal):
-        maps.map_src_luma[:] += rng.normal(scale=3.0, size=maps.map_src_luma.shape).astype(np.float32)
-        maps.map_src_luma[rng.random(maps.shape) < 0.2] = np.nan
+    with pytest.raises(ValueError, match="read-only"):
+        start.map_src_luma[0, 0] = 1.0  # a value: what moves the maps makes new ones
     blend = MapsBlend(start, goal)
     for weight in (1 / 7, 0.5, 5 / 7, 1.0):
         step = blend.at(weight)
@@ -408,13 +438,14 @@ def test_the_office_rig_gets_the_border_blend_on_its_y_plane(clips):
         try:
             outs[on] = comp.composite_yuv(y_l, uv, uv, y_r, uv, uv)[0].astype(np.float64)
             if on:
-                oy = int(comp._offset_tgt[1])
-                lines, border_src, border_tgt = comp._maps.border_luma
-                fade = comp._maps.seam_luma.lf_px
+                oy = int(comp.offset_tgt[1])
+                border = comp.maps.border_luma
+                lines, border_src, border_tgt = border.lines, border.src, border.tgt
+                fade = comp.maps.seam_luma.lf_px
                 assert lines == (oy - 0.5, oy + y_r.shape[0] - 0.5)
                 assert np.abs(border_tgt).max() > 2 and np.allclose(border_src, -border_tgt)
             else:
-                assert comp._maps.border_luma is None
+                assert comp.maps.border_luma is None
         finally:
             comp.close()
     changed_rows = np.flatnonzero(np.abs(outs[True] - outs[False]).max(axis=1) > 0)
@@ -446,12 +477,12 @@ def test_the_frame_seam_stays_on_the_lines_where_nothing_moved(clips):
         uv = np.full(((y_l.shape[0] + 1) // 2, (y_l.shape[1] + 1) // 2), 128, np.uint8)
         for _ in range(2):
             comp.composite_yuv(y_l, uv, uv, y_r, uv, uv)
-        seam = comp._seam
+        seam = comp.frame_seam
         before = seam.positions.copy()
         assert seam.still.all()  # the same frame again: every line still
         # cam2 is the source (left view): a bright square on its rows 200-240, where the seam is.
-        oy = int(comp._offset_tgt[1])
-        x = int(comp._maps.map_src_luma[oy + 220, int(before[oy + 220]), 0])  # the source column at the seam
+        oy = int(comp.offset_tgt[1])
+        x = int(comp.maps.map_src_luma[oy + 220, int(before[oy + 220]), 0])  # the source column at the seam
         square = y_r.copy()
         square[200:240, max(x - 30, 0):x + 30] = 250
         comp.composite_yuv(y_l, uv, uv, square, uv, uv)
@@ -491,11 +522,11 @@ def test_with_a_look_ahead_a_re_estimate_starts_on_a_later_frame_and_lands_on_it
     and is blended in when the loop reaches that frame, not before. The worker here answers at once
     (the first frames' maps, made beforehand), so the first lands exactly on its own frame; without the
     look-ahead's wait it would be blended in 12 frames before the frame it was made on."""
-    from sena_warp.video import stitch as video_stitch
+    from sena_warp.video import timeline
 
     first_l, first_r = decoded_frames(clips / "rooftop_left.mp4")[0], decoded_frames(clips / "rooftop_right.mp4")[0]
     maps = estimate.estimate_pair(first_l, first_r, FAST, "auto")
-    monkeypatch.setattr(video_stitch, "estimate_pair", lambda *args, **kwargs: maps)
+    monkeypatch.setattr(timeline, "estimate_pair", lambda *args, **kwargs: maps)
     cfg = FAST.replace(video_rig="moving", video_reestimate_s=0.5, video_estimate_workers=1,
                        video_estimate_lookahead_s=0.4)
     report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "la.mp4", cfg,
