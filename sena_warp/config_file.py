@@ -49,7 +49,7 @@ MAY_BE_ZERO = frozenset({
     "correction_smooth", "seam_blend_ratio", "gain_outlier_fraction", "gain_dark_level", "video_estimate_workers",
     "seam_prior_weight", "global_model_margin", "video_seam_noise", "video_seam_stay_cost", "video_seam_home_cost", "video_seam_margin",
     "video_seam_jump_cost", "video_seam_motion_cost", "video_gain_settle_s", "video_estimate_lookahead_s",
-    "video_drift_check_s",
+    "video_drift_check_s", "video_align_prior", "video_align_bend",
 })
 # ... and those named here have an upper bound too (probabilities, ratios, correlations, x264's quality scale).
 AT_MOST = {
@@ -57,7 +57,8 @@ AT_MOST = {
     "gamma_min": 1.0, "video_min_inlier_ratio": 1.0, "video_crf": 51, "sync_min_overlap": 1.0,
     "sync_min_confidence": 1.0, "sync_audio_min_peak": 1.0, "sync_motion_min_peak": 1.0,
     "gain_outlier_fraction": 1.0, "gain_dark_level": 255.0, "gain_bright_level": 255.0,
-    "gain_knee_ratio": 1.0, "video_warp_follow": 1.0,
+    "gain_knee_ratio": 1.0, "video_align_follow": 1.0, "video_align_min_share": 1.0, "video_rig_moving_share": 1.0,
+    "video_rig_switch_share": 1.0, "video_rig_still_share": 1.0,
 }
 KIND_WORDS = {int: "a whole number", float: "a number", str: "text", bool: "true or false"}
 SECTION_MARK = "# ---"  # a comment line opening a group of fields in config.py

@@ -19,7 +19,7 @@ smaller (area average: 1 up to 540 rows, 2 at 720p).
    there (canvas px); the source pixel the point should show is the current map at the point plus
    that flow.
 3. *Fit* (:class:`CorrectionFit`): the lattice least squares of ``ffd.fit_lattice`` (the same bicubic
-   taps and thin-plate bending energy, Tukey weights at ``video_align_tukey_px``), warm-started from
+   taps and thin-plate bending energy, at ``video_align_bend``; Tukey weights at ``video_align_tukey_px``), warm-started from
    the filter's prediction: the points it leaves far off start down-weighted, and a pull of
    ``video_align_prior`` towards it keeps nodes without points where they were; one reweighting.
 4. *Filter* (:class:`LagBoundedFilter`): each node's value follows the fits by an alpha-beta filter
@@ -162,10 +162,11 @@ class TargetPoints:
         self._last: np.ndarray | None = None
         self._since_seed = SEED_FRAMES
 
-    def update(self, tgt_small: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    def update(self, tgt_small: np.ndarray, mask: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
         """The points on the small target plane ``tgt_small`` (h, w) uint8: the last frame's tracked, those
         outside ``mask`` (h, w) uint8 (255: the overlap) dropped, topped up when too few remain (at most
-        every :data:`SEED_FRAMES` frames, unless fewer than ``video_align_min_points`` are left)."""
+        every :data:`SEED_FRAMES` frames, unless fewer than ``video_align_min_points`` are left): half of
+        them within ``near`` (h, w) uint8 (255: by the seam) where given, the rest anywhere."""
         cfg = self.cfg
         pts = self.pts
         if self._last is not None and len(pts):
@@ -179,9 +180,12 @@ class TargetPoints:
         self._since_seed += 1
         thin = len(pts) < cfg.video_align_min_share * cfg.video_align_points
         if thin and (self._since_seed >= SEED_FRAMES or len(pts) < cfg.video_align_min_points):
-            fresh = self._corners(tgt_small, mask, pts, cfg.video_align_points - len(pts))
-            self.seeded, self._since_seed = len(fresh), 0
-            pts = np.concatenate([pts, fresh])
+            before, wanted = len(pts), cfg.video_align_points - len(pts)
+            if near is not None:
+                by_seam = self._corners(tgt_small, cv2.bitwise_and(mask, near), pts, wanted // 2)
+                pts = np.concatenate([pts, by_seam])
+            pts = np.concatenate([pts, self._corners(tgt_small, mask, pts, cfg.video_align_points - len(pts))])
+            self.seeded, self._since_seed = len(pts) - before, 0
         self.pts = pts.astype(np.float32)
         self._last = tgt_small
         return self.pts
@@ -246,26 +250,29 @@ class CorrectionFit:
         diag_px = float(np.hypot(width, height))
         self.shape = lattice_shape(self.canvas, diag_px, cfg.replace(lattice_nodes=cfg.video_align_lattice_nodes))
         nodes = self.shape[0] * self.shape[1]
-        self._regulariser = (bending_regulariser(self.canvas, self.shape, diag_px, cfg.lambda_bend)
+        self._regulariser = (bending_regulariser(self.canvas, self.shape, diag_px, cfg.video_align_bend)
                              + cfg.video_align_prior * np.eye(nodes))
         self.lattice = np.zeros((*self.shape, 2))
         self.weights: np.ndarray | None = None
 
-    def fit(self, pts_canvas: np.ndarray, residual_src: np.ndarray, prior: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def fit(self, pts_canvas: np.ndarray, residual_src: np.ndarray, prior: np.ndarray,
+            importance: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The lattice fitted to residuals (N, 2) (source px the map must move by) at canvas points (N, 2),
         warm-started from and pulled towards ``prior`` (Ny, Nx, 2): the points start with Tukey weights
-        of how far the prior leaves them, at twice the scale. Two solves, the second reweighted. Returns
-        (lattice (Ny, Nx, 2) float64, |fit - residual| (N,), Tukey weights (N,)); ``lattice`` and
-        ``weights`` keep them."""
+        of how far the prior leaves them, at twice the scale. ``importance`` (N,): each point's weight
+        beside its Tukey weight (ones by default). Two solves, the second reweighted. Returns (lattice
+        (Ny, Nx, 2) float64, |fit - residual| (N,), Tukey weights (N,)); ``lattice`` and ``weights`` keep
+        them."""
         cfg = self.cfg
         terms = LatticeTerms(pts_canvas, self.canvas, self.shape)
         prior_flat = np.asarray(prior, np.float64).reshape(-1, 2)
+        importance = np.ones(len(pts_canvas)) if importance is None else np.asarray(importance, np.float64)
         error = np.hypot(*(terms.values(prior_flat) - residual_src).T)
         weights = tukey_weights(error, 2.0 * cfg.video_align_tukey_px)
         solution = prior_flat
         for _ in range(2):
-            w = weights / max(weights.sum(), 1e-12)
+            w = weights * importance
+            w = w / max(w.sum(), 1e-12)
             normal, rhs = terms.normal(w, residual_src)
             ok, solution = cv2.solve(normal + self._regulariser, rhs + self.cfg.video_align_prior * prior_flat,
                                      flags=cv2.DECOMP_CHOLESKY)
@@ -335,6 +342,34 @@ class Alignment:
         return float((self.weights > 0).mean()) if self.weights.size else 0.0
 
 
+@dataclass(frozen=True)
+class Seam:
+    """A frame's seam on the canvas: ``positions`` (L,) one per line, lines rows (x positions) when
+    ``lines_are_rows``, else columns (y positions)."""
+
+    positions: np.ndarray
+    lines_are_rows: bool
+
+    def distance(self, pts_canvas: np.ndarray) -> np.ndarray:
+        """(N,) |position - seam| of canvas points (N, 2) (x, y) along their lines; inf off the lines."""
+        pts = np.asarray(pts_canvas, np.float64)
+        line, position = (pts[:, 1], pts[:, 0]) if self.lines_are_rows else (pts[:, 0], pts[:, 1])
+        index = np.rint(line).astype(np.int64)
+        on = (index >= 0) & (index < len(self.positions))
+        out = np.full(len(pts), np.inf)
+        out[on] = np.abs(position[on] - self.positions[index[on]])
+        return out
+
+    def mask_small(self, shape_small: tuple[int, int], offset_tgt: np.ndarray, factor: int, half_px: float) -> np.ndarray:
+        """(h, w) uint8 over the small target plane (:func:`small_plane`, at canvas ``offset_tgt``): 255
+        within ``half_px`` canvas px of the seam."""
+        rows, cols = shape_small
+        xs = small_to_full(np.arange(cols), factor) + offset_tgt[0]
+        ys = small_to_full(np.arange(rows), factor) + offset_tgt[1]
+        grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+        return np.where(self.distance(grid) <= half_px, 255, 0).astype(np.uint8).reshape(rows, cols)
+
+
 class FrameAlignment:
     """Per-frame alignment of a moving rig's source map to the target (module docstring).
 
@@ -365,17 +400,21 @@ class FrameAlignment:
         height, width = shape or self.key_map.shape[:2]
         return cv2.resize(np.asarray(lattice, np.float32), (width, height), interpolation=cv2.INTER_CUBIC)
 
-    def step(self, y_src: np.ndarray, y_tgt: np.ndarray, gains: tuple[float, float, float, float]) -> Alignment:
+    def step(self, y_src: np.ndarray, y_tgt: np.ndarray, gains: tuple[float, float, float, float],
+             seam: Seam | None = None) -> Alignment:
         """Align the frame pair ``y_src``, ``y_tgt`` (full Y planes) whose luma ``gains`` are (gain, bias) of
         the source and of the target. The flow is measured against the last frame's map (any map serves:
         the source pixel a point should show is the map plus its flow); the fit starts from the filter's
-        prediction."""
+        prediction. ``seam``: where the last frame's seam ran: half the new corners are sought within
+        ``video_align_seam_px`` of it, and the points there weigh ``video_align_seam_weight`` times as
+        much in the fit (alignment shows at the seam only)."""
         cfg, factor = self.cfg, self.factor
         src_small, tgt_small = small_plane(y_src, factor), small_plane(y_tgt, factor)
         if self._overlap is None or self._frames % OVERLAP_FRAMES == 0:
             self._overlap = OverlapGrid(self.map_src, self.offset_tgt, self.shapes[0], tgt_small.shape, factor)
         self._frames += 1
-        pts_small = self.points.update(tgt_small, self._overlap.mask)
+        near = None if seam is None else seam.mask_small(tgt_small.shape, self.offset_tgt, factor, cfg.video_align_seam_px)
+        pts_small = self.points.update(tgt_small, self._overlap.mask, near)
         prior = self.filter.predict()
         current = self.map_src
         if self._overlap.empty or not len(pts_small):
@@ -390,7 +429,9 @@ class FrameAlignment:
         usable = kept & np.isfinite(targets_src).all(axis=1) & np.isfinite(key_src).all(axis=1)
         pts_canvas, targets_src = pts_canvas[usable], targets_src[usable]
         if len(pts_canvas) >= cfg.video_align_min_points:
-            lattice, error, weights = self.fit.fit(pts_canvas, targets_src - key_src[usable], prior)
+            importance = np.ones(len(pts_canvas)) if seam is None else \
+                1.0 + (cfg.video_align_seam_weight - 1.0) * (seam.distance(pts_canvas) <= cfg.video_align_seam_px)
+            lattice, error, weights = self.fit.fit(pts_canvas, targets_src - key_src[usable], prior, importance)
         else:  # too few points this frame: the warp carries on as predicted
             lattice, error, weights = prior, np.zeros(len(pts_canvas)), np.zeros(len(pts_canvas))
         value = self.filter.update(lattice)
