@@ -158,8 +158,8 @@ def cmd_image(args: argparse.Namespace) -> int:
 def cmd_video(args: argparse.Namespace) -> int:
     from .jobs import Job
 
-    if args.reestimate is not None and args.settings.get("video_rig") != "moving":
-        raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
+    if args.reestimate is not None and args.settings.get("video_rig") == "static":
+        raise InputError("--reestimate re-estimates a moving rig; a static rig is estimated once (drop --rig static)")
     return _run_job(Job("video", (args.left, args.right), args.output, args.settings, report=args.report,
                         reference=args.reference, crop=args.crop, offset_s=args.offset, strict=args.strict,
                         figures=args.figures, overwrite=args.overwrite))
@@ -220,12 +220,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seconds the right video started after the left one, or auto: estimated from the "
                         "audio of both (else their motion), refused when unclear (default: 0)")
     p.add_argument("--rig", choices=CHOICES["video_rig"],
-                   help=f"static: maps estimated once (and moved with a camera that drifts); moving: "
-                        f"re-estimated now and then (default: {Config.video_rig})")
+                   help=f"auto: decided from the first second and watched (a line on stderr says what and why); "
+                        f"static: maps estimated once (and moved with a camera that drifts); moving: aligned every "
+                        f"frame (default: {Config.video_rig})")
     p.add_argument("--crop", action="store_true",
                    help="crop to the largest rectangle the first estimate covers, fixed for the whole video")
     p.add_argument("--reestimate", type=float, metavar="S",
-                   help=f"seconds between re-estimations of a moving rig (default: {Config.video_reestimate_s})")
+                   help=f"a moving rig is re-estimated when its alignment falls behind, at most every S seconds "
+                        f"(default: {Config.video_reestimate_s})")
     p.add_argument("--crf", type=int, help=f"constant quality, lower is better (default: {Config.video_crf})")
     p.add_argument("--preset", choices=CHOICES["video_preset"], help=f"libx264 preset (default: {Config.video_preset})")
     p.add_argument("--codec", choices=CHOICES["video_codec"],

@@ -153,8 +153,8 @@ class Config:
     video_estimate_spacing: int = 5  # frame pairs between two of those tries
     video_screen_max_side: int = 640  # those tries are ranked by XFeat at this long side at most; the best is estimated at xfeat_max_side
     video_estimate_max_side: int = 1920  # an estimate runs on the frames made this small (long side) and is scaled up
-    video_rig: str = "static"  # "static": estimated once, moved with a drifting camera; "moving": every video_reestimate_s;
-    # "auto": decided from the first second and watched (video/rig_motion.py)
+    video_rig: str = "auto"  # "auto": decided from the first second and watched (video/rig_motion.py); "static":
+    # estimated once, moved with a drifting camera; "moving": aligned every frame (video/align.py)
     video_rig_moving_share: float = 0.004  # auto: a view drifting this x its width a second or more moves (first second)
     video_rig_switch_share: float = 0.015  # auto: ... and a static rig whose view drifts this much later becomes moving
     video_rig_still_share: float = 0.001  # auto: a moving rig whose views both drift less than this ...
@@ -166,10 +166,8 @@ class Config:
     video_drift_check_s: float = 0.25  # static rig: how often each view is compared with its view at the estimate (0: never)
     video_drift_px: float = 2.0  # static rig: a view's move (input px) beyond this from what the maps follow moves them
     video_drift_speed_px: float = 0.5  # static rig: a drift move is blended in at this many px a frame (faster jolts)
-    video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly (at least)
+    video_blend_frames: int = 10  # frames over which new maps are blended in linearly (at least): a drift's, a moving rig's new key
     video_seam_speed_px: float = 2.0  # the seam moves at most this (or one cell) per frame (a blend lasts long enough), but for jumps
-    video_warp_follow: float = 0.65  # moving rig: an accepted estimate moves the maps this share of the way (causal
-    # exponential smoothing of the warp across estimates: estimation noise averages out; 1: all the way)
     video_estimate_workers: int = 1  # moving rig: re-estimates run on this many threads off the frame loop (0: on it)
     video_estimate_lookahead_s: float = 1.5  # moving rig, worker: a re-estimate starts on the frame this far ahead of
     # the one composited (those decoded frames are held), so it is ready when the loop reaches its frame; 0: none
@@ -183,9 +181,12 @@ class Config:
     video_align_min_points: int = 20  # fewer points measured: the frame keeps the predicted warp
     video_align_window_px: int = 15  # Lucas-Kanade window (tracks and the warp's residual flow), reduced px
     video_align_lattice_nodes: float = 12.0  # correction lattice: nodes the canvas diagonal / this apart
+    video_align_seam_px: float = 32.0  # points within this of the seam (canvas px) are the ones that show ...
+    video_align_seam_weight: float = 4.0  # ... and weigh this many times as much; half the new corners are sought there
+    video_align_bend: float = 1e-6  # the fit's bending weight (lambda_b of the correction: ffd's, scale-free)
     video_align_tukey_px: float = 3.0  # the fit's Tukey scale (source px): points farther off do not pull
     video_align_prior: float = 1e-4  # the fit's pull towards the predicted lattice (per node, against the mean data term)
-    video_align_follow: float = 0.5  # the filter takes this share of a measured change at once (alpha)
+    video_align_follow: float = 0.3  # the filter takes this share of a measured change at once (alpha)
     video_align_max_lag_px: float = 1.0  # ... and never lags the measured lattice by more than this
     # --- Video over time: the per-frame seam and exposure (issue 14) ----------------------------
     video_seam_band_ratio: float = 0.05  # per-frame seam: band half-width, x the canvas diagonal (room to go round an object)
@@ -242,7 +243,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
                      "veryslow", "placebo"),
     "video_audio": ("left", "right", "none"),
     "video_encoder_thread_type": ("slice", "frame"),
-    "video_rig": ("static", "moving"),
+    "video_rig": ("auto", "static", "moving"),
     "ffd_model": ("fit", "blend"),
     "gate_model": ("none", "paper"),
     "seam_model": ("path", "paper"),
