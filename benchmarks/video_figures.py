@@ -12,7 +12,8 @@ with :class:`~sena_warp.evaluation.video_figures.VideoFigures` attached, exactly
 ``sena-warp video ... --figures --report`` measures, and writes into ``--out``: ``NAME.mp4``, ``NAME.json``
 (the report with ``figures``), ``NAME_strip.png`` (the output's seam band of every 10th frame side by
 side, lines top to bottom, the seam in red), ``NAME_frame_K.png`` (a few whole output frames, the
-seam in red) and ``NAME_every10/`` (every 10th output frame, for looking at the seam frame by frame).
+seam in red) and ``NAME_every10/`` (every 10th output frame as composited, the seam dotted in red, for
+looking at it frame by frame).
 Then it prints a Markdown table per recording; ``--tables DIR ...`` prints them again from the reports
 in those folders. A run's mode is ``default`` (the settings as shipped), ``static`` or ``moving-S``
 (``--rig moving --reestimate S``). With ``--cpu`` every run is made a second time with only
@@ -42,7 +43,6 @@ import tarfile
 import tempfile
 from pathlib import Path
 
-import av
 import cv2
 import numpy as np
 
@@ -92,11 +92,14 @@ def to_bgr(planes) -> np.ndarray:
     return YuvFrame(0, 0, *planes).to_bgr()
 
 
-def draw_seam(img: np.ndarray, seam: np.ndarray, rows: bool, shift: np.ndarray | None = None) -> np.ndarray:
-    """``img`` with the seam (per line; ``shift`` added) drawn in red."""
+def draw_seam(img: np.ndarray, seam: np.ndarray, rows: bool, shift: np.ndarray | None = None,
+              every: int = 1) -> np.ndarray:
+    """``img`` with the seam (per line; ``shift`` added) drawn in red, on every ``every``-th line."""
     out = img.copy()
     positions = np.rint(seam + (0 if shift is None else shift)).astype(int)
     for line, pos in enumerate(positions):
+        if line % every:
+            continue
         if rows and 0 <= pos < out.shape[1]:
             out[line, pos] = (0, 0, 255)
         elif not rows and 0 <= pos < out.shape[0]:
@@ -104,8 +107,8 @@ def draw_seam(img: np.ndarray, seam: np.ndarray, rows: bool, shift: np.ndarray |
     return out
 
 
-def write_pictures(observer: VideoFigures, name: str, out: Path, rows: bool) -> None:
-    """The seam-over-time strip and the kept frames of one run."""
+def write_pictures(observer: VideoFigures, name: str, out: Path, rows: bool, whole: set[int]) -> None:
+    """The seam-over-time strip, the ``whole`` frames with the seam drawn, and every 10th frame of one run."""
     tiles = []
     for _, band, seam, _ in observer.strips:
         tile = draw_seam(cv2.cvtColor(band, cv2.COLOR_GRAY2BGR), seam, True)
@@ -113,17 +116,13 @@ def write_pictures(observer: VideoFigures, name: str, out: Path, rows: bool) -> 
     if tiles:
         strip = np.hstack(tiles)
         cv2.imwrite(str(out / f"{name}_strip.png"), strip if rows else strip.transpose(1, 0, 2))
+    every10 = out / f"{name}_every10"
+    every10.mkdir(exist_ok=True)
     for index, (planes, seam) in observer.frames.items():
-        cv2.imwrite(str(out / f"{name}_frame_{index}.png"), draw_seam(to_bgr(planes), seam, rows))
-
-
-def write_every_tenth(video: Path, folder: Path) -> None:
-    """Every 10th frame of an output ``video`` as ``folder/frame_K.png`` (for looking at at 100 %)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    with av.open(str(video)) as container:
-        for index, frame in enumerate(container.decode(video=0)):
-            if index % STRIP_EVERY == 0:
-                cv2.imwrite(str(folder / f"frame_{index:04d}.png"), frame.to_ndarray(format="bgr24"))
+        if index in whole:
+            cv2.imwrite(str(out / f"{name}_frame_{index}.png"), draw_seam(to_bgr(planes), seam, rows))
+        if index % STRIP_EVERY == 0:  # the seam dotted on every 8th line: the picture beside it stays visible
+            cv2.imwrite(str(every10 / f"frame_{index:04d}.png"), draw_seam(to_bgr(planes), seam, rows, every=8))
 
 
 def pan_videos(name: str, pans: Path) -> Path:
@@ -205,7 +204,7 @@ def run_one(recording: str, mode: str, offset_s: float, videos: Path, out: Path,
     frames = min(probe_video(left).frame_count or 300, probe_video(right).frame_count or 300)
     keep = tuple(sorted({int(share * (frames - 1)) for share in FRAME_SHARES}))
     cfg = resolve_config(config_for(mode, changes))
-    observer = VideoFigures(cfg, strip_every=STRIP_EVERY, keep_frames=keep)
+    observer = VideoFigures(cfg, strip_every=STRIP_EVERY, keep_frames=keep + tuple(range(0, frames, STRIP_EVERY)))
     output = out / f"{name}.mp4"
     if code == "main":
         main_stitch, observed = main_compositor_class(observer)
@@ -227,8 +226,7 @@ def run_one(recording: str, mode: str, offset_s: float, videos: Path, out: Path,
     report["figures_mode"] = mode
     report["figures_settings"] = changes
     write_json(out / f"{name}.json", report)
-    write_pictures(observer, name, out, not report["stitch"]["rig"]["vertical"])
-    write_every_tenth(output, out / f"{name}_every10")
+    write_pictures(observer, name, out, not report["stitch"]["rig"]["vertical"], set(keep))
     return report
 
 
@@ -291,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", nargs="*",
                         help="RECORDING:MODE[:OFFSET_S] (default: every recording, every mode, offset 0)")
     parser.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE",
-                        help="Config changes for every run of this branch's code (e.g. video_warp_follow=0.5)")
+                        help="Config changes for every run of this branch's code (e.g. video_align_follow=0.5)")
     parser.add_argument("--code", choices=("branch", "main"), default="branch")
     parser.add_argument("--main-repo", type=Path, default=REPO.parent / "main")
     parser.add_argument("--tables", type=Path, nargs="+", metavar="DIR", help="only print the tables of these reports")
