@@ -8,13 +8,13 @@ were fully transparent. Inputs are never modified; outputs go through ``sena_war
 from __future__ import annotations
 
 import os
-import sys
-import tempfile
+import stat
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from . import native_stderr
 from .errors import InputError, OutputError
 from .image_header import apply_orientation, read_header
 from .outputs import OutputPlan, atomic_output
@@ -51,6 +51,29 @@ def to_bgr8(img: np.ndarray, name: str = "image") -> np.ndarray:
     raise InputError(f"{name}: unsupported image shape {img.shape}")
 
 
+def described(value) -> str:
+    """What ``value`` is, for an error about an argument: an array's shape and type, else its type."""
+    if isinstance(value, np.ndarray):
+        return f"a {value.dtype} array of shape {value.shape}"
+    return "None" if value is None else f"a {type(value).__name__}"
+
+
+def check_image(img, name: str, channels: int = 3) -> np.ndarray:
+    """``img`` when it is a uint8 array of shape (H, W, ``channels``) with both sides at least
+    ``MIN_SIDE_PX`` (BGR for 3, BGRA for 4); else InputError saying what was expected (a public
+    function's argument check)."""
+    kind = {3: "BGR", 4: "BGRA"}[channels]
+    if not (isinstance(img, np.ndarray) and img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == channels):
+        how = ("read_image() reads a file as one; to_bgr8() converts grey, BGRA, 16-bit or float arrays"
+               if channels == 3 else "stitch_images() gives one as Panorama.image")
+        raise InputError(f"{name}: expected a {kind} uint8 array of shape (H, W, {channels}), got {described(img)}; "
+                         f"{how}")
+    if min(img.shape[:2]) < MIN_SIDE_PX:
+        raise InputError(f"{name}: image is {img.shape[1]}x{img.shape[0]} px; at least {MIN_SIDE_PX} px per side "
+                         f"is needed")
+    return img
+
+
 def _float_to_uint8(img: np.ndarray) -> np.ndarray:
     colour = img[:, :, :3] if img.ndim == 3 and img.shape[2] == 4 else img  # alpha does not set the range
     finite = colour[np.isfinite(colour)]
@@ -69,25 +92,35 @@ def transparent_mask(img: np.ndarray) -> np.ndarray | None:
     return transparent if transparent.any() else None
 
 
+def input_stat(path: str | os.PathLike) -> os.stat_result:
+    """``os.stat`` of input ``path``, or InputError when it is missing or a name the file system refuses
+    (too long, a loop of links)."""
+    try:
+        return os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        raise InputError(f"{path}: file not found") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be opened ({exc.strerror})") from None
+
+
 def existing_file(path: str | os.PathLike) -> Path:
-    """``path`` as a Path, or InputError when it is missing or not a regular file."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: file not found")
-    if not path.is_file():
+    """``path`` as a Path, or InputError when it is missing, not a regular file or cannot be looked up."""
+    if not stat.S_ISREG(input_stat(path).st_mode):
         raise InputError(f"{path}: not a file")
-    return path
+    return Path(path)
 
 
 def check_size(name: str, width: int, height: int, max_megapixels: float | None, what: str = "image") -> None:
     """InputError when a ``width`` x ``height`` input is above ``max_megapixels`` (None: no limit of
     ours) or above what OpenCV decodes, before anything that size is allocated."""
     megapixels = width * height / 1e6
+    shown = f"{megapixels:.3g}" if megapixels < 1000 else f"{megapixels:.0f}"  # 0.307, 625, 1600: never "0 MP"
+    size = f"{width}x{height} px ({shown} MP)"
     if width * height > OPENCV_MAX_PIXELS:
-        raise InputError(f"{name}: {what} is {width}x{height} px ({megapixels:.0f} MP), above the "
+        raise InputError(f"{name}: {what} is {size}, above the "
                          f"{OPENCV_MAX_PIXELS / 1e6:.0f} MP OpenCV decodes; downscale it first")
     if max_megapixels is not None and megapixels > max_megapixels:
-        raise InputError(f"{name}: {what} is {width}x{height} px ({megapixels:.0f} MP), above the limit of "
+        raise InputError(f"{name}: {what} is {size}, above the limit of "
                          f"{max_megapixels:g} MP per input; downscale it first, or raise --max-megapixels if the "
                          f"machine has the memory (see the README)")
 
@@ -98,8 +131,9 @@ def read_image_masked(path: str | os.PathLike, max_megapixels: float | None = No
     InputError saying what is wrong with it.
 
     Returns (BGR uint8 (H, W, 3), (H, W) bool transparent mask or None when no pixel is). The size
-    is checked against ``max_megapixels`` from the header, before decoding; the EXIF orientation
-    is applied (see ``image_header``).
+    is checked against ``max_megapixels`` from the header, before decoding; a file whose header gives
+    no size (a format ``image_header`` does not read, or a damaged header) is refused undecoded. The
+    EXIF orientation is applied (see ``image_header``).
     """
     path = existing_file(path)
     try:
@@ -107,15 +141,14 @@ def read_image_masked(path: str | os.PathLike, max_megapixels: float | None = No
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror})") from exc
     header = read_header(memoryview(data))
-    if header.pixels is not None:
-        check_size(str(path), header.width, header.height, max_megapixels)
-    img, decoder_says = _decode_quietly(data) if data.size else (None, "")
+    if not header.pixels:  # no size to check: the decoder could allocate anything, so it is not asked
+        raise InputError(f"{path}: not a readable image (corrupt, truncated or unsupported format)")
+    check_size(str(path), header.width, header.height, max_megapixels)
+    img, decoder_says = _decode_quietly(data)
     if img is None:
         reason = f"; the decoder says: {decoder_says}" if decoder_says else ""
         raise InputError(f"{path}: not a readable image (corrupt, truncated or unsupported format{reason})")
     del data
-    if header.pixels is None:  # a format whose header we do not read: check what was decoded
-        check_size(str(path), img.shape[1], img.shape[0], max_megapixels)
     img = apply_orientation(img, header.orientation)
     transparent = transparent_mask(img)
     img = to_bgr8(img, str(path))
@@ -138,22 +171,13 @@ def _decode_quietly(data: np.ndarray) -> tuple[np.ndarray | None, str]:
     incomplete" for a truncated file), which would break the CLI's one-line error; the text is caught
     here so it can go into the InputError instead. Warnings on a file that still decodes are dropped.
     """
-    sys.stderr.flush()
-    saved_fd = os.dup(2)
-    with tempfile.TemporaryFile() as sink:
-        os.dup2(sink.fileno(), 2)
+    error = ""
+    with native_stderr.caught() as said:
         try:
             img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
         except cv2.error as exc:  # e.g. a size the decoder refuses to allocate
             img, error = None, exc.err
-        else:
-            error = ""
-        finally:
-            os.dup2(saved_fd, 2)
-            os.close(saved_fd)
-        sink.seek(0)
-        decoder_says = " ".join(f"{sink.read().decode(errors='replace')} {error}".split())
-    return img, decoder_says
+    return img, " ".join(f"{said.text} {error}".split())
 
 
 def encode_image(path: str | os.PathLike, img: np.ndarray, params: tuple[int, ...] = ()) -> np.ndarray:

@@ -29,9 +29,9 @@ GAINS = ([1.1, 0.9, 1.0], [-3.0, 2.0, 0.0], [0.95, 1.05, 1.0], [1.0, -1.0, 4.0])
 STRONG_GAINS = ([1.1, 0.9, 1.0], [-3.0, 2.0, 0.0], [1.3, 0.8, 1.0], [6.0, -5.0, 4.0])
 
 
-def layout(scene, lines_are_rows=True, band_px=12.0, lf_px=40.0, wobble=15.0) -> SeamLayout:  # noqa: F811
+def layout(scene_arrays, lines_are_rows=True, band_px=12.0, lf_px=40.0, wobble=15.0) -> SeamLayout:
     """A wavy seam down the middle of the scene's canvas (per row, or per column)."""
-    _, _, map_src, _, _ = scene
+    _, _, map_src, _, _ = scene_arrays
     height, width = map_src.shape[:2]
     lines, across = (height, width) if lines_are_rows else (width, height)
     positions = 0.5 * across + wobble * np.sin(np.arange(lines) / 17.0)

@@ -35,14 +35,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..config import Config
-from ..errors import StitchError
+from ..errors import StitchError, VideoError
 from ..progress import LOGGER
 from ..rig import Rig
 from sena_warp.kernels.transfer import own_stream
 from .align import Seam
 from .drift import DriftWatch, overlap_boxes
 from .estimate import estimate_pair, rejection_reason
-from .maps import MapsBlend, PlaneMaps, drifted_maps, maps_on_canvas
+from .maps import MapsBlend, PlaneMaps, canvas_scale, drifted_maps, maps_on_canvas
 from .moving import MovingRig
 from .reader import YuvFrame
 from .rig_motion import WINDOW_S, RigDecision, RigMotion
@@ -65,12 +65,14 @@ class Blend:
 
 class DriftCheck:
     """A static rig's drift check (``drift.py``), every ``cfg.video_drift_check_s`` from the first
-    estimate's pair (at ``from_s``) on: ``base`` (the first estimate's maps) moved by how far the views
-    moved. ``log``: what the checks found (the report's ``drift``)."""
+    estimate's pair (at ``from_s``) on: ``base`` (the first estimate's maps, on an output ``scale``
+    (x, y) output pixels per canvas pixel) moved by how far the views moved. ``log``: what the checks
+    found (the report's ``drift``)."""
 
-    def __init__(self, base: PlaneMaps, from_s: float, cfg: Config):
+    def __init__(self, base: PlaneMaps, from_s: float, scale: np.ndarray, cfg: Config):
         self._cfg = cfg
         self._base = base
+        self._scale = scale
         self._from_s = from_s
         self._watch: DriftWatch | None = None  # the views as the maps were made, taken on the first check's frame
         self._applied = (np.zeros(2), np.zeros(2))  # the (source, target) moves the maps were last moved by
@@ -103,18 +105,26 @@ class DriftCheck:
         self.log["applied"].append({"time_s": round(time_s, 4), "source_px": np.round(shifts[0], 2).tolist(),
                                     "target_px": np.round(shifts[1], 2).tolist()})
         frames = int(np.ceil(change / self._cfg.video_drift_speed_px))
-        return drifted_maps(self._base, *shifts), frames
+        return drifted_maps(self._base, *shifts, self._scale), frames
 
 
 @dataclass(frozen=True)
 class Canvas:
-    """The video's fixed canvas as estimates are expressed on it: (H, W) ``shape``, the target's offset
-    ``offset_tgt`` (x, y) on it, the per-frame seam's ``band_px``, and the ``rig`` (roles, orientation)."""
+    """The video's fixed canvas as estimates are expressed on it: (H, W) ``stitched_shape``, the target's
+    offset ``offset_tgt`` (x, y) on it, and the ``rig`` (roles, orientation); the output it is scaled
+    to, (H, W) ``shape`` (``video_max_width``: the maps themselves are scaled, ``maps.scaled_plane_maps``),
+    and the per-frame seam's ``band_px`` there."""
 
+    stitched_shape: tuple[int, int]
     shape: tuple[int, int]
     offset_tgt: np.ndarray
     band_px: int
     rig: Rig
+
+    @property
+    def scale(self) -> np.ndarray:
+        """(sx, sy): output pixels per canvas pixel."""
+        return canvas_scale(self.stitched_shape, self.shape)
 
 
 class Reestimates:
@@ -183,7 +193,7 @@ class Reestimates:
                 estimate = estimate_pair(frame_l, frame_r, cfg, canvas.rig.target, prior_seam_tgt=prior)
             if estimate.rig.vertical != canvas.rig.vertical:
                 return None, "rig orientation changed"
-            candidate = maps_on_canvas(estimate, canvas.shape, canvas.offset_tgt, canvas.band_px)
+            candidate = maps_on_canvas(estimate, canvas.stitched_shape, canvas.offset_tgt, canvas.band_px, canvas.shape)
             reason = rejection_reason(candidate, current(), self._first_inliers, shape_src, shape_tgt, cfg)
             return (candidate, None) if reason is None else (None, reason)
         except StitchError as exc:
@@ -239,12 +249,17 @@ class MapsTimeline:
         self._watch_frames = watch_frames if watch is not None else 0
         self._decisions: deque[RigDecision] = deque()  # the watch's decisions not yet applied, oldest first
         self.decisions: list[dict] = []  # each applied, with the time of the frame it took effect on
+        # The alignment works on the stitched canvas, the target pasted 1:1: not on an output scaled down.
+        self._aligns = bool(np.allclose(canvas.scale, 1.0))
+        if mode == "moving" and not self._aligns:
+            raise VideoError("--rig moving aligns every frame at the stitched size; drop --max-width "
+                             f"(the stitched video is {canvas.stitched_shape[1]} px wide) or use --rig static")
         self._alignments: list[dict] = []  # the alignment logs of the moving stretches that ended
         self._blend: Blend | None = None
         self.align_seconds = 0.0
 
     def _drift_check(self, base: PlaneMaps, from_s: float) -> DriftCheck | None:
-        return DriftCheck(base, from_s, self._cfg) if self._cfg.video_drift_check_s > 0 else None
+        return DriftCheck(base, from_s, self._canvas.scale, self._cfg) if self._cfg.video_drift_check_s > 0 else None
 
     @property
     def lookahead_frames(self) -> int:
@@ -311,10 +326,12 @@ class MapsTimeline:
         """``--rig auto``'s ``decision`` takes effect on the frame of ``time_s`` (said in one line, logged):
         a moving rig's maps are aligned from the maps of the moment on; a static rig keeps the maps of
         the moment, moved with the cameras' drift from now on."""
-        self.decisions.append({**decision.as_dict(), "from_s": round(time_s, 4)})
+        kept = decision.mode == "moving" and not self._aligns
+        said = decision.reason + ("; not aligned every frame at --max-width: the static plan is kept" if kept else "")
+        self.decisions.append({**decision.as_dict(), "reason": said, "from_s": round(time_s, 4)})
         LOGGER.warning("rig: %s%s (%s)", decision.mode, f" from {time_s:.2f} s" if len(self.decisions) > 1 else "",
-                       decision.reason)
-        if decision.mode == self.mode:
+                       said)
+        if decision.mode == self.mode or kept:
             return
         self.mode = decision.mode
         self._blend = None  # a drift's blend stops where it is
