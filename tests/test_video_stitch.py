@@ -21,10 +21,10 @@ import pytest
 from sena_warp.cli import main
 from sena_warp.config import Config
 from sena_warp.video.loop import VideoOptions
-from sena_warp.errors import GeometryError
+from sena_warp.errors import GeometryError, VideoError
 from sena_warp.video import estimate
 from sena_warp.video.estimate import best_first_estimate, first_pairs, rejection_reason
-from sena_warp.composite import SeamLayout
+from sena_warp.composite import BorderBlend, SeamLayout
 from sena_warp.video.maps import (ArrayLerp, MapsBlend, PlaneMaps, canvas_scale, chroma_positions, chroma_seam,
                                  map_change_px, output_shape, scaled_plane_maps, seam_change_px,
                                  seam_on_canvas_lines, seam_per_target_line, target_map)
@@ -556,7 +556,7 @@ def test_a_picture_output_is_the_frame_a_video_from_there_starts_with(clips, tmp
 
 def test_scaled_maps_sample_where_the_canvas_does_and_carry_the_seam_along():
     maps = synthetic_maps(0.0, 300, shape=(40, 60))
-    border = ((9.5, 30.5), np.arange(120, dtype=np.float32).reshape(2, 60, 1), np.zeros((2, 60, 1), np.float32))
+    border = BorderBlend((9.5, 30.5), np.arange(120, dtype=np.float32).reshape(2, 60, 1), np.zeros((2, 60, 1), np.float32))
     maps = replace(maps, border_luma=border)
     half = scaled_plane_maps(maps, output_shape(maps.shape, 30))
     assert half.shape == (20, 30) and output_shape((40, 61), 30) == (20, 30) and output_shape((40, 60), 100) == (40, 60)
@@ -568,8 +568,8 @@ def test_scaled_maps_sample_where_the_canvas_does_and_carry_the_seam_along():
     # its offsets along them likewise.
     np.testing.assert_allclose(half.seam_luma.positions, 14.75)
     assert (half.seam_luma.band_px, half.seam_luma.transition_px) == (5.0, 4.0)
-    assert half.border_luma[0] == (4.5, 15.0)
-    np.testing.assert_allclose(half.border_luma[1][0, :3, 0], [0.5, 2.5, 4.5])
+    assert half.border_luma.lines == (4.5, 15.0)
+    np.testing.assert_allclose(half.border_luma.src[0, :3, 0], [0.5, 2.5, 4.5])
     # What works on the canvas gets the seam back per canvas line.
     np.testing.assert_allclose(seam_on_canvas_lines(half.seam_luma.positions, 40, canvas_scale((40, 60), (20, 30)),
                                                     True), 30.0)
@@ -577,7 +577,7 @@ def test_scaled_maps_sample_where_the_canvas_does_and_carry_the_seam_along():
 
 def test_a_narrower_output_is_the_stitch_made_smaller_by_its_maps(clips, tmp_path):
     left, right = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4"
-    cfg = FAST.replace(video_audio="none")
+    cfg = FAST.replace(video_audio="none", video_rig="static")  # a moving rig is not aligned at --max-width
     full = stitch_videos(left, right, tmp_path / "full.mp4", cfg, VideoOptions.from_config(cfg))
     small_cfg = cfg.replace(video_max_width=166)
     small = stitch_videos(left, right, tmp_path / "small.mp4", small_cfg, VideoOptions.from_config(small_cfg))
@@ -589,10 +589,16 @@ def test_a_narrower_output_is_the_stitch_made_smaller_by_its_maps(clips, tmp_pat
         frame_full, frame_small = decoded_frames(tmp_path / "full.mp4")[k], decoded_frames(tmp_path / "small.mp4")[k]
         made_small = cv2.resize(frame_full.y, (width, height), interpolation=cv2.INTER_AREA)
         assert float(np.mean(cv2.absdiff(made_small, frame_small.y))) < 2.5
-    # A moving rig's re-estimates work on the canvas and land on the smaller output.
-    moving = small_cfg.replace(video_rig="moving", video_reestimate_s=0.5, video_estimate_workers=0)
-    report = stitch_videos(left, right, tmp_path / "moving.mp4", moving, VideoOptions.from_config(moving))
-    assert report["stitch"]["reestimations"]["accepted"] == 3 and report["output"]["width"] == 166
+    # A moving rig is aligned every frame at the stitched size only: refused at a narrower output, and
+    # --rig auto says that it keeps the static plan.
+    moving = small_cfg.replace(video_rig="moving", video_estimate_workers=0)
+    with pytest.raises(VideoError, match="drop --max-width"):
+        stitch_videos(left, right, tmp_path / "moving.mp4", moving, VideoOptions.from_config(moving))
+    auto = small_cfg.replace(video_rig="auto")
+    report = stitch_videos(left, right, tmp_path / "auto.mp4", auto, VideoOptions.from_config(auto))
+    decisions = report["stitch"]["rig"]["decisions"]
+    assert [d["mode"] for d in decisions] == ["moving"] and "the static plan is kept" in decisions[0]["reason"]
+    assert report["stitch"]["rig"]["alignment"] is None and report["output"]["width"] == 166
 
 
 @pytest.mark.parametrize("max_side", [1920, 256])  # the frames as they are, and made smaller for the estimate
