@@ -35,6 +35,7 @@ input px per canvas pixel; the target sits at ``canvas = target + o`` (``maps.ta
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -162,11 +163,13 @@ class TargetPoints:
         self._last: np.ndarray | None = None
         self._since_seed = SEED_FRAMES
 
-    def update(self, tgt_small: np.ndarray, mask: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+    def update(self, tgt_small: np.ndarray, mask: np.ndarray, near: Callable[[], np.ndarray] | None = None
+               ) -> np.ndarray:
         """The points on the small target plane ``tgt_small`` (h, w) uint8: the last frame's tracked, those
         outside ``mask`` (h, w) uint8 (255: the overlap) dropped, topped up when too few remain (at most
         every :data:`SEED_FRAMES` frames, unless fewer than ``video_align_min_points`` are left): half of
-        them within ``near`` (h, w) uint8 (255: by the seam) where given, the rest anywhere."""
+        them within ``near()`` (h, w) uint8 (255: by the seam; asked for only then) where given, the rest
+        anywhere."""
         cfg = self.cfg
         pts = self.pts
         if self._last is not None and len(pts):
@@ -182,7 +185,7 @@ class TargetPoints:
         if thin and (self._since_seed >= SEED_FRAMES or len(pts) < cfg.video_align_min_points):
             before, wanted = len(pts), cfg.video_align_points - len(pts)
             if near is not None:
-                by_seam = self._corners(tgt_small, cv2.bitwise_and(mask, near), pts, wanted // 2)
+                by_seam = self._corners(tgt_small, cv2.bitwise_and(mask, near()), pts, wanted // 2)
                 pts = np.concatenate([pts, by_seam])
             pts = np.concatenate([pts, self._corners(tgt_small, mask, pts, cfg.video_align_points - len(pts))])
             self.seeded, self._since_seed = len(pts) - before, 0
@@ -413,7 +416,8 @@ class FrameAlignment:
         if self._overlap is None or self._frames % OVERLAP_FRAMES == 0:
             self._overlap = OverlapGrid(self.map_src, self.offset_tgt, self.shapes[0], tgt_small.shape, factor)
         self._frames += 1
-        near = None if seam is None else seam.mask_small(tgt_small.shape, self.offset_tgt, factor, cfg.video_align_seam_px)
+        near = None if seam is None else (
+            lambda: seam.mask_small(tgt_small.shape, self.offset_tgt, factor, cfg.video_align_seam_px))
         pts_small = self.points.update(tgt_small, self._overlap.mask, near)
         prior = self.filter.predict()
         current = self.map_src
