@@ -7,7 +7,9 @@ becomes the key without a jump: its correction is refitted so that key plus corr
 moment, up to what the coarse lattice cannot say, and that remainder fades out over
 ``video_blend_frames`` frames at least; the seam's home (the band the per-frame seam moves in) moves
 from the old key's to the new one's over as many frames, slowly enough that it moves by at most
-``video_seam_speed_px`` a frame. The border blend is the key's.
+``video_seam_speed_px`` a frame. Where the new key covers the canvas differently, what it adds is
+uncovered from the old coverage outwards and what it drops is let go from the outside in over the same
+frames (:class:`CoverFade`): the uncovered area does not jump. The border blend is the key's.
 
 Where the warp cannot follow a point (something near, whose parallax its surroundings do not share),
 the point's two copies are apart on the canvas; :meth:`MovingRig.copies` gives them as (line, position)
@@ -16,7 +18,7 @@ pairs for the per-frame seam, which keeps them on one side (``frame_seam.separat
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -28,6 +30,42 @@ from .maps import PlaneMaps
 KEY_GRID_PX = 16  # a new key's correction is fitted to the map of the moment on a grid this fine (canvas px)
 POOR_SHARE = 0.5  # the alignment is poor on a frame where fewer of its points than this follow the warp ...
 POOR_FRAMES = 10  # ... and asks for a new estimate after this many such frames in a row
+
+
+@dataclass(frozen=True)
+class CoverFade:
+    """Where a new key covers the canvas differently from the map of the moment, the change spread over
+    its fade instead of shown in one frame: pixels the new key covers first (``appear``) are shown from
+    the old coverage outwards, those it no longer covers (``vanish``) keep the map of the moment (less
+    the key's correction, ``held``) and are let go from the outside in, each by its distance
+    (``appear_px``, ``vanish_px``) to what stays."""
+
+    appear: np.ndarray
+    appear_px: np.ndarray
+    vanish: np.ndarray
+    vanish_px: np.ndarray
+    held: np.ndarray
+
+    @staticmethod
+    def of(now: np.ndarray, key: np.ndarray, correction: np.ndarray) -> "CoverFade":
+        """For source maps ``now`` and ``key`` (H, W, 2) (NaN: not covered) and the correction (H, W, 2)
+        the new key starts with."""
+        now_nan, key_nan = np.isnan(now[..., 0]), np.isnan(key[..., 0])
+        appear, vanish = now_nan & ~key_nan, ~now_nan & key_nan
+        appear_px = cv2.distanceTransform(now_nan.astype(np.uint8), cv2.DIST_L2, 3)
+        vanish_px = cv2.distanceTransform(key_nan.astype(np.uint8), cv2.DIST_L2, 3)
+        return CoverFade(appear, appear_px, vanish, vanish_px, (now - correction).astype(np.float32))
+
+    def apply(self, map_src: np.ndarray, weight: float) -> None:
+        """``map_src`` (H, W, 2), the key's with ``weight`` (1 at the fade's start, 0 at its end) of the
+        remainder, in place: what appears is hidden beyond ``1 - weight`` of its reach, what vanishes is
+        held within ``weight`` of its reach."""
+        if self.appear.any():
+            hidden = self.appear & (self.appear_px > (1.0 - weight) * float(self.appear_px[self.appear].max()))
+            map_src[hidden] = np.nan
+        if self.vanish.any():
+            held = self.vanish & (self.vanish_px <= weight * float(self.vanish_px[self.vanish].max()))
+            map_src[held] = self.held[held]
 
 
 class MovingRig:
@@ -50,6 +88,7 @@ class MovingRig:
         self._chroma_key = key.map_src_chroma
         # A new key's fade: (luma, chroma map remainders, luma, chroma seam home remainders, frames, frames left).
         self._fade: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int] | None = None
+        self._cover: tuple[CoverFade, CoverFade] | None = None  # ... and its coverage's (luma, chroma)
         self._poor_frames = 0
         self.log = {"frames": 0, "keys": 0, "points_mean": 0.0, "followed_share_mean": 0.0, "seeded": 0}
 
@@ -87,8 +126,12 @@ class MovingRig:
         map_luma, map_chroma, seam_luma, seam_chroma, frames, left = self._fade
         weight = np.float32(left / (frames + 1))
         self._fade = None if left <= 1 else (*self._fade[:5], left - 1)
-        return (cv2.scaleAdd(map_luma, weight, key.map_src_luma), cv2.scaleAdd(map_chroma, weight, self._chroma_key),
-                key.seam_luma.positions + weight * seam_luma, key.seam_chroma.positions + weight * seam_chroma)
+        luma, chroma = cv2.scaleAdd(map_luma, weight, key.map_src_luma), cv2.scaleAdd(map_chroma, weight, self._chroma_key)
+        for cover, plane in zip(self._cover, (luma, chroma)):
+            cover.apply(plane, float(weight))
+        if self._fade is None:
+            self._cover = None
+        return luma, chroma, key.seam_luma.positions + weight * seam_luma, key.seam_chroma.positions + weight * seam_chroma
 
     def wants_estimate(self) -> bool:
         """Whether the alignment has been poor for :data:`POOR_FRAMES` frames in a row (too few of its
@@ -109,8 +152,10 @@ class MovingRig:
         self.aligner.filter.reset(lattice)
         correction = self.aligner.correction_field(lattice)
         remainder = np.nan_to_num(now.map_src_luma - key.map_src_luma - correction).astype(np.float32)
-        chroma = np.nan_to_num(now.map_src_chroma - key.map_src_chroma
-                               - 0.5 * self.aligner.correction_field(lattice, key.map_src_chroma.shape[:2]))
+        correction_chroma = 0.5 * self.aligner.correction_field(lattice, key.map_src_chroma.shape[:2])
+        chroma = np.nan_to_num(now.map_src_chroma - key.map_src_chroma - correction_chroma)
+        self._cover = (CoverFade.of(now.map_src_luma, key.map_src_luma, correction),
+                       CoverFade.of(now.map_src_chroma, key.map_src_chroma, correction_chroma))
         seam_luma = (now.seam_luma.positions - key.seam_luma.positions).astype(np.float32)
         seam_chroma = (now.seam_chroma.positions - key.seam_chroma.positions).astype(np.float32)
         frames = max(self.cfg.video_blend_frames,
