@@ -16,7 +16,7 @@ frame t and earlier ones only, by the plan of the moment (``mode``):
 
 With ``--rig auto`` (:class:`~sena_warp.video.rig_motion.RigMotion`) the rig's motion is watched on the
 looked-ahead pairs from the first second on; each decision takes effect on its frame (the first on
-the first frame), is said in one line on stderr and logged (``decisions``).
+the first frame), is said in one line on stderr (hidden by ``-q``) and logged (``decisions``).
 
 :meth:`MapsTimeline.advance` answers for each frame in turn with a :class:`~sena_warp.video.maps.PlaneMaps`
 value: the same object for as long as the maps do not change, so whatever is made from it (a
@@ -25,6 +25,7 @@ compositing plan) is made once per map set. What happened is logged for the repo
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections import deque
@@ -329,8 +330,9 @@ class MapsTimeline:
         kept = decision.mode == "moving" and not self._aligns
         said = decision.reason + ("; not aligned every frame at --max-width: the static plan is kept" if kept else "")
         self.decisions.append({**decision.as_dict(), "reason": said, "from_s": round(time_s, 4)})
-        LOGGER.warning("rig: %s%s (%s)", decision.mode, f" from {time_s:.2f} s" if len(self.decisions) > 1 else "",
-                       said)
+        # A decision is news, not a fault (-q hides it); a plan that cannot follow the rig is a warning.
+        LOGGER.log(logging.WARNING if kept else logging.INFO, "rig: %s%s (%s)", decision.mode,
+                   f" from {time_s:.2f} s" if len(self.decisions) > 1 else "", said)
         if decision.mode == self.mode or kept:
             return
         self.mode = decision.mode
