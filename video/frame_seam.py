@@ -52,7 +52,7 @@ import warp as wp
 
 from ..config import Config
 from ..partition import running_mean
-from ..seam_path import BandPath
+from ..seam_path import BandPath, separation_spans
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
 from sena_warp.kernels.frame_seam import (DEVICE, BackgroundModel, CellCosts, LastSeam, SeamCosts, background_kernel,
@@ -245,8 +245,12 @@ class FrameSeam:
         self.cfg = cfg
         self.band = band
         self.grid = BandGrid.of(len(home), band, cell, cfg)
+        self._fps = fps
         self.model = BandModel(self.grid, fps, cfg) if jumps else None
         self.work = BandCosts(self.grid, cfg)
+        # A frame's cost of leaving home with its separation cost added (``next``'s ``copies``).
+        self._home_frame = np.zeros(self.grid.shape, np.float32)
+        self._home_frame_wp = host_array(self._home_frame, float)
         segment = np.array([[0, len(self.grid.lines) - 1, -1, -1]])  # one, free at both ends
         self._solvers = (BandPath(len(self.grid.lines), self.grid.width, segment, cfg.cpu_threads),  # free
                          BandPath(len(self.grid.lines), self.grid.glide_width, segment, cfg.cpu_threads))  # glide
@@ -269,6 +273,16 @@ class FrameSeam:
     def home(self) -> np.ndarray:
         """(L,) float32 the estimate's seam, the band's centre."""
         return self.place.home
+
+    @property
+    def jumps(self) -> bool:
+        return self.model is not None
+
+    def set_jumps(self, jumps: bool) -> None:
+        """Whether it may jump and keeps a background model from now on (a rig that stopped or started
+        moving); a new model learns the band from the next frame."""
+        if jumps != self.jumps:
+            self.model = BandModel(self.grid, self._fps, self.cfg) if jumps else None
 
     def reset(self, home: np.ndarray) -> None:
         """A new estimate's seam: the band follows it; the last path is kept where it still fits. The
@@ -315,15 +329,24 @@ class FrameSeam:
     def _per_line(self, path: np.ndarray) -> np.ndarray:
         return np.rint(np.interp(np.arange(self.grid.count), self.grid.lines, path)).astype(np.int32)
 
-    def next(self, band: BandFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def next(self, band: BandFrame, copies: tuple[np.ndarray, np.ndarray] | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The seam of the frame whose band is ``band`` and its seam blend's offsets (``band_offsets``):
-        (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32)."""
+        (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32).
+        ``copies``: (target's, source's) (M, 2) (line, position) of points the warp leaves apart this
+        frame: the seam keeps each pair on one side (:func:`separation_band_cost`)."""
         self._still = self.still_lines(band)
         self._has_last = True
         last = self._path if self._shown is None else self._shown
         if not self._still.all():  # else nothing changed on any line: the seam and the background model stay
             moving = self.model.foreground(band) if self.model is not None else None
-            self._path = self._solve(band, moving, last)
+            home_term = self.place.home_term_wp
+            if copies is not None and len(copies[0]):  # this frame's home term carries the separation's cost
+                separation = separation_band_cost(self.grid.lines, self.place.x0, self.grid.cell, self.grid.width,
+                                                  *copies, self.cfg)
+                np.add(self.place.home_term, separation, out=self._home_frame)
+                home_term = self._home_frame_wp
+            self._path = self._solve(band, moving, last, home_term)
         self._shown = self._path.copy()
         work, grid = self.work, self.grid
         np.copyto(work.host["path"], self._path, casting="unsafe")
@@ -334,9 +357,11 @@ class FrameSeam:
                                                 grid.step, self.cfg)
         return self.positions, offsets_src, offsets_tgt
 
-    def _solve(self, band: BandFrame, moving: np.ndarray | None, last: np.ndarray) -> np.ndarray:
+    def _solve(self, band: BandFrame, moving: np.ndarray | None, last: np.ndarray, home_term: wp.array
+               ) -> np.ndarray:
         """The solved lines' new path (module docstring); ``moving``: the cells in front of the
-        background (``BandModel.foreground``), None on a moving rig.
+        background (``BandModel.foreground``), None on a moving rig; ``home_term``: each cell's cost of
+        leaving home (with the frame's separation cost, if any).
 
         The glide moves at most ``video_seam_speed_px`` (or one cell) per solved line from ``last`` (K,)
         and not at all on still lines: it is solved on the few cells it may take, from ``first``."""
@@ -347,7 +372,7 @@ class FrameSeam:
         if moving is not None:
             np.copyto(work.host["moving"], moving)
         runtime.launch_rows(band_cost_kernel, len(grid.lines), 1, [
-            band.diff_wp, work.views["moving"], place.home_term_wp, place.x0_wp, grid.cell, work.last, work.costs,
+            band.diff_wp, work.views["moving"], home_term, place.x0_wp, grid.cell, work.last, work.costs,
             work.out], DEVICE, runtime.BAND_THREADS)
         change = work.host["change"]
         free_solver, glide_solver = self._solvers
@@ -404,6 +429,31 @@ def _gain_offset(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
         return 1.0, float(y_mean - x_mean)
     gain = float(dx @ (y - y_mean)) / x.size / x_var
     return gain, float(y_mean - gain * x_mean)
+
+
+def separation_band_cost(lines: np.ndarray, x0: np.ndarray, cell: int, width: int, copies_tgt: np.ndarray,
+                         copies_src: np.ndarray, cfg: Config) -> np.ndarray:
+    """(K, width) float32 over a band's cells (solved lines ``lines`` (K,), their first cells at ``x0`` (K,)
+    px, cells ``cell`` px wide): ``seam_path.separation_cost`` for points whose two copies are
+    ``copies_tgt`` / ``copies_src`` (M, 2) (line, position): every cell between a pair's copies, and
+    within the transition's reach of them, costs ``seam_separation_weight`` on the solved lines within
+    ``seam_separation_rows`` of the pair's."""
+    solved = np.full(int(lines[-1]) + 1, -1, np.int64)
+    solved[lines] = np.arange(len(lines))
+    mid, lo, hi = separation_spans(np.asarray(copies_src, np.float64)[:, ::-1],
+                                   np.asarray(copies_tgt, np.float64)[:, ::-1], cfg)
+    row = np.rint(mid).astype(np.int64)
+    edges = np.zeros((len(lines), width + 1), np.float32)
+    for dy in range(-cfg.seam_separation_rows, cfg.seam_separation_rows + 1):
+        line = row + dy
+        k = np.where((line >= 0) & (line < len(solved)), solved[np.clip(line, 0, len(solved) - 1)], -1)
+        ok = k >= 0
+        first = np.clip(np.floor((lo[ok] - x0[k[ok]]) / cell), 0, width).astype(np.int64)
+        last = np.clip(np.ceil((hi[ok] - x0[k[ok]]) / cell), 0, width).astype(np.int64)
+        wide = last > first
+        np.add.at(edges, (k[ok][wide], first[wide]), cfg.seam_separation_weight)
+        np.add.at(edges, (k[ok][wide], last[wide]), -cfg.seam_separation_weight)
+    return np.cumsum(edges, axis=1)[:, :width]
 
 
 def lines_near(flags: np.ndarray, reach: int) -> np.ndarray:
