@@ -8,8 +8,8 @@ Usage (from the repository root)::
 
 Per walk (every combination of the lists): the crossing clip of ``sena_warp.evaluation.crossing`` on
 the recording ``--left`` / ``--right`` (default: ``office_static`` of ../shared/data, whose left
-camera is ``cam2.mp4``), stitched as a static rig at the defaults (and the settings given with
-``--set``) with :class:`CrossingFigures` observing. Prints one Markdown row per walk: frames counted,
+camera is ``cam2.mp4``), stitched at the defaults (``--rig auto``, which finds the rig static; and the
+settings given with ``--set``) with :class:`CrossingFigures` observing. Prints one Markdown row per walk: frames counted,
 frames where the figure is not whole (shown < 90 % of it or in more than one piece), frames where it
 is doubled, the least shown share and the most pieces; then how many walks met the target. Writes
 ``crossing.json`` (every frame's figures) and with ``--sheets`` ``sheet_WALK.png``: every 4th
@@ -77,7 +77,8 @@ def measure(walk: Walk, left: Path, right: Path, cfg: Config, out: Path, sheets:
                            observer=probe)
     if sheets:
         sheet(probe, np.asarray(report["stitch"]["canvas"]["offset_tgt"]), out / f"sheet_{walk.name}.png")
-    return {**probe.figures(), "frame_seam": report["stitch"]["frame_seam"]}
+    return {**probe.figures(), "frame_seam": report["stitch"]["frame_seam"],
+            "rig": [decision["mode"] for decision in report["stitch"]["rig"]["decisions"]]}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -103,8 +104,9 @@ def main(argv: list[str] | None = None) -> int:
         results.append(figures)
         bad, doubled = figures["frames_not_whole"], figures["frames_doubled"]
         met += not bad and not doubled
+        rig = "" if figures["rig"] in ([], ["static"]) else f" (rig: {' -> '.join(figures['rig'])})"
         print(f"| {d:g} | {width} | {direction} | {speed:g} | {figures['frames_counted']} | {len(bad) or '-'} "
-              f"| {len(doubled) or '-'} | {figures['shown_pct_min']} | {figures['pieces_max']} |", flush=True)
+              f"| {len(doubled) or '-'} | {figures['shown_pct_min']} | {figures['pieces_max']}{rig} |", flush=True)
     print(f"\nwalks with the figure whole and never doubled in every frame: {met} of {len(results)}")
     (args.out / "crossing.json").write_text(json.dumps(results, indent=1))
     return 0

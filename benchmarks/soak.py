@@ -37,10 +37,8 @@ import tempfile
 import time
 import traceback
 from dataclasses import dataclass
-from fractions import Fraction
 from pathlib import Path
 
-import av
 import cv2
 import numpy as np
 
@@ -48,8 +46,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 
 from helpers import (alive, child_processes, claiming_more, damage_the_middle, decoded_frames,  # noqa: E402
-                     index_first, png_claiming, reencode_with_black_start, shortened, truncated, ts_clip,
-                     with_orientation, with_repeated_pts, without_key_frames)
+                     index_first, joined_ts_files, one_mjpeg_frame, png_claiming, reencode_with_black_start,
+                     shortened, truncated, with_orientation, without_key_frames)
 from sena_warp.cli import main as cli_main  # noqa: E402
 from sena_warp.jobs import INPUT_SUFFIXES  # noqa: E402
 
@@ -460,30 +458,15 @@ def input_cases(data: Path, inputs: Path, out: Path, clean) -> list[tuple[Hostil
     a, b = inputs / "a.jpg", inputs / "b.jpg"
     clips = REPO / "tests" / "data" / "video"
     left_frames, right_frames = (decoded_frames(clips / name) for name in ("rooftop_left.mp4", "rooftop_right.mp4"))
-    ts = inputs / "ts"
-    ts.mkdir()
-    ts_clip(left_frames, ts / "left.ts")
-    ts_clip(left_frames, ts / "left_2x.ts", first_pts=3000 * len(left_frames), size=(540, 960))
-    ts_clip(right_frames[:60], ts / "right_a.ts")
-    ts_clip(right_frames[:60], ts / "right_b.ts", first_pts=3000 * 60)
-    (ts / "back.ts").write_bytes((ts / "left.ts").read_bytes() * 2)
-    (ts / "resized.ts").write_bytes((ts / "left.ts").read_bytes() + (ts / "left_2x.ts").read_bytes())
-    (ts / "right_4s.ts").write_bytes((ts / "right_a.ts").read_bytes() + (ts / "right_b.ts").read_bytes())
-    with_repeated_pts(ts / "left.ts", ts / "repeated.ts", range(10, 14))
+    (inputs / "ts").mkdir()
+    ts = joined_ts_files(left_frames, right_frames, inputs / "ts")
     right_clip = clips / "rooftop_right.mp4"
     small = cv2.imread(str(a))[:48, :70]
     bombs = inputs / "bombs"
     bombs.mkdir()
     for fmt in ("bigtiff", ".gif", ".jp2", ".hdr"):
         (bombs / f"huge_{fmt.strip('.')}.img").write_bytes(claiming_more(fmt, 20000, 20000, small))
-    big_mov = inputs / "big.mov"
-    with av.open(str(big_mov), "w") as c:
-        stream = c.add_stream("mjpeg", rate=1)
-        stream.width, stream.height, stream.pix_fmt = 1280, 1024, "yuvj420p"
-        frame = av.VideoFrame(1280, 1024, "yuvj420p")
-        frame.pts, frame.time_base = 0, Fraction(1, 1)
-        c.mux(stream.encode(frame))
-        c.mux(stream.encode(None))
+    big_mov = one_mjpeg_frame(inputs / "big.mov", 1280, 1024)
     settings = inputs / "settings"
     settings.mkdir()
     for name, value in {"gain_stride": "1000000000", "lattice_nx": "100000", "seam_separation_rows": "1000000000",

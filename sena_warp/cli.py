@@ -148,10 +148,12 @@ def _add_video(parser: argparse.ArgumentParser) -> None:
                      help="seconds the right video started after the left one, or auto: estimated from the "
                           "audio of both (else their motion), refused when unclear (default: 0)")
     rig.add_argument("--rig", choices=CHOICES["video_rig"],
-                     help=f"static: maps estimated once (and moved with a camera that drifts); moving: "
-                          f"re-estimated every --reestimate seconds (default: {Config.video_rig})")
+                     help=f"auto: decided from the first second and watched (a line on stderr says what and why); "
+                          f"static: maps estimated once (and moved with a camera that drifts); moving: aligned "
+                          f"every frame (default: {Config.video_rig})")
     rig.add_argument("--reestimate", type=float, metavar="S",
-                     help=f"seconds between re-estimations of a moving rig (default: {Config.video_reestimate_s:g})")
+                     help=f"a moving rig is re-estimated when its alignment falls behind, at most every S seconds "
+                          f"(default: {Config.video_reestimate_s:g})")
     picture = parser.add_argument_group("picture")
     picture.add_argument("--crop", action="store_true",
                          help="crop to the largest rectangle the first estimate covers (a video: for all of it)")
@@ -243,8 +245,8 @@ def cmd_image(args: argparse.Namespace) -> int:
 def cmd_video(args: argparse.Namespace) -> int:
     from .jobs import Job
 
-    if args.reestimate is not None and args.settings.get("video_rig") != "moving":
-        raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
+    if args.reestimate is not None and args.settings.get("video_rig") == "static":
+        raise InputError("--reestimate re-estimates a moving rig; a static rig is estimated once (drop --rig static)")
     return _run_job(Job("video", (args.left, args.right), args.output, args.settings, report=args.report,
                         reference=args.reference, crop=args.crop, offset_s=args.offset, strict=args.strict,
                         figures=args.figures, debug=args.debug, overwrite=args.overwrite))

@@ -68,27 +68,35 @@ def _gradient(grey: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3) / 8.0, cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3) / 8.0
 
 
-def separation_cost(shape: tuple[int, int], copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray,
-                    cfg: Config) -> np.ndarray:
-    """(H, W) float32: for every match whose two copies land apart on the canvas, a seam between them
-    shows the point twice (both copies visible) or not at all, so every x between the copies, and within
-    a quarter transition plus the smoothing beyond them, costs ``cfg.seam_separation_weight`` on the rows
-    within ``cfg.seam_separation_rows`` of the match.
-
-    copies_*_canvas: (N, 2) float64 canvas (x, y) of each match's source copy (warped) and target copy
-    (NaN where undefined). Copies closer than ``cfg.seam_separation_min_px`` count as one point;
-    farther than ``cfg.seam_separation_max_px``, as a wrong match.
-    """
-    height, width = shape
+def separation_spans(copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray, cfg: Config
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(row, lo, hi) float64 (M,) of every match whose two copies land apart on the canvas: the row between
+    them and the x span a seam must not cross (module ``separation_cost``). copies_*_canvas: (N, 2)
+    float64 canvas (x, y) of each match's source copy (warped) and target copy (NaN where undefined).
+    Copies closer than ``cfg.seam_separation_min_px`` count as one point; farther than
+    ``cfg.seam_separation_max_px``, as a wrong match."""
     copies_src_canvas = np.asarray(copies_src_canvas, np.float64)
     copies_tgt_canvas = np.asarray(copies_tgt_canvas, np.float64)
     apart = np.hypot(*(copies_src_canvas - copies_tgt_canvas).T)
     use = np.isfinite(apart) & (apart > cfg.seam_separation_min_px) & (apart <= cfg.seam_separation_max_px)
     # A seam within a quarter transition (and the smoothing) of a copy mixes it in at a quarter or more: a ghost.
     reach = 0.25 * cfg.transition_px + cfg.seam_smooth_sigma_px
-    lo = np.clip(np.floor(np.minimum(copies_src_canvas[use, 0], copies_tgt_canvas[use, 0]) - reach), 0, width).astype(np.int64)
-    hi = np.clip(np.ceil(np.maximum(copies_src_canvas[use, 0], copies_tgt_canvas[use, 0]) + reach), 0, width).astype(np.int64)
-    row = np.rint(0.5 * (copies_src_canvas[use, 1] + copies_tgt_canvas[use, 1])).astype(np.int64)
+    lo = np.minimum(copies_src_canvas[use, 0], copies_tgt_canvas[use, 0]) - reach
+    hi = np.maximum(copies_src_canvas[use, 0], copies_tgt_canvas[use, 0]) + reach
+    return 0.5 * (copies_src_canvas[use, 1] + copies_tgt_canvas[use, 1]), lo, hi
+
+
+def separation_cost(shape: tuple[int, int], copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray,
+                    cfg: Config) -> np.ndarray:
+    """(H, W) float32: for every match whose two copies land apart on the canvas, a seam between them
+    shows the point twice (both copies visible) or not at all, so every x between the copies, and within
+    a quarter transition plus the smoothing beyond them, costs ``cfg.seam_separation_weight`` on the rows
+    within ``cfg.seam_separation_rows`` of the match (:func:`separation_spans`)."""
+    height, width = shape
+    mid, lo_x, hi_x = separation_spans(copies_src_canvas, copies_tgt_canvas, cfg)
+    lo = np.clip(np.floor(lo_x), 0, width).astype(np.int64)
+    hi = np.clip(np.ceil(hi_x), 0, width).astype(np.int64)
+    row = np.rint(mid).astype(np.int64)
     edges = np.zeros((height, width + 1), np.float32)
     for dy in range(-cfg.seam_separation_rows, cfg.seam_separation_rows + 1):
         r = row + dy

@@ -277,7 +277,7 @@ BAD_OPTIONS = [
     ("video", ["--rig", "moving", "--reestimate", "nan"], ("--reestimate: video_reestimate_s = nan must be a finite",)),
     ("video", ["--rig", "moving", "--reestimate", "0"], ("--reestimate: video_reestimate_s = 0.0 is out of range (0, 3600]",)),
     ("video", ["--rig", "moving", "--reestimate", "inf"], ("--reestimate: video_reestimate_s = inf must be a finite",)),
-    ("video", ["--reestimate", "2"], ("add --rig moving",)),
+    ("video", ["--rig", "static", "--reestimate", "2"], ("drop --rig static",)),
     ("video", ["--max-megapixels", "0"], ("--max-megapixels: max_input_megapixels = 0.0 is out of range (0, 10000]",)),
     ("image", ["--max-megapixels", "nan"], ("--max-megapixels: max_input_megapixels = nan",)),
     ("image", ["--reference", "c"], ("argument --reference: invalid choice",)),

@@ -30,7 +30,7 @@ OVERLAP = np.tile(np.int32([HOME - REACH, HOME + REACH]), (LINES, 1))  # where b
 
 def seam(cfg: Config = CFG, cell: int = 1) -> FrameSeam:
     """A static rig's seam (it watches what is in front) on cells of ``cell`` px."""
-    return FrameSeam(np.full(LINES, float(HOME), np.float32), BAND, cell, OVERLAP, FPS, cfg)
+    return FrameSeam(np.full(LINES, float(HOME), np.float32), BAND, cell, OVERLAP, True, FPS, cfg)
 
 
 def test_a_cell_is_the_same_share_of_the_inputs_whatever_their_size():
@@ -66,8 +66,8 @@ def test_gentle_moves_a_centre_line_no_more_than_a_path_can_follow():
 class BandFrames:
     """A stand-in for the device frame: the overlap's difference and sum of the current frame, given
     (L, 2 REACH + 1) per px from HOME - REACH, sampled on a seam's solved lines' cells as
-    ``DeviceFrame.band`` gives them (with the change from the difference it gave last), and on its
-    object band's as ``DeviceFrame.objects`` does."""
+    ``DeviceFrame.band`` gives them (with the change from the difference it gave last), with its
+    object band's where it has one."""
 
     def __init__(self, diff: np.ndarray, total: np.ndarray):
         self.diff, self.total = diff, total
@@ -81,24 +81,21 @@ class BandFrames:
         total = np.where(inside, np.take_along_axis(self.total[lines], taken, axis=1), 0.0).astype(np.float32)
         return diff, total
 
-    def band(self, seam: FrameSeam) -> BandFrame:
+    def band(self, seam: FrameSeam) -> tuple[BandFrame, BandFrame | None]:
         diff, total = self.sampled(seam.grid.lines, seam.place.x0, seam.cell, seam.grid.width)
         last = self.last if self.last is not None else np.zeros_like(diff)
         delta = np.where((diff < 0.5 * NOT_BOTH) & (last < 0.5 * NOT_BOTH), np.abs(diff - last), 0.0)
         self.last = diff
-        return BandFrame.of(diff, total, delta.astype(np.float32))
-
-    def objects(self, seam: FrameSeam) -> BandFrame:
+        if seam.objects is None:
+            return BandFrame.of(diff, total, delta.astype(np.float32)), None
         grid = seam.objects.grid
-        diff, total = self.sampled(grid.lines, grid.x0, grid.cell, grid.width)
-        return BandFrame.of(diff, total, np.zeros_like(diff))
+        diff_o, total_o = self.sampled(grid.lines, grid.x0, grid.cell, grid.width)
+        return BandFrame.of(diff, total, delta.astype(np.float32)), BandFrame.of(diff_o, total_o, np.zeros_like(diff_o))
 
 
 def next_seam(seam: FrameSeam, frames: BandFrames) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The seam of the next frame of ``frames``, as the video's frame path takes it."""
-    if seam.objects is not None:
-        seam.follow(frames.objects(seam))
-    return seam.next(frames.band(seam))
+    return seam.next(*frames.band(seam))
 
 
 def valley_band(column: int) -> np.ndarray:
@@ -118,7 +115,7 @@ def test_a_moving_rig_s_seam_glides_and_then_stays(cell):
     # The difference's valley moves 20 px away at once: a moving rig's seam may follow at
     # video_seam_speed_px a frame (one cell where cells are wider), not jump; once nothing changes it
     # keeps its place (still lines), though the valley is still 18 px away.
-    band = FrameSeam(np.full(LINES, float(HOME), np.float32), BAND, cell, None, FPS, CFG)
+    band = FrameSeam(np.full(LINES, float(HOME), np.float32), BAND, cell, OVERLAP, False, FPS, CFG)
     frames = BandFrames(valley_band(REACH), static_band(7))
     first, _, _ = next_seam(band, frames)
     assert np.abs(first - HOME).max() <= cell // 2  # home, the valley (its nearest cell)
@@ -148,6 +145,9 @@ def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
     frames.diff = valley_band(REACH)
     frames.diff[10:110, start:end] = 2.0
     frames.diff[10:110, [start, start + 1, end - 2, end - 1]] = 60.0
+    # The object band comes down with the seam's band: the band is placed round the object for the
+    # frame after the one it appeared in (an object that walks in is seen on the overlap before).
+    next_seam(band, frames)
     positions, offsets_src, offsets_tgt = next_seam(band, frames)
     at = positions - (HOME - REACH)
     assert np.all((at[10:110] < start) | (at[10:110] >= end))  # round the object, not through it
@@ -168,3 +168,25 @@ def test_a_reset_to_the_same_home_keeps_the_band_and_a_new_home_starts_it_again(
     assert not band.still.any()  # no last difference on the new cells: nothing is still yet
     next_seam(band, frames)
     assert band.still.all()
+
+
+def test_a_moving_plan_drops_the_object_band_and_a_static_one_learns_a_new_one():
+    band, frames = valley_seam(2, 8)
+    background = frames.total
+    for _ in range(int(FPS)):
+        next_seam(band, frames)
+    frames.total = background.copy()
+    frames.total[10:110, REACH - 20:REACH + 28] += 160.0  # an object on the seam: the band goes round it
+    for _ in range(2):
+        next_seam(band, frames)
+    home_x0 = band.place.x0.copy()
+    assert band.jumps and band.objects is not None
+    band.set_jumps(False)  # the rig started moving: nothing is in front of a background that moves
+    assert not band.jumps and band.objects is None
+    assert not band.work.host["moving"].any() and not band.work.host["kept_off"].any()
+    centred = FrameSeam(band.home, BAND, 2, OVERLAP, False, FPS, CFG).place.x0
+    np.testing.assert_array_equal(band.place.x0, centred)  # the band back about the estimate's seam
+    assert not np.array_equal(home_x0, centred)
+    next_seam(band, frames)  # a moving plan's frame: no object band comes down
+    band.set_jumps(True)  # static again: a new object band, whose models learn from the next frame
+    assert band.objects is not None and band.objects.pairs == []

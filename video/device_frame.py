@@ -6,11 +6,11 @@ pass's (U and V composited as two channels at half resolution), made once per ma
 
 :class:`DeviceFrame` holds the frame's device memory, allocated once, and moves it as few times as a
 frame allows (``kernels/transfer.py``): the decoded planes go up in one block (:meth:`DeviceFrame.load`);
-on a static rig the object band's difference (the whole overlap on coarse cells) comes down in one
-small block (:meth:`DeviceFrame.objects`), then the seam band's, where the objects placed it
-(:meth:`DeviceFrame.band`); the frame's seam and seam-blend offsets go up in one small block and both
-passes are composited, then the output planes come down in one block for the encoder
-(:meth:`DeviceFrame.composite`). Nothing in a frame waits for the device but those downloads.
+the seam band's difference and, on a static plan, the object band's (the whole overlap on coarse
+cells) come down together in one small block (:meth:`DeviceFrame.band`); the frame's seam and
+seam-blend offsets go up in one small block and both passes are composited, then the output planes
+come down in one block for the encoder (:meth:`DeviceFrame.composite`). Nothing in a frame waits for
+the device but those two downloads.
 """
 
 from __future__ import annotations
@@ -84,31 +84,40 @@ class Plans:
         return self._plan
 
 
+BAND_FIELDS = ("diff", "total", "delta")  # what ``composite.band_difference`` fills on a band's cells
+
+
 class BandBlock:
-    """A band of cells on the device (``lines`` (K,) the seam lines, cells ``cell`` px, ``shape`` (K,
-    width)) and its difference, sum and change on the host, moved in one block counted as ``what``."""
+    """Bands of cells on the device, each (``lines`` (K,) the seam lines, cells ``cell`` px, ``shape``
+    (K, width)) by name in ``bands``, and their differences, sums and changes on the host, all moved in
+    one block counted as ``"band"``."""
 
-    def __init__(self, lines: np.ndarray, cell: int, shape: tuple[int, int], device: str, what: str):
-        self.shape = shape
-        self._block = transfer.Staged({name: (shape, np.float32) for name in ("diff", "total", "delta")}, device, what)
+    def __init__(self, bands: dict[str, tuple[np.ndarray, int, tuple[int, int]]], device: str):
+        self._block = transfer.Staged({f"{name}_{field}": (shape, np.float32) for name, (_, _, shape) in bands.items()
+                                       for field in BAND_FIELDS}, device, "band")
         self._block.zero()  # the first frame's "last difference"
-        self.frame = BandFrame.of(*(self._block.host[name] for name in ("diff", "total", "delta")))
-        self._cells = BandCells()
-        self._cells.lines = transfer.to_device(lines, int, device, "plan")
-        self._cells.cell = cell
-        self._x0: np.ndarray | None = None
+        self._bands = {}
+        for name, (lines, cell, shape) in bands.items():
+            cells = BandCells()
+            cells.lines = transfer.to_device(lines, int, device, "plan")
+            cells.cell = cell
+            frame = BandFrame.of(*(self._block.host[f"{name}_{field}"] for field in BAND_FIELDS))
+            self._bands[name] = [shape, cells, None, frame]  # ... and the x0 array last sent
 
-    def difference(self, frame: FrameArrays, plan: CompositePlan, x0: np.ndarray, gains_luma: Gains) -> BandFrame:
-        """``composite.band_difference`` of the pair loaded in ``frame`` on the cells from ``x0`` (K,) px,
-        on the host (one small download; ``x0`` goes up when it is a new array)."""
-        if x0 is not self._x0:
-            self._cells.x0 = transfer.to_device(x0, int, plan.device, "plan")
-            self._x0 = x0
+    def difference(self, frame: FrameArrays, plan: CompositePlan, x0: dict[str, np.ndarray], gains_luma: Gains
+                   ) -> dict[str, BandFrame]:
+        """``composite.band_difference`` of the pair loaded in ``frame`` on each band's cells from ``x0[name]``
+        (K,) px, on the host (one small download; an ``x0`` goes up when it is a new array)."""
         device = self._block.device
-        band_difference(frame, plan, self._cells, gains_luma, self.shape[1],
-                        tuple(device[name].reshape(self.shape) for name in ("diff", "total", "delta")))
+        for name, band in self._bands.items():
+            shape, cells, sent, _ = band
+            if x0[name] is not sent:
+                cells.x0 = transfer.to_device(x0[name], int, plan.device, "plan")
+                band[2] = x0[name]
+            band_difference(frame, plan, cells, gains_luma, shape[1],
+                            tuple(device[f"{name}_{field}"].reshape(shape) for field in BAND_FIELDS))
         self._block.download()
-        return self.frame
+        return {name: band[3] for name, band in self._bands.items()}
 
 
 class DeviceFrame:
@@ -132,8 +141,8 @@ class DeviceFrame:
             "uv_src": ((crows_s, ccols_s, 2), np.uint8), "uv_tgt": ((crows_t, ccols_t, 2), np.uint8)}, device, "planes")
         self._out = transfer.Staged({"y": ((height, width), np.uint8),
                                      "uv": ((height // 2, width // 2, 2), np.uint8)}, device, "output")
-        self._band = BandBlock(grid.lines, grid.cell, grid.shape, device, "band")
-        self._objects: tuple[ObjectGrid, BandBlock] | None = None  # a static rig's (made with its grid)
+        self._grid = grid
+        self._bands: tuple[ObjectGrid | None, BandBlock] | None = None  # made with the object grid it holds
         self._seam: transfer.Staged | None = None  # made with the first plan: its lines
         planes, out = self._planes.device, self._out.device
         self._passes = {"luma": (planes["y_src"], planes["y_tgt"], out["y"]),
@@ -163,18 +172,22 @@ class DeviceFrame:
         return (kernel_gains(luma, 1, plan.luma.tone, self.frame_arrays("luma", plan.luma).table),
                 kernel_gains(chroma, 2, plan.chroma.tone, self.frame_arrays("chroma", plan.chroma).table))
 
-    def band(self, plan: FramePlan, place: BandPlace, gains_luma: Gains) -> BandFrame:
+    def band(self, plan: FramePlan, place: BandPlace, objects: ObjectGrid | None, gains_luma: Gains
+             ) -> tuple[BandFrame, BandFrame | None]:
         """The seam band's difference, sum and change of the loaded pair on the band's cells at ``place``
-        (``composite.band_difference`` with the Y pass's gains), on the host (one small download; its
-        cells go up when the band moves). The arrays are this frame's: the next call overwrites them."""
-        return self._band.difference(self.frame_arrays("luma", plan.luma), plan.luma, place.x0, gains_luma)
-
-    def objects(self, plan: FramePlan, grid: ObjectGrid, gains_luma: Gains) -> BandFrame:
-        """:meth:`band` on a static rig's object band ``grid`` (``frame_objects.ObjectGrid``, the whole
-        overlap on coarse cells): one small download of its own, counted as ``"objects"``."""
-        if self._objects is None or self._objects[0] is not grid:
-            self._objects = grid, BandBlock(grid.lines, grid.cell, grid.shape, self._cfg.device, "objects")
-        return self._objects[1].difference(self.frame_arrays("luma", plan.luma), plan.luma, grid.x0, gains_luma)
+        (``composite.band_difference`` with the Y pass's gains) and, on a static plan, the object band's
+        on ``objects`` (``frame_objects.ObjectGrid``, the whole overlap on coarse cells), on the host in
+        one small download (cells go up when a band moves). The arrays are this frame's: the next call
+        overwrites them."""
+        if self._bands is None or self._bands[0] is not objects:
+            grid = self._grid
+            bands = {"seam": (grid.lines, grid.cell, grid.shape)}
+            if objects is not None:
+                bands["objects"] = (objects.lines, objects.cell, objects.shape)
+            self._bands = objects, BandBlock(bands, self._cfg.device)
+        x0 = {"seam": place.x0, **({"objects": objects.x0} if objects is not None else {})}
+        frames = self._bands[1].difference(self.frame_arrays("luma", plan.luma), plan.luma, x0, gains_luma)
+        return frames["seam"], frames.get("objects")
 
     def _seam_block(self, plan: FramePlan) -> transfer.Staged:
         """The block the frame's seam and offsets go up in (made once: the canvas's lines are fixed)."""

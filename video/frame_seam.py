@@ -9,29 +9,33 @@ a cell costs its difference beyond the noise floor, plus ``video_seam_stay_cost`
 the last frame's seam and ``video_seam_home_cost`` per pixel away from the estimate's.
 
 *Glide and jump.* The seam glides: it moves at most ``video_seam_speed_px`` per line from the last
-frame's (one cell where cells are wider). On a static rig, while something is in front of the
-background (below), a second path, free in the band, is taken instead when the gliding one would cost
-``video_seam_jump_cost`` per line more: something moved across the seam and the seam steps round it
-at once. (On a moving rig everything
-shifts a little every frame; there the seam only glides.) A new path replaces the last one only when
-it is cheaper by ``video_seam_margin`` per line: while nothing moves the costs only carry noise.
+frame's (one cell where cells are wider). While the rig's plan is static and something is in front
+of the background (below), a second path, free in the band, is taken instead when the gliding one
+would cost ``video_seam_jump_cost`` per line more: something moved across the seam and the seam steps
+round it at once. (While the plan is a moving rig's, everything shifts a little every frame; there
+the seam only glides, and keeps the two copies of what the frame's warp left apart on one side,
+:func:`separation_band_cost`.) A new path replaces the last one only when it is cheaper by
+``video_seam_margin`` per line: while nothing moves the costs only carry noise.
 
 *Still lines.* A line is still when no box of ``video_seam_still_box_px`` cells of the band's
 difference changed by more than ``video_seam_noise`` since the last frame on it or within a band's
 width of lines (room for the path to leave and come back); there every cell but the last frame's
 seam is blocked, and a frame whose lines are all still solves nothing.
 
-*In front of the background* (static rigs, ``frame_objects.ObjectBand``). Over the whole overlap, on
+*In front of the background* (a static plan, ``frame_objects.ObjectBand``). Over the whole overlap, on
 cells four times as wide, each view keeps a background model; what is off it in either view (an object,
 both its copies) costs ``video_seam_motion_cost`` more, so the seam goes round a moving object whole,
 not only round where the views differ: inside a smooth object its two copies differ little, and a
 seam through it would lose a strip of it. Each object's two copies (paired across the views) and the
 strip between them cost ``video_seam_object_cost``: the seam keeps off them and shows the object once
-and whole from one view. Where an object stands on the band's home, the band moves (:meth:`FrameSeam.follow`)
+and whole from one view. Where an object stands on the band's home, the next frame's band moves
 to where the object band's route passes it, on the side it passed before (a jump when the route
 switches sides, round the object); where the band left the seam last shown behind, the seam goes with
-it, freely in the band, that frame. (The plan keeps both views wherever the band may go: about the
-estimate's seam, and on a static rig over the overlap.)
+it, freely in the band, that frame. The object band and the seam's band come down in one block, so
+the band is placed a frame after the objects that place it; a route goes round an object's strip
+widened by the seam's transition, room for a frame's walk. (The plan keeps both views wherever the
+band may go: about the estimate's seam and, where the rig may be static, over the overlap.) When the
+plan turns moving the object band is dropped; when it turns static a new one learns.
 
 All of it runs on the host, on the band's few thousand cells (``kernels/frame_seam.py`` on Warp's
 CPU device, numpy, OpenCV); the frame's seam and the seam blend's offsets go back to the device in
@@ -54,7 +58,7 @@ import warp as wp
 
 from ..config import Config
 from ..partition import running_mean
-from ..seam_path import BandPath
+from ..seam_path import BandPath, separation_spans
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
 from sena_warp.kernels.frame_objects import CellGrid, coarse_masks_kernel
@@ -198,33 +202,41 @@ class BandCosts:
 
 class FrameSeam:
     """The per-frame seam of a luma plane whose plan keeps both views within ``band`` px of the
-    estimate's seam ``home`` (L,) float32 (positions per line) and, on a static rig, over the whole
-    overlap, on cells ``cell`` px wide (:func:`cell_px`); ``overlap`` (L, 2) int: per line the first and
-    the last position holding both views, for a static rig (whose seam may jump and goes round what is
-    in front of the background, ``frame_objects.ObjectBand``), None for a moving rig (whose seam only
-    glides); ``fps``: the video's frame rate.
+    estimate's seam ``home`` (L,) float32 (positions per line) and, where the rig may be static, over
+    the whole overlap, on cells ``cell`` px wide (:func:`cell_px`); ``overlap`` (L, 2) int: per line the
+    first and the last position holding both views (None: the plan keeps only the band); ``jumps``:
+    whether the rig's plan is static, so that the seam may jump and goes round what is in front of
+    the background (``frame_objects.ObjectBand``, kept where there is an overlap), not on a moving rig
+    (whose seam only glides; :meth:`set_jumps` when the plan changes); ``fps``: the video's frame rate.
 
     The seam is solved on the grid's lines (:class:`BandGrid`) and interpolated between them;
     ``positions``, ``shown`` and ``still`` are per line. :meth:`reset` follows a new estimate's seam; per
-    frame, on a static rig :meth:`follow` takes the object band's difference (on ``objects.grid``) and
-    places the band, then :meth:`next` takes the frame's band (:class:`BandFrame`)."""
+    frame :meth:`next` takes the frame's band (:class:`BandFrame`, at ``place``) and, with an object
+    band, the object band's (on ``objects.grid``), both from one download: the objects are found, the
+    seam is solved, and the band is placed for the next frame where the objects' route passes."""
 
-    def __init__(self, home: np.ndarray, band: int, cell: int, overlap: np.ndarray | None, fps: float, cfg: Config):
+    def __init__(self, home: np.ndarray, band: int, cell: int, overlap: np.ndarray | None, jumps: bool, fps: float,
+                 cfg: Config):
         self.cfg = cfg
         self.fps = fps
+        self._jumps = jumps
+        self._overlap: np.ndarray | None = None
         self.band = band
         self.grid = BandGrid.of(len(home), band, cell, cfg)
         self.work = BandCosts(self.grid, cfg)
+        # A frame's cost of leaving home with its separation cost added (``next``'s ``copies``).
+        self._home_frame = np.zeros(self.grid.shape, np.float32)
+        self._home_frame_wp = host_array(self._home_frame, float)
         segment = np.array([[0, len(self.grid.lines) - 1, -1, -1]])  # one, free at both ends
         self._solvers = (BandPath(len(self.grid.lines), self.grid.width, segment, cfg.cpu_threads),  # free
                          BandPath(len(self.grid.lines), self.grid.glide_width, segment, cfg.cpu_threads))  # glide
-        self.objects: ObjectBand | None = None  # a static rig's (``reset``)
-        self.place: BandPlace | None = None  # where the band lies (``reset``, ``follow``)
-        self._moved = False  # whether ``follow`` moved the band off the seam last shown since the last solve
+        self.objects: ObjectBand | None = None  # a static plan's (``reset``, ``set_jumps``)
+        self.place: BandPlace | None = None  # where the band lies (``reset``, ``_follow``)
+        self._moved = False  # whether ``_follow`` moved the band off the seam last shown since the last solve
         self._path: np.ndarray | None = None  # (K,) the solved lines' seam (px, on the grid of cells)
         self._shown: np.ndarray | None = None  # (K,) the solved lines' seam the last frame was composited with
         self._still = np.zeros(len(self.grid.lines), bool)  # the solved lines the last frame found still
-        # Per solved line, how many cells the band moved since the last frame (``follow``): 0 where the
+        # Per solved line, how many cells the band moved since the last frame (``_follow``): 0 where the
         # band's ``delta`` compares with the last frame, a band's width or more where nothing does.
         self._shift = np.full(len(self.grid.lines), self.grid.width, np.int32)
         self.reset(home, overlap)
@@ -242,31 +254,49 @@ class FrameSeam:
         """(L,) float32 the estimate's seam, the band's centre where nothing is in the way."""
         return self.place.home
 
+    @property
+    def jumps(self) -> bool:
+        """Whether the seam may jump round what is in front (a static plan): the object band is kept."""
+        return self._jumps
+
+    def set_jumps(self, jumps: bool) -> None:
+        """Whether the seam may jump and keeps the object band from now on (a rig that stopped or started
+        moving): a new object band's models learn from the next frame; without one the band goes back
+        to the estimate's seam."""
+        if jumps != self._jumps:
+            self._jumps = jumps
+            self._place_home(self.place.home)
+
     def reset(self, home: np.ndarray, overlap: np.ndarray | None) -> None:
-        """A new estimate's seam and, for a static rig, overlap (as the constructor's): the band follows
-        it; the last path is kept where it still fits. The glide still starts from the seam last shown
-        (``shown``), so a band that moves with a blend does not add its own step to the seam's. A seam
-        that did not move (a static rig's maps moved with a camera's drift) keeps its band, its last
-        difference and its background models: the band's content moved by a pixel or two, which the
-        models' own learning follows."""
+        """A new estimate's seam and overlap (as the constructor's): the band follows it; the last path
+        is kept where it still fits. The glide still starts from the seam last shown (``shown``), so a
+        band that moves with a blend does not add its own step to the seam's. A seam that did not move
+        (a static rig's maps moved with a camera's drift) keeps its band, its last difference and its
+        background models: the band's content moved by a pixel or two, which the models' own learning
+        follows."""
         home = np.asarray(home, np.float32)
         if self.place is not None and np.array_equal(home, self.place.home):
             return
-        self.objects = None if overlap is None else ObjectBand(ObjectGrid.of(home, overlap, self.grid.cell),
-                                                               self.fps, self.cfg)
+        self._overlap = overlap
+        self._place_home(home)
+
+    def _place_home(self, home: np.ndarray) -> None:
+        """The band about ``home``, and a new object band over the overlap where the seam may jump."""
+        keeps = self._jumps and self._overlap is not None
+        self.objects = ObjectBand(ObjectGrid.of(home, self._overlap, self.grid.cell), self.fps, self.cfg) \
+            if keeps else None
         self.place = BandPlace.of(home, self.grid, self.cfg)
+        for name in ("moving", "kept_off"):  # filled again each frame while there is an object band
+            self.work.host[name].fill(0)
         self._shift[:] = self.grid.width  # the band's cells moved: the last difference no longer lines up
         self._moved = False
         self._path = self._on_grid(home[self.grid.lines] if self._path is None else self._path)
 
-    def follow(self, objects: BandFrame) -> None:
-        """A static rig's frame: what is in front on the object band (``objects``, on ``objects.grid``)
-        and the band centred where the objects' route passes (``ObjectBand.centre``), moved as gently as a
-        path can follow. On lines whose cells moved, the last frame's difference moves with the cells it
-        was taken on (``still_lines``); where the band left the seam last shown behind, the next solve is
-        free in the band. A route that did not change leaves the band where it is."""
-        if not self.objects.update(objects):
-            return
+    def _follow(self) -> None:
+        """After a frame whose objects changed their route: the band of the next frame centred where the
+        route passes (``ObjectBand.centre``), moved as gently as a path can follow. On lines whose cells
+        moved, the last frame's difference moves with the cells it was taken on (``still_lines``); where
+        the band left the seam last shown behind, the next solve is free in the band."""
         grid, place = self.grid, self.place
         centre = gentle(self.objects.centre(grid.lines), max(grid.max_step - 1, 1) * grid.cell)
         moved = BandPlace.of(place.home, grid, self.cfg, centre)
@@ -274,8 +304,7 @@ class FrameSeam:
             return
         self._shift = np.where(np.abs(self._shift) >= grid.width, self._shift,
                                (moved.x0 - place.x0) // grid.cell).astype(np.int32)
-        last = self._path if self._shown is None else self._shown
-        self._moved = bool(np.any((last < moved.x0) | (last > moved.cells[:, -1])))
+        self._moved = bool(np.any((self._shown < moved.x0) | (self._shown > moved.cells[:, -1])))
         self.place = moved
         self._path = self._on_grid(self._path)
 
@@ -309,16 +338,29 @@ class FrameSeam:
     def _per_line(self, path: np.ndarray) -> np.ndarray:
         return np.rint(np.interp(np.arange(self.grid.count), self.grid.lines, path)).astype(np.int32)
 
-    def next(self, band: BandFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def next(self, band: BandFrame, objects: BandFrame | None = None,
+             copies: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The seam of the frame whose band is ``band`` and its seam blend's offsets (``band_offsets``):
-        (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32)."""
-        self._still = self.still_lines(band)
+        (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32).
+        ``objects``: the frame's object band (on ``objects.grid``; None without an object band): what is
+        in front, kept off, and where the next frame's band lies. ``copies``: (target's, source's) (M, 2)
+        (line, position) of points the warp leaves apart this frame: the seam keeps each pair on one
+        side (:func:`separation_band_cost`)."""
+        route_changed = self.objects is not None and objects is not None and self.objects.update(objects)
+        # Where the band left the seam shown last behind, no line keeps it: the seam follows the band.
+        self._still = self.still_lines(band) & ~self._moved
         self._shift[:] = 0
         np.copyto(self.work.host["last_diff"], band.diff)
         last = self._path if self._shown is None else self._shown
         if not self._still.all():  # else nothing changed on any line: the seam stays
             moving = self.foreground() if self.objects is not None else None
-            self._path = self._solve(band, moving, last)
+            home_term = self.place.home_term_wp
+            if copies is not None and len(copies[0]):  # this frame's home term carries the separation's cost
+                separation = separation_band_cost(self.grid.lines, self.place.x0, self.grid.cell, self.grid.width,
+                                                  *copies, self.cfg)
+                np.add(self.place.home_term, separation, out=self._home_frame)
+                home_term = self._home_frame_wp
+            self._path = self._solve(band, moving, last, home_term)
         self._shown = self._path.copy()
         work, grid = self.work, self.grid
         np.copyto(work.host["path"], self._path, casting="unsafe")
@@ -327,11 +369,16 @@ class FrameSeam:
             work.views["strip_mean"], work.views["strip_count"]], DEVICE, runtime.BAND_THREADS)
         offsets_src, offsets_tgt = band_offsets(work.host["strip_mean"], work.host["strip_count"], grid.lines,
                                                 grid.step, self.cfg)
-        return self.positions, offsets_src, offsets_tgt
+        positions = self.positions
+        if route_changed:
+            self._follow()
+        return positions, offsets_src, offsets_tgt
 
-    def _solve(self, band: BandFrame, moving: np.ndarray | None, last: np.ndarray) -> np.ndarray:
+    def _solve(self, band: BandFrame, moving: np.ndarray | None, last: np.ndarray, home_term: wp.array
+               ) -> np.ndarray:
         """The solved lines' new path (module docstring); ``moving``: the cells in front of the
-        background (:meth:`foreground`, which also filled the strips kept off), None on a moving rig.
+        background (:meth:`foreground`, which also filled the strips kept off), None without an object
+        band; ``home_term``: each cell's cost of leaving home (with the frame's separation cost, if any).
 
         The glide moves at most ``video_seam_speed_px`` (or one cell) per solved line from ``last`` (K,)
         and not at all on still lines: it is solved on the few cells it may take, from ``first``."""
@@ -340,8 +387,8 @@ class FrameSeam:
         for name, values in (("last", last), ("still", self._still), ("glide_first", first)):
             np.copyto(work.host[name], values, casting="unsafe")
         runtime.launch_rows(band_cost_kernel, len(grid.lines), 1, [
-            band.diff_wp, work.views["moving"], work.views["kept_off"], place.home_term_wp, place.x0_wp, grid.cell, work.last, work.costs,
-            work.out], DEVICE, runtime.BAND_THREADS)
+            band.diff_wp, work.views["moving"], work.views["kept_off"], home_term, place.x0_wp, grid.cell, work.last,
+            work.costs, work.out], DEVICE, runtime.BAND_THREADS)
         change = work.host["change"]
         free_solver, glide_solver = self._solvers
         if self._moved:  # the band left the seam behind (round an object): the seam follows, anywhere in the band
@@ -409,6 +456,31 @@ def gentle(positions: np.ndarray, most: float) -> np.ndarray:
     for k in range(len(out) - 2, -1, -1):
         out[k] = min(max(out[k], out[k + 1] - most), out[k + 1] + most)
     return out
+
+
+def separation_band_cost(lines: np.ndarray, x0: np.ndarray, cell: int, width: int, copies_tgt: np.ndarray,
+                         copies_src: np.ndarray, cfg: Config) -> np.ndarray:
+    """(K, width) float32 over a band's cells (solved lines ``lines`` (K,), their first cells at ``x0`` (K,)
+    px, cells ``cell`` px wide): ``seam_path.separation_cost`` for points whose two copies are
+    ``copies_tgt`` / ``copies_src`` (M, 2) (line, position): every cell between a pair's copies, and
+    within the transition's reach of them, costs ``seam_separation_weight`` on the solved lines within
+    ``seam_separation_rows`` of the pair's."""
+    solved = np.full(int(lines[-1]) + 1, -1, np.int64)
+    solved[lines] = np.arange(len(lines))
+    mid, lo, hi = separation_spans(np.asarray(copies_src, np.float64)[:, ::-1],
+                                   np.asarray(copies_tgt, np.float64)[:, ::-1], cfg)
+    row = np.rint(mid).astype(np.int64)
+    edges = np.zeros((len(lines), width + 1), np.float32)
+    for dy in range(-cfg.seam_separation_rows, cfg.seam_separation_rows + 1):
+        line = row + dy
+        k = np.where((line >= 0) & (line < len(solved)), solved[np.clip(line, 0, len(solved) - 1)], -1)
+        ok = k >= 0
+        first = np.clip(np.floor((lo[ok] - x0[k[ok]]) / cell), 0, width).astype(np.int64)
+        last = np.clip(np.ceil((hi[ok] - x0[k[ok]]) / cell), 0, width).astype(np.int64)
+        wide = last > first
+        np.add.at(edges, (k[ok][wide], first[wide]), cfg.seam_separation_weight)
+        np.add.at(edges, (k[ok][wide], last[wide]), -cfg.seam_separation_weight)
+    return np.cumsum(edges, axis=1)[:, :width]
 
 
 def lines_near(flags: np.ndarray, reach: int) -> np.ndarray:

@@ -381,11 +381,6 @@ class MapsBlend:
                        seam_chroma=replace(self._goal.seam_chroma, positions=chroma))
 
 
-def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
-    """``start + weight * (goal - start)`` for every map; where either side is NaN, ``goal``'s value; a
-    map the two share (a drift moves only the source's) is kept as it is (:class:`MapsBlend`)."""
-    return MapsBlend(start, goal).at(weight)
-
 
 def sampled_mask(map_canvas: np.ndarray, plane_shape: tuple[int, int]) -> np.ndarray:
     """(H, W) bool: where the map's (x, y) has its bilinear footprint inside a plane of ``plane_shape`` (rows, cols)."""

@@ -1,4 +1,4 @@
-"""Stitching two videos with SENA maps: estimate once (or now and then for a moving rig), composite planes.
+"""Stitching two videos with SENA maps: estimate once, then follow the rig, composite planes.
 
 ``stitch_videos`` is the ``sena-warp video`` job: the best of the first frame pairs gives the maps and
 fixes the output canvas (``estimate.py``); every frame pair is then composited in YUV 4:2:0 by the
@@ -6,14 +6,16 @@ loop in ``loop.py``, which calls :class:`SenaFrameCompositor` once per pair. A f
 paper's per-frame path, one stage per line (:meth:`SenaFrameCompositor.composite_yuv`):
 
 1. the maps of the frame: the maps timeline (``timeline.py``: the first estimate, a static rig's
-   drift, a moving rig's re-estimates and the blends between them), a value per map set;
+   drift and its blends, a moving rig's alignment to every frame and its re-estimates, ``--rig
+   auto``'s switches between the two), a value per map set;
 2. their plan on the device, made once per map set (``device_frame.Plans``);
 3. the frame's gains (``exposure.py``: they follow the cameras' exposure);
-4. the pair on the device, and its seam band's difference back (``device_frame.DeviceFrame``): on a
-   static rig first the object band's, over the whole overlap, which places the seam's band round what
-   is in front (``frame_objects.py``);
-5. the frame's seam, cut anew in its band (``frame_seam.py``), and the seam blend's offsets: with the
-   gains, the frame's state (``composite.FrameState``);
+4. the pair on the device, and its seam band's difference back (``device_frame.DeviceFrame``): with
+   a static plan's object band's over the whole overlap in the same block (``frame_objects.py``);
+5. the frame's seam, cut anew in its band (``frame_seam.py``; on a static plan round what is in front,
+   each object shown once and whole, the band placed for the next frame where the objects' route
+   passes; on a moving rig keeping the two copies of what its warp could not align on one side), and
+   the seam blend's offsets: with the gains, the frame's state (``composite.FrameState``);
 6. the compositing step, the plan and the state on the pair, and the output planes back;
 7. the run log (``RunLog``), which the report reads.
 
@@ -56,14 +58,16 @@ from .loop import VideoOptions, run_still, run_video
 from .maps import (PlaneMaps, chroma_lines, map_change_px, maps_on_canvas, output_shape, sampled_mask,
                    seam_change_px, seam_on_canvas_lines, seam_per_target_line, target_offset)
 from .reader import YuvFrame, probe_video
-from .timeline import Canvas, DriftCheck, MapsTimeline, Reestimates, lookahead_frames
+from .align import Seam
+from .rig_motion import RigMotion
+from .timeline import Canvas, LastFrame, MapsTimeline, Reestimates, lookahead_frames, watch_frames
 from .writer import even_size
 
 RIGS = CHOICES["video_rig"]
 STILL_SUFFIXES = (".png", ".jpg", ".jpeg")  # an output of these types is the one stitched frame at the span's start
 JITTER_PERCENTILE = 99.0  # "largest map change" = this percentile of |delta M_s| per frame (robust to edge pixels)
 JITTER_STRIDE = 4  # ... over every this-th canvas row and column (a 1080p frame's full maps took 0.1 s)
-FRAME_PATH = ("planes", "objects", "band", "seam", "output")  # what a frame itself moves (``kernels/transfer.py``)
+FRAME_PATH = ("planes", "band", "seam", "output")  # what a frame itself moves (``kernels/transfer.py``)
 PLANE_CHANNELS = (1, 2)  # the frame kernels' channel counts: the Y pass, and U and V stacked
 
 
@@ -221,30 +225,29 @@ class SenaFrameCompositor:
         self.output_size = (shape[1], shape[0])
         offset_tgt = target_offset(first.map_tgt_input) - np.array([x0, y0], np.float64)
         self._canvas = Canvas((height, width), shape, offset_tgt, band_half_width(shape, cfg), rig)
-        static = rig.pick(*frame_shapes) if cfg.video_rig == "static" else None  # its seam goes over the overlap
+        # A rig that may be static: its seam may go round what is in front anywhere in the overlap.
+        static = rig.pick(*frame_shapes) if cfg.video_rig != "moving" else None
         maps = maps_on_canvas(first, self._canvas.stitched_shape, offset_tgt, self._canvas.band_px, shape, static)
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": maps.inliers, "seconds": round(sum(first.seconds.values()), 4)}
-        self._timeline = MapsTimeline(maps, self._drift_check(maps, first_attempts, first_pair),
-                                      self._reestimates(maps, fps, frame_shapes), cfg)
+        first_s = next(a.time_s for a in first_attempts if a.pair == first_pair)
+        mode = "moving" if cfg.video_rig == "moving" else "static"  # --rig auto starts static and decides
+        self._timeline = MapsTimeline(maps, mode, first_s, self._canvas, self._reestimates(maps, fps, frame_shapes),
+                                      RigMotion(cfg) if cfg.video_rig == "auto" else None,
+                                      watch_frames(fps, pair_mib(frame_shapes), cfg), cfg)
         self._plans = Plans(cfg)
         cell = max(1, round(cell_px(frame_shapes, cfg) * float(self._canvas.scale.min())))
-        self._seam = FrameSeam(maps.seam_luma.positions, self._canvas.band_px, cell, maps.overlap_luma, fps, cfg)
+        self._seam = FrameSeam(maps.seam_luma.positions, self._canvas.band_px, cell, maps.overlap_luma,
+                               mode == "static", fps, cfg)
         self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
         self._device: DeviceFrame | None = None  # likewise
         self._last: tuple[FramePlan, FrameState, FrameState] | None = None  # the last frame's plan and states
         self._log = RunLog({"reestimate": 0.0, "maps_upload": 0.0, "frame_seam": 0.0, "exposure": 0.0,
                             **({"observer": 0.0} if observer is not None else {})})
 
-    def _drift_check(self, maps: PlaneMaps, attempts: list[Attempt], pair: int) -> DriftCheck | None:
-        """A static rig's drift check (``video_drift_check_s`` > 0), from the first estimate's pair on."""
-        if self._cfg.video_rig != "static" or self._cfg.video_drift_check_s <= 0:
-            return None
-        return DriftCheck(maps, next(a.time_s for a in attempts if a.pair == pair), self._canvas.scale, self._cfg)
-
     def _reestimates(self, maps: PlaneMaps, fps: float, frame_shapes) -> Reestimates | None:
-        """A moving rig's re-estimates, started ahead of their frame by a worker's look-ahead."""
-        if self._cfg.video_rig != "moving":
+        """The re-estimates of a rig that may move, started ahead of their frame by a worker's look-ahead."""
+        if self._cfg.video_rig == "static":
             return None
         return Reestimates(self._canvas, maps.inliers, lookahead_frames(fps, pair_mib(frame_shapes), self._cfg),
                            self._cfg)
@@ -339,17 +342,27 @@ class SenaFrameCompositor:
         self._timeline.look_ahead(frame_l, frame_r, self._prior_seam_tgt)
 
     def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
-        """Before compositing a pair: the maps timeline advances to it (``timeline.py``); the maps' change
-        is logged."""
+        """Before compositing a pair: the maps timeline advances to it (``timeline.py``), the seam glides
+        or may jump as its rig's plan says; the maps' change is logged."""
         log = self._log
         log.time_s = float(frame_l.time_s)
         before = self._timeline.maps
         y_src, y_tgt = (frame.y for frame in self.source_target(frame_l, frame_r))
-        after = self._timeline.advance(frame_l, frame_r, y_src, y_tgt, self._prior_seam_tgt)
+        after = self._timeline.advance(frame_l, frame_r, y_src, y_tgt, self._prior_seam_tgt, self._last_frame())
+        self._seam.set_jumps(self._timeline.mode == "static")
         changed = after is not before
         log.seam_jitter_px.append(seam_change_px(before, after) if changed else 0.0)
         log.map_change_px.append(map_change_px(before, after, y_src.shape, JITTER_PERCENTILE, stride=JITTER_STRIDE)
                                  if changed else 0.0)
+
+    def _last_frame(self) -> LastFrame:
+        """The gains and seam of the frame composited last, for a moving rig's alignment."""
+        if self._exposure is None:
+            return LastFrame((1.0, 0.0, 1.0, 0.0), None)
+        (gain_src, bias_src), (gain_tgt, bias_tgt) = self._exposure.luma
+        shown = self._seam.shown
+        return LastFrame((float(gain_src[0]), float(bias_src[0]), float(gain_tgt[0]), float(bias_tgt[0])),
+                         None if shown is None else Seam(shown, self._timeline.maps.seam_luma.lines_are_rows))
 
     def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Output (y, u, v) planes of ``output_size``; uncovered pixels are black (Y 16, U = V = 128).
@@ -371,10 +384,10 @@ class SenaFrameCompositor:
         device.load(planes_src, planes_tgt)
         gains = device.gains(plan, luma_gains, chroma_gains)
         with log.clock("frame_seam"):
-            if self._seam.objects is not None:  # a static rig: what is in front places the seam's band
-                self._seam.follow(device.objects(plan, self._seam.objects.grid, gains[0]))
-            band = device.band(plan, self._seam.place, gains[0])
-            luma, chroma = self._frame_states(band, plan, luma_gains, chroma_gains)
+            objects = self._seam.objects
+            band, object_band = device.band(plan, self._seam.place, objects.grid if objects is not None else None,
+                                            gains[0])
+            luma, chroma = self._frame_states(band, object_band, plan, luma_gains, chroma_gains)
         out = device.composite(plan, luma, chroma, gains)
         self._last = (plan, luma, chroma)
         if self.observer is not None:
@@ -385,12 +398,14 @@ class SenaFrameCompositor:
         log.time_s = None
         return out
 
-    def _frame_states(self, band: BandFrame, plan: FramePlan, luma_gains: tuple, chroma_gains: tuple
-                      ) -> tuple[FrameState, FrameState]:
-        """Each pass's state of the frame whose seam band is ``band``: its seam (``frame_seam``), kept in
-        the band, with the seam blend's offsets on the Y pass, and its gains."""
+    def _frame_states(self, band: BandFrame, objects: BandFrame | None, plan: FramePlan, luma_gains: tuple,
+                      chroma_gains: tuple) -> tuple[FrameState, FrameState]:
+        """Each pass's state of the frame whose seam band is ``band`` (and object band ``objects``, on a
+        static plan): its seam (``frame_seam``), kept in the band, with the seam blend's offsets on the
+        Y pass, and its gains."""
         last = self._seam.positions if self._seam.shown is None else self._seam.shown  # a new array either way
-        positions, offsets_src, offsets_tgt = self._seam.next(band)
+        copies = self._timeline.copies(plan.maps.seam_luma.lines_are_rows)
+        positions, offsets_src, offsets_tgt = self._seam.next(band, objects, copies)
         self._log.seam_motion_px.append(float(np.abs(positions - last).max()))
         positions = positions.astype(np.float32)
         return (FrameState(clipped_seam(positions, plan.luma.layout), luma_gains, (offsets_src, offsets_tgt)),
@@ -438,11 +453,13 @@ class SenaFrameCompositor:
         history = self._exposure.history if self._exposure is not None else []
         reestimates = self._timeline.reestimates
         drift = self._timeline.drift
-        seconds = {**log.seconds, "reestimate": reestimates.seconds if reestimates is not None else 0.0}
+        seconds = {**log.seconds, "reestimate": reestimates.seconds if reestimates is not None else 0.0,
+                   **({"align": self._timeline.align_seconds} if reestimates is not None else {})}
         return {
             "rig": {"mode": cfg.video_rig, "source": "left" if canvas.rig.source == "a" else "right",
                     "vertical": canvas.rig.vertical,
-                    "reestimate_s": cfg.video_reestimate_s if reestimates is not None else None},
+                    "reestimate_s": cfg.video_reestimate_s if reestimates is not None else None,
+                    "decisions": self._timeline.decisions, "alignment": self._timeline.alignment_log()},
             "first_estimate": self._first_info,
             "canvas": {"width": self.output_size[0], "height": self.output_size[1],
                        "stitched_width": canvas.stitched_shape[1], "stitched_height": canvas.stitched_shape[0],
@@ -515,7 +532,8 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
 
     An ``output`` of a ``STILL_SUFFIXES`` type gets the stitched frame at the span's start and nothing
     more (:func:`loop.run_still`), a video file every frame of the span (:func:`loop.run_video`).
-    ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
+    ``cfg.video_rig`` "static" estimates once; "moving" aligns the maps to every frame and re-estimates
+    when the alignment falls behind; "auto" decides from the first second and watches (``timeline.py``).
     ``options``: offset, encoder and limits (None: ``VideoOptions.from_config(cfg)``).
     ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
     An existing ``output`` is refused (OutputError, before any work) unless ``overwrite`` is True, as

@@ -1,17 +1,22 @@
 """Which maps each frame of a video is composited with: the maps timeline.
 
 The first estimate gives the maps of the first frames. After that the maps of frame t come from
-frame t and earlier ones only:
+frame t and earlier ones only, by the plan of the moment (``mode``):
 
 - a static rig's maps follow a camera that drifts (:class:`DriftCheck`, ``drift.py``): every
   ``video_drift_check_s`` the views are compared with the first estimate's, and a move larger than
-  ``video_drift_px`` is blended in (the source side at most ``video_drift_speed_px`` a frame);
-- a moving rig's maps are re-estimated every ``video_reestimate_s`` (:class:`Reestimates`), on a worker
-  thread with a CUDA stream of its own (on the loop's thread with ``video_estimate_workers`` 0:
-  deterministic), a look-ahead ahead so that an estimate lands on its own frame; an implausible one is
-  rejected; an accepted one moves the maps ``video_warp_follow`` of the way (an exponential average
-  over the estimates, causal), blended in over ``video_blend_frames`` frames at least and slowly
-  enough that the seam moves at most ``video_seam_speed_px`` a frame (:class:`Blend`).
+  ``video_drift_px`` is blended in (the source side at most ``video_drift_speed_px`` a frame,
+  :class:`Blend`);
+- a moving rig's source map is aligned to every frame (``moving.py``, ``align.py``): the key
+  estimate's plus a correction measured on the frame. When the alignment falls behind, a full
+  re-estimate is made, at most every ``video_reestimate_s`` (:class:`Reestimates`), on a worker thread
+  with a CUDA stream of its own (on the loop's thread with ``video_estimate_workers`` 0:
+  deterministic), a look-ahead ahead so that an estimate lands on its own frame; an implausible one
+  is rejected; an accepted one becomes the key without a jump.
+
+With ``--rig auto`` (:class:`~sena_warp.video.rig_motion.RigMotion`) the rig's motion is watched on the
+looked-ahead pairs from the first second on; each decision takes effect on its frame (the first on
+the first frame), is said in one line on stderr (hidden by ``-q``) and logged (``decisions``).
 
 :meth:`MapsTimeline.advance` answers for each frame in turn with a :class:`~sena_warp.video.maps.PlaneMaps`
 value: the same object for as long as the maps do not change, so whatever is made from it (a
@@ -20,6 +25,7 @@ compositing plan) is made once per map set. What happened is logged for the repo
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections import deque
@@ -30,13 +36,17 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..config import Config
-from ..errors import StitchError
+from ..errors import StitchError, VideoError
+from ..progress import LOGGER
 from ..rig import Rig
 from sena_warp.kernels.transfer import own_stream
+from .align import Seam
 from .drift import DriftWatch, overlap_boxes
 from .estimate import estimate_pair, rejection_reason
-from .maps import MapsBlend, PlaneMaps, canvas_scale, drifted_maps, lerp_maps, maps_on_canvas
+from .maps import MapsBlend, PlaneMaps, canvas_scale, drifted_maps, maps_on_canvas
+from .moving import MovingRig
 from .reader import YuvFrame
+from .rig_motion import WINDOW_S, RigDecision, RigMotion
 
 
 @dataclass(frozen=True)
@@ -119,7 +129,7 @@ class Canvas:
 
 
 class Reestimates:
-    """A moving rig's re-estimates: one is due every ``cfg.video_reestimate_s``; it runs on a worker
+    """A moving rig's re-estimates: one may be due every ``cfg.video_reestimate_s``; it runs on a worker
     thread (on the loop's with ``video_estimate_workers`` 0) and is collected once the loop reaches the
     frame it was made on. ``log``: the report's ``reestimations``; ``seconds``: their time."""
 
@@ -141,6 +151,12 @@ class Reestimates:
         if self._last_s is None:  # the first estimate was made on the video's first pairs
             self._last_s = time_s
         return time_s - self._last_s >= self._cfg.video_reestimate_s
+
+    def restart(self, time_s: float) -> None:
+        """The rig starts moving at ``time_s``: estimates under way are not waited for, and the period
+        counts from now."""
+        self._pending.clear()
+        self._last_s = time_s
 
     def idle(self) -> bool:
         """No re-estimate is running (those done may still wait for their frame)."""
@@ -178,7 +194,10 @@ class Reestimates:
                 estimate = estimate_pair(frame_l, frame_r, cfg, canvas.rig.target, prior_seam_tgt=prior)
             if estimate.rig.vertical != canvas.rig.vertical:
                 return None, "rig orientation changed"
-            candidate = maps_on_canvas(estimate, canvas.stitched_shape, canvas.offset_tgt, canvas.band_px, canvas.shape)
+            # Under --rig auto the key may be kept by a static plan later: its overlap is kept too.
+            static = (shape_src, shape_tgt) if cfg.video_rig == "auto" else None
+            candidate = maps_on_canvas(estimate, canvas.stitched_shape, canvas.offset_tgt, canvas.band_px, canvas.shape,
+                                       static)
             reason = rejection_reason(candidate, current(), self._first_inliers, shape_src, shape_tgt, cfg)
             return (candidate, None) if reason is None else (None, reason)
         except StitchError as exc:
@@ -205,65 +224,147 @@ class Reestimates:
             self._workers.shutdown(wait=True, cancel_futures=True)
 
 
+@dataclass(frozen=True)
+class LastFrame:
+    """What a moving rig's alignment takes from the frame composited last: its luma ``gains`` (gain, bias
+    of the source; of the target) and its ``seam`` (None before the first frame)."""
+
+    gains: tuple[float, float, float, float]
+    seam: Seam | None
+
+
 class MapsTimeline:
     """The maps of each frame in turn (module docstring): ``maps`` those of the frame last advanced to;
-    ``drift`` (a static rig's, or None) and ``reestimates`` (a moving rig's, or None) say when they move."""
+    ``mode`` ("static" / "moving") the plan they follow; ``drift`` (a static rig's, or None),
+    ``reestimates`` (a rig that may move, or None) and ``moving`` (a moving rig's alignment, made on
+    its first frame) say how they move; ``watch``: ``--rig auto``'s, or None. ``first_s``: the time of
+    the first estimate's pair (a static rig's drift is measured from there)."""
 
-    def __init__(self, first: PlaneMaps, drift: DriftCheck | None, reestimates: Reestimates | None, cfg: Config):
+    def __init__(self, first: PlaneMaps, mode: str, first_s: float, canvas: Canvas,
+                 reestimates: Reestimates | None, watch: RigMotion | None, watch_frames: int, cfg: Config):
         self._cfg = cfg
+        self._canvas = canvas
         self.maps = first
-        self.drift = drift
+        self.mode = mode
+        self.drift = self._drift_check(first, first_s) if mode == "static" else None
         self.reestimates = reestimates
+        self.moving: MovingRig | None = None
+        self.watch = watch
+        self._watch_frames = watch_frames if watch is not None else 0
+        self._decisions: deque[RigDecision] = deque()  # the watch's decisions not yet applied, oldest first
+        self.decisions: list[dict] = []  # each applied, with the time of the frame it took effect on
+        # The alignment works on the stitched canvas, the target pasted 1:1: not on an output scaled down.
+        self._aligns = bool(np.allclose(canvas.scale, 1.0))
+        if mode == "moving" and not self._aligns:
+            raise VideoError("--rig moving aligns every frame at the stitched size; drop --max-width "
+                             f"(the stitched video is {canvas.stitched_shape[1]} px wide) or use --rig static")
+        self._alignments: list[dict] = []  # the alignment logs of the moving stretches that ended
         self._blend: Blend | None = None
+        self.align_seconds = 0.0
+
+    def _drift_check(self, base: PlaneMaps, from_s: float) -> DriftCheck | None:
+        return DriftCheck(base, from_s, self._canvas.scale, self._cfg) if self._cfg.video_drift_check_s > 0 else None
 
     @property
     def lookahead_frames(self) -> int:
-        return self.reestimates.lookahead_frames if self.reestimates is not None else 0
+        """How far ahead pairs are shown to :meth:`look_ahead`: a worker's re-estimates', the watch's."""
+        estimates = self.reestimates.lookahead_frames if self.reestimates is not None else 0
+        return max(estimates, self._watch_frames)
+
+    def _due(self, time_s: float) -> bool:
+        """A re-estimate is due: a moving rig whose alignment asks for one, ``video_reestimate_s`` after the last."""
+        return (self.mode == "moving" and self.moving is not None and self.moving.wants_estimate()
+                and self.reestimates.due(time_s))
 
     def look_ahead(self, frame_l: YuvFrame, frame_r: YuvFrame, prior_seam_tgt: Callable[[], np.ndarray]) -> None:
-        """A pair ``lookahead_frames`` before it is composited: a re-estimate that is due starts on it,
-        so that it is ready when the loop reaches that frame (the maps of a frame still come from that
-        frame and earlier ones only)."""
+        """A pair ``lookahead_frames`` before it is composited: the watch sees it, and a re-estimate that
+        is due starts on it, so that it is ready when the loop reaches that frame (the maps of a frame
+        still come from that frame and earlier ones only)."""
+        time_s = float(frame_l.time_s)
+        if self.watch is not None and (decision := self.watch.observe(time_s, frame_l.y, frame_r.y)) is not None:
+            self._decisions.append(decision)
         estimates = self.reestimates
-        if self.lookahead_frames and estimates.idle() and estimates.due(float(frame_l.time_s)):
+        if estimates is not None and estimates.lookahead_frames and estimates.idle() and self._due(time_s):
             estimates.submit(frame_l, frame_r, lambda: self.maps, prior_seam_tgt())
 
     def advance(self, frame_l: YuvFrame, frame_r: YuvFrame, y_src: np.ndarray, y_tgt: np.ndarray,
-                prior_seam_tgt: Callable[[], np.ndarray]) -> PlaneMaps:
+                prior_seam_tgt: Callable[[], np.ndarray], last: LastFrame) -> PlaneMaps:
         """The maps of the next frame pair (``y_src``, ``y_tgt``: its luma planes as source and target):
-        start, collect or blend in a re-estimate, or a drift move. A re-estimate made on a later frame
-        (``look_ahead``) waits for the loop to reach that frame; one that is reached while the last is
-        still being blended in takes over from the maps of the moment (else a rig that keeps moving falls
-        further behind with every long blend). ``prior_seam_tgt``: the seam a re-estimate should stay
-        near, asked for when one starts."""
+        the watch's decisions that are due take effect; a static rig blends in a drift move; a moving
+        rig's maps are aligned to the pair (``last``: the gains and seam of the frame before), after an
+        accepted re-estimate became its key. A re-estimate made on a later frame (``look_ahead``) waits
+        for the loop to reach that frame. ``prior_seam_tgt``: the seam a re-estimate should stay near,
+        asked for when one starts."""
         time_s = float(frame_l.time_s)
-        estimates = self.reestimates
-        if estimates is not None and estimates.reached(time_s):
-            _, candidate = estimates.collect(time_s)
-            if candidate is not None:  # an accepted one starts its blend on this frame
-                self._blend_in(candidate)
-                return self.maps
+        while self._decisions and (not self.decisions or self._decisions[0].time_s <= time_s + 1e-6):
+            self._become(self._decisions.popleft(), time_s)
+        if self.mode == "moving":
+            return self._align(frame_l, frame_r, y_src, y_tgt, prior_seam_tgt, last)
         if self._blend is not None:
             self._step()
         elif self.drift is not None and (moved := self.drift.moved(time_s, y_src, y_tgt)) is not None:
             self._blend_to(*moved)
-        elif estimates is not None and not self.lookahead_frames and not estimates.waiting() and estimates.due(time_s):
-            estimates.submit(frame_l, frame_r, lambda: self.maps, prior_seam_tgt())
         return self.maps
 
-    def _blend_in(self, candidate: PlaneMaps) -> None:
-        """An accepted re-estimate: blended in towards ``video_warp_follow`` of the way to it."""
-        cfg = self._cfg
-        # The target maps are the fixed canvas's own, the same values in every estimate: shared, a blend
-        # keeps them as they are instead of mixing equal arrays.
-        candidate = replace(candidate, map_tgt_luma=self.maps.map_tgt_luma, map_tgt_chroma=self.maps.map_tgt_chroma)
-        # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
-        # estimation noise, which an exponential average over the accepted estimates takes out.
-        goal = lerp_maps(self.maps, candidate, cfg.video_warp_follow)
-        # Over video_blend_frames at least, and slowly enough that the seam moves at most
-        # video_seam_speed_px a frame.
-        seam_move = float(np.nanmax(np.abs(goal.seam_luma.positions - self.maps.seam_luma.positions)))
-        self._blend_to(goal, max(cfg.video_blend_frames, int(np.ceil(seam_move / cfg.video_seam_speed_px))))
+    def _align(self, frame_l: YuvFrame, frame_r: YuvFrame, y_src: np.ndarray, y_tgt: np.ndarray,
+               prior_seam_tgt: Callable[[], np.ndarray], last: LastFrame) -> PlaneMaps:
+        """A moving rig's maps of the pair: a re-estimate collected (an accepted one its new key) or
+        started (without a look-ahead), then the key aligned to the pair."""
+        time_s = float(frame_l.time_s)
+        if self.moving is None:
+            self.moving = MovingRig(self.maps, self._canvas.offset_tgt, (y_src.shape, y_tgt.shape), self._cfg)
+        estimates = self.reestimates
+        if estimates.reached(time_s):
+            _, candidate = estimates.collect(time_s)
+            if candidate is not None:  # the target maps are the fixed canvas's own, the same in every estimate
+                self.moving.rekey(replace(candidate, map_tgt_luma=self.maps.map_tgt_luma,
+                                          map_tgt_chroma=self.maps.map_tgt_chroma))
+        elif not estimates.lookahead_frames and not estimates.waiting() and self._due(time_s):
+            estimates.submit(frame_l, frame_r, lambda: self.maps, prior_seam_tgt())
+        t0 = time.perf_counter()
+        self.maps = self.moving.frame_maps(y_src, y_tgt, last.gains, last.seam)
+        self.align_seconds += time.perf_counter() - t0
+        return self.maps
+
+    def _become(self, decision: RigDecision, time_s: float) -> None:
+        """``--rig auto``'s ``decision`` takes effect on the frame of ``time_s`` (said in one line, logged):
+        a moving rig's maps are aligned from the maps of the moment on; a static rig keeps the maps of
+        the moment, moved with the cameras' drift from now on."""
+        kept = decision.mode == "moving" and not self._aligns
+        said = decision.reason + ("; not aligned every frame at --max-width: the static plan is kept" if kept else "")
+        self.decisions.append({**decision.as_dict(), "reason": said, "from_s": round(time_s, 4)})
+        # A decision is news, not a fault (-q hides it); a plan that cannot follow the rig is a warning.
+        LOGGER.log(logging.WARNING if kept else logging.INFO, "rig: %s%s (%s)", decision.mode,
+                   f" from {time_s:.2f} s" if len(self.decisions) > 1 else "", said)
+        if decision.mode == self.mode or kept:
+            return
+        self.mode = decision.mode
+        self._blend = None  # a drift's blend stops where it is
+        if self.mode == "moving":
+            self.drift = None
+            self.reestimates.restart(time_s)
+            return
+        self._alignments.append(self.moving.log)
+        self.moving = None
+        self.reestimates.restart(time_s)
+        self.drift = self._drift_check(self.maps, time_s)
+
+    def copies(self, lines_are_rows: bool) -> tuple[np.ndarray, np.ndarray] | None:
+        """A moving rig's frame: the two copies of each point its warp leaves apart (``MovingRig.copies``);
+        None on a static rig."""
+        return self.moving.copies(lines_are_rows) if self.mode == "moving" and self.moving is not None else None
+
+    def alignment_log(self) -> dict | None:
+        """The moving stretches' alignment (``MovingRig.log``), all of them together; None if none."""
+        logs = self._alignments + ([self.moving.log] if self.moving is not None else [])
+        if not logs:
+            return None
+        frames = sum(log["frames"] for log in logs)
+        merged = {"frames": frames, "keys": sum(log["keys"] for log in logs),
+                  "seeded": sum(log["seeded"] for log in logs)}
+        for name in ("points_mean", "followed_share_mean"):
+            merged[name] = round(sum(log[name] * log["frames"] for log in logs) / max(frames, 1), 4)
+        return merged
 
     def _blend_to(self, goal: PlaneMaps, frames: int) -> None:
         """Start blending from the maps of the moment to ``goal`` over ``frames`` frames (at least one)."""
@@ -277,6 +378,12 @@ class MapsTimeline:
     def close(self) -> None:
         if self.reestimates is not None:
             self.reestimates.close()
+
+
+def watch_frames(fps: float, pair_mib: float, cfg: Config) -> int:
+    """How many frames ahead ``--rig auto``'s watch sees the pairs: its first window, within
+    ``video_estimate_lookahead_mib`` of held pairs of ``pair_mib`` each."""
+    return min(int(math.ceil(WINDOW_S * fps)), int(cfg.video_estimate_lookahead_mib / pair_mib))
 
 
 def lookahead_frames(fps: float, pair_mib: float, cfg: Config) -> int:

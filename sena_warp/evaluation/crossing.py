@@ -42,7 +42,8 @@ OUTLINE_PX = 3  # its dark outline
 GLOBAL_WEIGHT = 1e-3  # every background match's weight in the local affine behind the figure, beyond its nearness
 CLIP_CRF = 10  # near-lossless clips: the figures are about the seam, not the encoder
 SIFT_RATIO = 0.75
-HOMOGRAPHY_PX = 12.0  # a background match further than this off the pair's homography is a mismatch
+HOMOGRAPHY_PX = 3.0  # RANSAC threshold of the background's homography (``background_homography``)
+MISMATCH_PX = 12.0  # a background match further than this off the pair's homography is a mismatch
 WHOLE_SHARE = 0.9  # a frame shows the figure whole when this share of it is shown, in one piece
 PIECE_SHARE = 0.02  # a piece: a connected part of the shown figure of at least this share of it
 TWICE_SHARE = 0.02  # shown twice: this share of the figure shown from both views at two places
@@ -117,10 +118,8 @@ class CrossingClip:
         return (left, right) if source == "left" else (right, left)
 
 
-def background_matches(img_left: np.ndarray, img_right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(pts_left, pts_right) (N, 2) float64 (x, y): SIFT matches of the background (ratio test), less
-    those more than :data:`HOMOGRAPHY_PX` off a homography fitted to them by RANSAC (mismatches;
-    the homography is loose enough to keep the scene's depth)."""
+def sift_matches(img_left: np.ndarray, img_right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(pts_left, pts_right) (N, 2) float64 (x, y): SIFT matches between two BGR views (ratio test)."""
     sift = cv2.SIFT_create()
     grey = [cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) for img in (img_left, img_right)]
     (kp_l, des_l), (kp_r, des_r) = (sift.detectAndCompute(g, None) for g in grey)
@@ -128,9 +127,22 @@ def background_matches(img_left: np.ndarray, img_right: np.ndarray) -> tuple[np.
     good = [m for m, n in (p for p in pairs if len(p) == 2) if m.distance < SIFT_RATIO * n.distance]
     if len(good) < 12:
         raise InputError(f"crossing clip: only {len(good)} SIFT matches between the views")
-    pts_l = np.float64([kp_l[m.queryIdx].pt for m in good])
-    pts_r = np.float64([kp_r[m.trainIdx].pt for m in good])
-    _, inliers = cv2.findHomography(pts_l, pts_r, cv2.RANSAC, HOMOGRAPHY_PX)
+    return np.float64([kp_l[m.queryIdx].pt for m in good]), np.float64([kp_r[m.trainIdx].pt for m in good])
+
+
+def background_homography(img_left: np.ndarray, img_right: np.ndarray) -> np.ndarray:
+    """3x3 homography (left pixels -> right pixels) of the background: SIFT, ratio test, RANSAC at
+    :data:`HOMOGRAPHY_PX`."""
+    homography, _ = cv2.findHomography(*sift_matches(img_left, img_right), cv2.RANSAC, HOMOGRAPHY_PX)
+    return homography
+
+
+def background_matches(img_left: np.ndarray, img_right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(pts_left, pts_right) (N, 2) float64 (x, y): SIFT matches of the background (``sift_matches``), less
+    those more than :data:`MISMATCH_PX` off a homography fitted to them by RANSAC (mismatches; the
+    homography is loose enough to keep the scene's depth)."""
+    pts_l, pts_r = sift_matches(img_left, img_right)
+    _, inliers = cv2.findHomography(pts_l, pts_r, cv2.RANSAC, MISMATCH_PX)
     kept = inliers.ravel().astype(bool)
     return pts_l[kept], pts_r[kept]
 
@@ -178,12 +190,12 @@ def paste(frame: np.ndarray, patch: np.ndarray, figure_to_view: np.ndarray) -> n
     return np.clip(np.rint(mixed), 0, 255).astype(np.uint8)
 
 
-def write_clip(path: Path, frames_bgr: Iterable[np.ndarray], fps: Fraction | int) -> None:
-    """A near-lossless H.264 clip (:data:`CLIP_CRF`) of BGR frames (H, W, 3) uint8 with even sides."""
+def write_clip(path: Path, frames_bgr: Iterable[np.ndarray], fps: Fraction | int, crf: int = CLIP_CRF) -> None:
+    """An H.264 clip of BGR frames (H, W, 3) uint8 with even sides, at ``crf`` (near-lossless by default)."""
     frames_bgr = iter(frames_bgr)
     first = next(frames_bgr)
     height, width = first.shape[:2]
-    with VideoWriter(path, width, height, Fraction(fps), "libx264", CLIP_CRF, "veryfast") as writer:
+    with VideoWriter(path, width, height, Fraction(fps), "libx264", crf, "veryfast") as writer:
         for index, frame in enumerate(itertools.chain([first], frames_bgr)):
             i420 = cv2.cvtColor(frame, cv2.COLOR_BGR2YUV_I420)
             chroma = i420[height:].reshape(2, height // 2, width // 2)
