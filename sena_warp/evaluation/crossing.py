@@ -41,6 +41,7 @@ STRIPE_PX = 12  # period of the figure's diagonal stripes
 OUTLINE_PX = 3  # its dark outline
 GLOBAL_WEIGHT = 1e-3  # every background match's weight in the local affine behind the figure, beyond its nearness
 CLIP_CRF = 10  # near-lossless clips: the figures are about the seam, not the encoder
+CLIP_FPS = 30  # a clip's frame rate where none is given
 SIFT_RATIO = 0.75
 HOMOGRAPHY_PX = 3.0  # RANSAC threshold of the background's homography (``background_homography``)
 MISMATCH_PX = 12.0  # a background match further than this off the pair's homography is a mismatch
@@ -190,8 +191,10 @@ def paste(frame: np.ndarray, patch: np.ndarray, figure_to_view: np.ndarray) -> n
     return np.clip(np.rint(mixed), 0, 255).astype(np.uint8)
 
 
-def write_clip(path: Path, frames_bgr: Iterable[np.ndarray], fps: Fraction | int, crf: int = CLIP_CRF) -> None:
-    """An H.264 clip of BGR frames (H, W, 3) uint8 with even sides, at ``crf`` (near-lossless by default)."""
+def write_clip(path: Path, frames_bgr: Iterable[np.ndarray], fps: Fraction | int = CLIP_FPS,
+               crf: int = CLIP_CRF) -> None:
+    """An H.264 clip of BGR frames (H, W, 3) uint8 with even sides at ``fps``, at ``crf`` (near-lossless
+    by default)."""
     frames_bgr = iter(frames_bgr)
     first = next(frames_bgr)
     height, width = first.shape[:2]
