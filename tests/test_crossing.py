@@ -134,3 +134,17 @@ def test_the_crossing_figure_is_whole_and_shown_once_in_every_frame(crossing):
     # Shown from one view at a time: the source's share is 0 or 100 % in nearly every frame.
     shares = [f["source_pct"] for f in figures["per_frame"]]
     assert sum(0.0 < share < 100.0 for share in shares) <= 2
+
+
+def test_the_object_band_moves_with_the_frame_s_own_transfers(crossing):
+    """The object band comes down with the seam's band, and where its route moves the seam's band the
+    band's cells go up with the frame's seam: each frame still moves its planes up and its output down
+    once, one small download and one small upload (``kernels/transfer.py``); a plan goes up only with
+    new maps (the first, a drift's blend)."""
+    _, report, _ = crossing
+    transfers = report["stitch"]["transfers"]
+    assert transfers["per_frame_min"] == transfers["per_frame_max"] == {"upload": 2, "download": 2, "sync": 2}
+    # No drift on this clip: one map set, whose plan's uploads (both passes' maps and static seam, the
+    # bands' lines and first cells) are all; the band moving round the figure adds none.
+    assert report["stitch"]["drift"]["applied"] == []
+    assert transfers["total"]["upload"]["plan"] <= 12

@@ -8,9 +8,9 @@ pass's (U and V composited as two channels at half resolution), made once per ma
 frame allows (``kernels/transfer.py``): the decoded planes go up in one block (:meth:`DeviceFrame.load`);
 the seam band's difference and, on a static plan, the object band's (the whole overlap on coarse
 cells) come down together in one small block (:meth:`DeviceFrame.band`); the frame's seam and
-seam-blend offsets go up in one small block and both passes are composited, then the output planes
-come down in one block for the encoder (:meth:`DeviceFrame.composite`). Nothing in a frame waits for
-the device but those two downloads.
+seam-blend offsets go up in one small block, with where the next frame's seam band lies, and both
+passes are composited, then the output planes come down in one block for the encoder
+(:meth:`DeviceFrame.composite`). Nothing in a frame waits for the device but those two downloads.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
 
 from ..composite import (CompositePlan, FrameArrays, FrameState, band_difference, composite, composite_plan,
                          fixed_point, kernel_gains, with_runs)
@@ -87,37 +88,41 @@ class Plans:
 BAND_FIELDS = ("diff", "total", "delta")  # what ``composite.band_difference`` fills on a band's cells
 
 
-class BandBlock:
-    """Bands of cells on the device, each (``lines`` (K,) the seam lines, cells ``cell`` px, ``shape``
-    (K, width)) by name in ``bands``, and their differences, sums and changes on the host, all moved in
-    one block counted as ``"band"``."""
+@dataclass(frozen=True)
+class BandCellsOn:
+    """One band of a :class:`BandBlock`: its (K, width) ``shape``, its cells as the kernel takes them
+    (``cells``), and its difference, sum and change on the host (``frame``)."""
 
-    def __init__(self, bands: dict[str, tuple[np.ndarray, int, tuple[int, int]]], device: str):
-        self._block = transfer.Staged({f"{name}_{field}": (shape, np.float32) for name, (_, _, shape) in bands.items()
-                                       for field in BAND_FIELDS}, device, "band")
+    shape: tuple[int, int]
+    cells: BandCells
+    frame: BandFrame
+
+
+class BandBlock:
+    """Bands of cells on the device, each by name in ``bands``: (``lines`` (K,) the seam lines, cells
+    ``cell`` px, ``shape`` (K, width), ``x0`` the device array of each line's first cell (px)), and
+    their differences, sums and changes on the host, all moved in one block counted as ``"band"``."""
+
+    def __init__(self, bands: dict[str, tuple[np.ndarray, int, tuple[int, int], wp.array]], device: str):
+        self._block = transfer.Staged({f"{name}_{field}": (shape, np.float32) for name, (_, _, shape, _) in
+                                       bands.items() for field in BAND_FIELDS}, device, "band")
         self._block.zero()  # the first frame's "last difference"
         self._bands = {}
-        for name, (lines, cell, shape) in bands.items():
+        for name, (lines, cell, shape, x0) in bands.items():
             cells = BandCells()
-            cells.lines = transfer.to_device(lines, int, device, "plan")
-            cells.cell = cell
+            cells.lines, cells.cell, cells.x0 = transfer.to_device(lines, int, device, "plan"), cell, x0
             frame = BandFrame.of(*(self._block.host[f"{name}_{field}"] for field in BAND_FIELDS))
-            self._bands[name] = [shape, cells, None, frame]  # ... and the x0 array last sent
+            self._bands[name] = BandCellsOn(shape, cells, frame)
 
-    def difference(self, frame: FrameArrays, plan: CompositePlan, x0: dict[str, np.ndarray], gains_luma: Gains
-                   ) -> dict[str, BandFrame]:
-        """``composite.band_difference`` of the pair loaded in ``frame`` on each band's cells from ``x0[name]``
-        (K,) px, on the host (one small download; an ``x0`` goes up when it is a new array)."""
+    def difference(self, frame: FrameArrays, plan: CompositePlan, gains_luma: Gains) -> dict[str, BandFrame]:
+        """``composite.band_difference`` of the pair loaded in ``frame`` on each band's cells, on the host
+        (one small download)."""
         device = self._block.device
         for name, band in self._bands.items():
-            shape, cells, sent, _ = band
-            if x0[name] is not sent:
-                cells.x0 = transfer.to_device(x0[name], int, plan.device, "plan")
-                band[2] = x0[name]
-            band_difference(frame, plan, cells, gains_luma, shape[1],
-                            tuple(device[f"{name}_{field}"].reshape(shape) for field in BAND_FIELDS))
+            band_difference(frame, plan, band.cells, gains_luma, band.shape[1],
+                            tuple(device[f"{name}_{field}"].reshape(band.shape) for field in BAND_FIELDS))
         self._block.download()
-        return {name: band[3] for name, band in self._bands.items()}
+        return {name: band.frame for name, band in self._bands.items()}
 
 
 class DeviceFrame:
@@ -144,6 +149,7 @@ class DeviceFrame:
         self._grid = grid
         self._bands: tuple[ObjectGrid | None, BandBlock] | None = None  # made with the object grid it holds
         self._seam: transfer.Staged | None = None  # made with the first plan: its lines
+        self._band_x0: np.ndarray | None = None  # the seam band's cells (``BandPlace.x0``) on the device
         planes, out = self._planes.device, self._out.device
         self._passes = {"luma": (planes["y_src"], planes["y_tgt"], out["y"]),
                         "chroma": (planes["uv_src"], planes["uv_tgt"], out["uv"])}
@@ -177,48 +183,59 @@ class DeviceFrame:
         """The seam band's difference, sum and change of the loaded pair on the band's cells at ``place``
         (``composite.band_difference`` with the Y pass's gains) and, on a static plan, the object band's
         on ``objects`` (``frame_objects.ObjectGrid``, the whole overlap on coarse cells), on the host in
-        one small download (cells go up when a band moves). The arrays are this frame's: the next call
-        overwrites them."""
+        one small download. The seam band's cells went up with the last frame's seam (:meth:`composite`),
+        or go up now where the band moved otherwise (a new map set's). The arrays are this frame's: the
+        next call overwrites them."""
+        block = self._seam_block(plan)
+        if place.x0 is not self._band_x0:
+            np.copyto(block.host["band_x0"], place.x0)
+            transfer.upload(block.device["band_x0"], place.x0, "plan")
+            self._band_x0 = place.x0
         if self._bands is None or self._bands[0] is not objects:
             grid = self._grid
-            bands = {"seam": (grid.lines, grid.cell, grid.shape)}
+            bands = {"seam": (grid.lines, grid.cell, grid.shape, block.device["band_x0"])}
             if objects is not None:
-                bands["objects"] = (objects.lines, objects.cell, objects.shape)
+                bands["objects"] = (objects.lines, objects.cell, objects.shape,
+                                    transfer.to_device(objects.x0, int, self._cfg.device, "plan"))
             self._bands = objects, BandBlock(bands, self._cfg.device)
-        x0 = {"seam": place.x0, **({"objects": objects.x0} if objects is not None else {})}
-        frames = self._bands[1].difference(self.frame_arrays("luma", plan.luma), plan.luma, x0, gains_luma)
+        frames = self._bands[1].difference(self.frame_arrays("luma", plan.luma), plan.luma, gains_luma)
         return frames["seam"], frames.get("objects")
 
     def _seam_block(self, plan: FramePlan) -> transfer.Staged:
-        """The block the frame's seam and offsets go up in (made once: the canvas's lines are fixed)."""
+        """The block the frame's seam and offsets, and the next frame's seam band's cells, go up in (made
+        once: the canvas's lines are fixed)."""
         if self._seam is None:
             luma, chroma = plan.luma.lines, plan.chroma.lines
             self._seam = transfer.Staged({
                 "seam_luma": ((luma,), np.float32), "offsets_luma": ((2, luma), np.int32),
-                "seam_chroma": ((chroma,), np.float32), "offsets_chroma": ((2, chroma * 2), np.int32)},
-                self._cfg.device, "seam")
+                "seam_chroma": ((chroma,), np.float32), "offsets_chroma": ((2, chroma * 2), np.int32),
+                "band_x0": ((len(self._grid.lines),), np.int32)}, self._cfg.device, "seam")
             self._seam.host["offsets_chroma"].fill(0)  # the U/V pass has no seam offsets
         return self._seam
 
-    def composite(self, plan: FramePlan, luma: FrameState, chroma: FrameState, gains: tuple[Gains, Gains]
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def composite(self, plan: FramePlan, luma: FrameState, chroma: FrameState, gains: tuple[Gains, Gains],
+                  next_band: BandPlace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The loaded pair composited by ``plan`` with each pass's state (``luma`` with the seam blend's
         offsets, ``chroma`` without) and ``gains`` (:meth:`gains`): the output's (y, u, v) planes, new
-        arrays (one upload of the seams, one download of the planes)."""
-        self.set_seams(plan, luma, chroma)
+        arrays (one upload of the seams, with the cells of the next frame's seam band at ``next_band``;
+        one download of the planes)."""
+        self.set_seams(plan, luma, chroma, next_band.x0)
         self.composite_pass("luma", plan.luma, gains[0])
         self.composite_pass("chroma", plan.chroma, gains[1])
         self._out.download()
         uv = self._out.host["uv"]
         return self._out.host["y"].copy(), uv[:, :, 0].copy(), uv[:, :, 1].copy()
 
-    def set_seams(self, plan: FramePlan, luma: FrameState, chroma: FrameState) -> None:
-        """Both passes' seams and the Y pass's seam-blend offsets onto the device, in one copy."""
+    def set_seams(self, plan: FramePlan, luma: FrameState, chroma: FrameState, band_x0: np.ndarray) -> None:
+        """Both passes' seams and the Y pass's seam-blend offsets onto the device, with the seam band's
+        cells ``band_x0`` (``BandPlace.x0``) for the next :meth:`band`, in one copy."""
         block = self._seam_block(plan)
         host = block.host
         np.copyto(host["seam_luma"], luma.seam)
         host["offsets_luma"][:] = np.stack([fixed_point(v) for v in luma.offsets])
         np.copyto(host["seam_chroma"], chroma.seam)
+        np.copyto(host["band_x0"], band_x0)
+        self._band_x0 = band_x0
         block.upload()
 
     def composite_pass(self, name: str, plan: CompositePlan, gains: Gains, per_pixel: bool | None = None) -> None:

@@ -347,8 +347,9 @@ class FrameSeam:
         (line, position) of points the warp leaves apart this frame: the seam keeps each pair on one
         side (:func:`separation_band_cost`)."""
         route_changed = self.objects is not None and objects is not None and self.objects.update(objects)
-        # Where the band left the seam shown last behind, no line keeps it: the seam follows the band.
-        self._still = self.still_lines(band) & ~self._moved
+        self._still = self.still_lines(band)
+        if self._moved:  # the band left the seam shown last behind: no line keeps it, the seam follows the band
+            self._still[:] = False
         self._shift[:] = 0
         np.copyto(self.work.host["last_diff"], band.diff)
         last = self._path if self._shown is None else self._shown

@@ -388,7 +388,7 @@ class SenaFrameCompositor:
             band, object_band = device.band(plan, self._seam.place, objects.grid if objects is not None else None,
                                             gains[0])
             luma, chroma = self._frame_states(band, object_band, plan, luma_gains, chroma_gains)
-        out = device.composite(plan, luma, chroma, gains)
+        out = device.composite(plan, luma, chroma, gains, self._seam.place)
         self._last = (plan, luma, chroma)
         if self.observer is not None:
             with log.clock("observer"):
