@@ -170,8 +170,9 @@ class BandCosts:
     what they cost (``SeamCosts`` of ``cfg``): a path's cells from the last seam (``last``, ``still``,
     ``glide_first``), each cell's costs (``change``, ``free``, ``glide``, ``line_min``), the frame's
     ``path`` and the difference next to it (``strip_mean``, ``strip_count``); what is in front
-    (``moving``) and the strips kept off (``kept_off``) on a static rig, and the last frame's difference
-    (``last_diff``, for lines where the band moved)."""
+    (``moving``) and the strips kept off (``kept_off``) on a static plan, the last frame's difference
+    (``last_diff``, for lines where the band moved), and a frame's cost of leaving home with its
+    separation cost added (``home_frame``, :meth:`FrameSeam.next`'s ``copies``)."""
 
     def __init__(self, grid: BandGrid, cfg: Config):
         solved, width = grid.shape
@@ -182,7 +183,8 @@ class BandCosts:
                      "line_min": np.zeros(solved, np.float32), "path": np.zeros(solved, np.int32),
                      "strip_mean": np.zeros(solved, np.float32), "strip_count": np.zeros(solved, np.int32),
                      "moving": np.zeros(grid.shape, np.uint8), "kept_off": np.zeros(grid.shape, np.uint8),
-                     "lines": grid.lines.astype(np.int32), "last_diff": np.zeros(grid.shape, np.float32)}
+                     "lines": grid.lines.astype(np.int32), "last_diff": np.zeros(grid.shape, np.float32),
+                     "home_frame": np.zeros(grid.shape, np.float32)}
         dtypes = {np.dtype(np.int32): int, np.dtype(np.float32): float, np.dtype(np.uint8): wp.uint8}
         self.views = {name: host_array(a, dtypes[a.dtype]) for name, a in self.host.items()}
         self.last = LastSeam()
@@ -224,9 +226,6 @@ class FrameSeam:
         self.band = band
         self.grid = BandGrid.of(len(home), band, cell, cfg)
         self.work = BandCosts(self.grid, cfg)
-        # A frame's cost of leaving home with its separation cost added (``next``'s ``copies``).
-        self._home_frame = np.zeros(self.grid.shape, np.float32)
-        self._home_frame_wp = host_array(self._home_frame, float)
         segment = np.array([[0, len(self.grid.lines) - 1, -1, -1]])  # one, free at both ends
         self._solvers = (BandPath(len(self.grid.lines), self.grid.width, segment, cfg.cpu_threads),  # free
                          BandPath(len(self.grid.lines), self.grid.glide_width, segment, cfg.cpu_threads))  # glide
@@ -359,8 +358,8 @@ class FrameSeam:
             if copies is not None and len(copies[0]):  # this frame's home term carries the separation's cost
                 separation = separation_band_cost(self.grid.lines, self.place.x0, self.grid.cell, self.grid.width,
                                                   *copies, self.cfg)
-                np.add(self.place.home_term, separation, out=self._home_frame)
-                home_term = self._home_frame_wp
+                np.add(self.place.home_term, separation, out=self.work.host["home_frame"])
+                home_term = self.work.views["home_frame"]
             self._path = self._solve(band, moving, last, home_term)
         self._shown = self._path.copy()
         work, grid = self.work, self.grid
