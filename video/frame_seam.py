@@ -32,8 +32,8 @@ and whole from one view. Where an object stands on the band's home, the next fra
 to where the object band's route passes it, on the side it passed before (a jump when the route
 switches sides, round the object); where the band left the seam last shown behind, the seam goes with
 it, freely in the band, that frame. The object band and the seam's band come down in one block, so
-the band is placed a frame after the objects that place it; a route goes round an object's strip
-widened by the seam's transition, room for a frame's walk. (The plan keeps both views wherever the
+the band is placed a frame after the objects that place it (the strips the seam keeps off are
+this frame's). (The plan keeps both views wherever the
 band may go: about the estimate's seam and, where the rig may be static, over the overlap.) When the
 plan turns moving the object band is dropped; when it turns static a new one learns.
 
