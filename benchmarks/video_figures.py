@@ -178,9 +178,9 @@ def main_compositor_class(observer: VideoFigures):
             zeros = np.zeros((len(home), 1))
             observer(CompositedFrame(
                 index=self.frames, time_s=self.time_s, source="left" if self.rig.source == "a" else "right",
-                planes_src=planes_src, planes_tgt=planes_tgt, planes_out=out, planes_shown=out,
+                planes_src=planes_src, planes_tgt=planes_tgt, planes_out=out,
                 window=(0.0, 0.0, out[0].shape[1], out[0].shape[0]), maps=maps, seam_home=home,
-                seam_reach_px=0.0, seam=home, lines_are_rows=not self.rig.vertical, gains_luma=identity,
+                seam_reach_px=0.0, seam=home, gains_luma=identity,
                 knee_luma=None, offsets_luma=(zeros, zeros),
                 weights=lambda: (maps.alpha_luma, np.zeros_like(maps.alpha_luma))))
             self.frames += 1

@@ -71,7 +71,8 @@ class SteadyCanvas:
     ``canvas_shape`` (H, W) the composited canvas, ``output_shape`` (H, W) the output (the canvas less
     ``2 margin`` each way with ``--crop``), ``scale`` (sx, sy) output px per target px.
     :meth:`follow` takes each frame's target Y plane while the rig moves, :meth:`hold` each frame of a
-    static rig; :meth:`window` gives the output's top-left corner on the canvas.
+    static rig; :meth:`window` gives the output's top-left corner on the canvas, :meth:`window_for` the
+    same where a frame needs one.
     """
 
     def __init__(self, canvas_shape: tuple[int, int], output_shape: tuple[int, int], scale: np.ndarray,
@@ -82,6 +83,8 @@ class SteadyCanvas:
                                np.float64)
         self.scale = np.asarray(scale, np.float64)
         self.max_px = float(cfg.video_steady_max_px)
+        # Whether the output may be a window on the canvas: a rig that may move, or an output cropped from it.
+        self.windowed = tuple(output_shape) != tuple(canvas_shape) or (cfg.video_rig != "static" and self.max_px > 0)
         self._filter = LagBoundedFilter(cfg.video_steady_follow, self.max_px)
         self._path = np.zeros(2)
         self._last: np.ndarray | None = None
@@ -129,6 +132,12 @@ class SteadyCanvas:
     def window(self) -> np.ndarray:
         """(x, y) the output's top-left corner on the canvas, output px (sub-pixel; may lie off the canvas)."""
         return self.centre - self.shift
+
+    def window_for(self, mode: str) -> np.ndarray | None:
+        """The window of a frame composited with a ``mode`` ("static" or "moving") plan: :meth:`window`, or
+        None where the output is the canvas itself."""
+        cropped = self.output_shape != self.canvas_shape
+        return self.window() if cropped or (self.windowed and mode == "moving") else None
 
     def report(self) -> dict:
         return {"max_px": self.max_px, "frames": self.log["frames"], "weak_frames": self.log["weak"],

@@ -122,9 +122,9 @@ class CompositedFrame:
     ``composite_yuv`` was called without ``update``); ``source``: which input is the source, "left"
     or "right" (the other is the target). ``planes_src`` / ``planes_tgt``: the (y, u, v)
     uint8 planes of the source / target input as decoded (``plane[row, col]``); ``planes_out``: the
-    composited (y, u, v) on the canvas, ``planes_shown`` the output's as encoded; ``window``: (x, y, width,
-    height) the output frame on the canvas (x, y sub-pixel: a moving rig's steady canvas, ``steady.py``; it
-    may reach off the canvas, where the output is black). ``maps``: the :class:`~sena_warp.video.maps.PlaneMaps` composited
+    composited (y, u, v) on the canvas; ``window``: (x, y, width, height) the output frame on the canvas
+    (x, y sub-pixel: a moving rig's steady canvas, ``steady.py``; it may reach off the canvas, where the
+    output is black). ``maps``: the :class:`~sena_warp.video.maps.PlaneMaps` composited
     with (the same object for as long as the maps do not change; input-frame (x, y) sample positions
     per canvas pixel). ``seam_home``: (L,) float32 the estimate's seam, the centre of the band in
     which the frame's seam may move, at most ``seam_reach_px`` from it; ``seam``: (L,) float32 the
@@ -144,17 +144,20 @@ class CompositedFrame:
     planes_src: tuple[np.ndarray, np.ndarray, np.ndarray]
     planes_tgt: tuple[np.ndarray, np.ndarray, np.ndarray]
     planes_out: tuple[np.ndarray, np.ndarray, np.ndarray]
-    planes_shown: tuple[np.ndarray, np.ndarray, np.ndarray]
     window: tuple[float, float, int, int]
     maps: PlaneMaps
     seam_home: np.ndarray
     seam_reach_px: float
     seam: np.ndarray
-    lines_are_rows: bool
     gains_luma: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     knee_luma: tuple[float, float] | None
     offsets_luma: tuple[np.ndarray, np.ndarray]
     weights: Callable[[], tuple[np.ndarray, np.ndarray]]
+
+    @property
+    def lines_are_rows(self) -> bool:
+        """Whether a seam line is a canvas row (else a column)."""
+        return self.maps.seam_luma.lines_are_rows
 
 
 FirstEstimateHook = Callable[[StitchMaps, YuvFrame, YuvFrame], None]
@@ -238,9 +241,6 @@ class SenaFrameCompositor:
             self.crop_xywh = None
         self.output_size = (shown[2], shown[3])
         self._steady = SteadyCanvas(shape, (shown[3], shown[2]), self._canvas.scale, cfg)
-        # Whether the output may be a window on the canvas (a rig that may move, or a cropped output).
-        self._cropped = shown[2:] != (shape[1], shape[0])
-        self._windowed = self._cropped or (cfg.video_rig != "static" and cfg.video_steady_max_px > 0)
         maps = maps_on_canvas(first, self._canvas.stitched_shape, offset_tgt, self._canvas.band_px, shape)
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": maps.inliers, "seconds": round(sum(first.seconds.values()), 4)}
@@ -404,12 +404,12 @@ class SenaFrameCompositor:
         with log.clock("frame_seam"):
             band = device.band(plan, self._seam.place, gains[0])
             luma, chroma = self._frame_states(band, plan, luma_gains, chroma_gains)
-        window = self._steady.window() if self._cropped or (self._windowed and self._timeline.mode == "moving") else None
+        window = self._steady.window_for(self._timeline.mode)
         out, canvas = device.composite(plan, luma, chroma, gains, window, keep_canvas=self.observer is not None)
         self._last = (plan, luma, chroma)
         if self.observer is not None:
             with log.clock("observer"):
-                self.observer(self._composited(planes_src, planes_tgt, canvas, out, gains[0]))
+                self.observer(self._composited(planes_src, planes_tgt, canvas, gains[0]))
         log.transfers.append(transfer.tally() - counted)
         log.frames += 1
         log.time_s = None
@@ -440,15 +440,12 @@ class SenaFrameCompositor:
     def _device_for(self, shapes: tuple[tuple[int, int], tuple[int, int]]) -> DeviceFrame:
         """The device frame of planes of these Y shapes (made on the first frame)."""
         if self._device is None or self._device.shapes != shapes:
-            self._device = DeviceFrame(shapes, self._canvas.shape, self._output_shape(), self._seam.grid, self._cfg)
+            steady = self._steady
+            self._device = DeviceFrame(shapes, self._canvas.shape, steady.output_shape if steady.windowed else None,
+                                       self._seam.grid, self._cfg)
         return self._device
 
-    def _output_shape(self) -> tuple[int, int] | None:
-        """(H, W) of the output when it is a window on the canvas, else None."""
-        return (self.output_size[1], self.output_size[0]) if self._windowed else None
-
-    def _composited(self, planes_src: tuple, planes_tgt: tuple, planes_out: tuple, planes_shown: tuple, gains_luma
-                    ) -> CompositedFrame:
+    def _composited(self, planes_src: tuple, planes_tgt: tuple, planes_out: tuple, gains_luma) -> CompositedFrame:
         """The frame just composited, for the observer."""
         plan, luma, _ = self._last
         maps = plan.maps
@@ -456,10 +453,10 @@ class SenaFrameCompositor:
         return CompositedFrame(
             index=self._log.frames, time_s=self._log.time_s,
             source="left" if self._canvas.rig.source == "a" else "right",
-            planes_src=planes_src, planes_tgt=planes_tgt, planes_out=planes_out, planes_shown=planes_shown,
+            planes_src=planes_src, planes_tgt=planes_tgt, planes_out=planes_out,
             window=(*(float(v) for v in self._steady.window()), *self.output_size), maps=maps,
             seam_home=maps.seam_luma.positions, seam_reach_px=float(maps.seam_luma.band_px), seam=luma.seam.copy(),
-            lines_are_rows=maps.seam_luma.lines_are_rows, gains_luma=applied_gains(gains_luma, 1),
+            gains_luma=applied_gains(gains_luma, 1),
             knee_luma=plan.luma.knee, offsets_luma=offsets,
             weights=lambda: seam_weights(luma.seam, plan.luma.layout, plan.luma.canvas_shape, self._cfg))
 

@@ -34,7 +34,8 @@ rig), in a band of :data:`BAND_MARGIN_PX` beyond the per-frame seam's reach arou
   maps and its window on the canvas; its largest frame-to-frame change says whether black areas flash
   in or out.
 * *Output shake* (output px): how the picture as shown moves from frame to frame (phase correlation of
-  the output's Y, made about ``steady.PATH_SHORT_PX`` rows small), summed into a path; its second
+  the canvas's Y, made about ``steady.PATH_SHORT_PX`` rows small, less the frame's window's move on the
+  canvas), summed into a path; its second
   difference ``|P_{t-1} - 2 P_t + P_{t+1}|`` (mean and 95th percentile): 0 for a still picture and for
   a steady pan, large where the picture shakes (a moving rig's steady canvas, ``video/steady.py``, is
   what lowers it).
@@ -271,7 +272,8 @@ class VideoFigures:
         self._path: np.ndarray | None = None
         self._valid: tuple[np.ndarray, np.ndarray] | None = None
         self._covered: np.ndarray | None = None  # the canvas pixels the current maps sample
-        self._shown: tuple[np.ndarray, np.ndarray] | None = None  # the last output's small Y and its window
+        self._shown: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last canvas's small Y, its
+        # Hanning window and the output window's corner
         self.shown_path: list[np.ndarray] = []  # the output picture's path (output shake), output px
         self.per_frame: dict[str, list] = {name: [] for name in (
             "time_s", "maps_changed", "seam_motion_px", "seam_motion_still_px", "still_lines_pct",
@@ -320,7 +322,7 @@ class VideoFigures:
         record["misalignment_px"].append(
             self._misalignment(src_g, tgt_g, band, seam_band) if frame.index % self.flow_every == 0 else None)
         record["uncovered_pct"].append(uncovered_pct(self._covered, frame.window))
-        self._follow_output(frame.planes_shown[0])
+        self._follow_output(y_out, frame.window)
         self.paths.append(self._path)
         if self.truth is not None:
             self._copies(frame)
@@ -344,17 +346,19 @@ class VideoFigures:
         self._valid = None
         self._covered = covered_canvas(frame)
 
-    def _follow_output(self, y_shown: np.ndarray) -> None:
-        """The output picture's path (module docstring, output shake) one frame on."""
-        small = small_y(y_shown)
-        factor = np.array([y_shown.shape[1] / small.shape[1], y_shown.shape[0] / small.shape[0]])
+    def _follow_output(self, y_canvas: np.ndarray, window: tuple[float, float, int, int]) -> None:
+        """The output picture's path (module docstring, output shake) one frame on: the canvas's move less
+        the window's."""
+        small = small_y(y_canvas)
+        factor = np.array([y_canvas.shape[1] / small.shape[1], y_canvas.shape[0] / small.shape[0]])
+        corner = np.asarray(window[:2], np.float64)
         if self._shown is None or self._shown[0].shape != small.shape:
-            self._shown = (small, cv2.createHanningWindow(small.shape[::-1], cv2.CV_32F))
+            self._shown = (small, cv2.createHanningWindow(small.shape[::-1], cv2.CV_32F), corner)
             self.shown_path.append(np.zeros(2) if not self.shown_path else self.shown_path[-1])
             return
         moved, _ = frame_shift(self._shown[0], small, self._shown[1])
-        self._shown = (small, self._shown[1])
-        self.shown_path.append(self.shown_path[-1] + moved * factor)
+        self.shown_path.append(self.shown_path[-1] + moved * factor - (corner - self._shown[2]))
+        self._shown = (small, self._shown[1], corner)
 
     def _still_lines(self, src, tgt, last_src, last_tgt) -> np.ndarray:
         """(L,) bool: lines where neither view changed within the band, nor within the dilation."""
