@@ -71,6 +71,22 @@ def test_the_output_path_shakes_less_than_the_target_and_lags_it_boundedly(rooft
     assert second_difference(shown).mean() < 0.5 * second_difference(path).mean()
 
 
+def test_a_rig_found_static_glides_back_to_the_whole_canvas(rooftop):
+    frames = decoded_frames(rooftop[1])
+    steady = SteadyCanvas((480, 270), (480, 270), np.ones(2), CFG)
+    for frame in frames[:40]:
+        steady.follow(frame.y)
+    away = steady.window().copy()
+    assert np.abs(away).max() > 3.0  # the window sits off the canvas's corner while the rig pans
+    windows = [away]
+    for _ in range(120):
+        steady.hold()
+        windows.append(steady.window().copy())
+    steps = np.abs(np.diff(np.array(windows), axis=0)).max()
+    assert steps < 1.0  # no jump home: it stops, then glides (measured 0.67 px a frame at most, home in 2.5 s)
+    assert steady.window_for("static") is None  # ... but home in the end: the output is the canvas again
+
+
 def steady_run(rooftop, tmp_path, cfg: Config) -> tuple[VideoFigures, dict]:
     figures = VideoFigures(cfg)
     report = stitch_videos(*rooftop, tmp_path / "out.mp4", cfg, VideoOptions.from_config(cfg), observer=figures,

@@ -19,7 +19,7 @@ follows the target's *camera path* through a causal low-pass:
 With ``--crop`` the output is the first estimate's rectangle less ``video_steady_max_px`` on every side
 (:func:`steady_crop`): the window never leaves the cropped canvas, so the rectangle the viewer sees does
 not change at all. A static rig's window is the whole canvas, unshifted (``video_steady_max_px`` 0: the
-same for a moving rig).
+same for a moving rig); a rig found static after moving glides back there at the filter's pace.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from .align import LagBoundedFilter
 
 PATH_SHORT_PX = 180  # the target's path is measured on its Y plane made about this many rows small
 MIN_RESPONSE = 0.05  # a phase correlation peak weaker than this: the frame moved as the last one did
+HOME_PX = 0.01  # a static rig's window this close to the centre is the canvas itself
 
 
 def margin_px(cfg: Config) -> int:
@@ -111,8 +112,8 @@ class SteadyCanvas:
             self.log["weak"] += int(weak)
         self._path = self._path + step
         if self._last is not None and self._following == 1:
-            self._filter.reset(self._path, step)  # the rig's motion as first seen: no start from rest
-            steady = self._path.copy()
+            steady = self._filter.value + step  # the rig's motion as first seen: no start from rest
+            self._filter.reset(steady, step)
         else:
             steady = self._filter.update(self._path)
         self._last, self._step = small, step
@@ -122,12 +123,18 @@ class SteadyCanvas:
         self.log["shift_px_max"] = max(self.log["shift_px_max"], float(np.abs(self.shift).max()))
 
     def hold(self) -> None:
-        """A frame of a static rig: the window returns to the centre and the path starts anew."""
-        self._filter.reset(np.zeros(2))
-        self._path = np.zeros(2)
+        """A frame of a static rig: the path stands still, so the window glides back to the centre (the
+        filter's own pace), and is there once within :data:`HOME_PX`."""
+        if self._filter.value is None:
+            return
+        if self._following:
+            self._filter.reset(self._filter.value)  # the path stopped: so does the window, then it glides
         self._last = None
         self._following = 0
-        self.shift = np.zeros(2)
+        self.shift = self._filter.update(self._path) - self._path
+        if np.abs(self.shift).max() < HOME_PX:
+            self._filter.reset(self._path)
+            self.shift = np.zeros(2)
 
     def window(self) -> np.ndarray:
         """(x, y) the output's top-left corner on the canvas, output px (sub-pixel; may lie off the canvas)."""
@@ -135,9 +142,10 @@ class SteadyCanvas:
 
     def window_for(self, mode: str) -> np.ndarray | None:
         """The window of a frame composited with a ``mode`` ("static" or "moving") plan: :meth:`window`, or
-        None where the output is the canvas itself."""
+        None where the output is the canvas itself (a static rig's, once its window is home)."""
         cropped = self.output_shape != self.canvas_shape
-        return self.window() if cropped or (self.windowed and mode == "moving") else None
+        away = bool(np.abs(self.shift).max() > 0)
+        return self.window() if cropped or (self.windowed and (mode == "moving" or away)) else None
 
     def report(self) -> dict:
         return {"max_px": self.max_px, "frames": self.log["frames"], "weak_frames": self.log["weak"],
