@@ -60,8 +60,8 @@ def test_the_output_path_shakes_less_than_the_target_and_lags_it_boundedly(rooft
     path, shown = [], []
     for frame in frames:
         steady.follow(frame.y)
-        path.append(steady._path.copy())
-        shown.append(steady._path + steady.shift)
+        path.append(steady.path)
+        shown.append(steady.path + steady.shift)
     path, shown = np.array(path), np.array(shown)
     # The rig turns: its view moves by tens of px over the clip's two seconds.
     assert np.ptp(path[:, 0]) > 40.0

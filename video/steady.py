@@ -136,6 +136,11 @@ class SteadyCanvas:
             self._filter.reset(self._path)
             self.shift = np.zeros(2)
 
+    @property
+    def path(self) -> np.ndarray:
+        """(x, y) the target's camera path so far: where its view has gone since the rig began to move (output px)."""
+        return self._path.copy()
+
     def window(self) -> np.ndarray:
         """(x, y) the output's top-left corner on the canvas, output px (sub-pixel; may lie off the canvas)."""
         return self.centre - self.shift
