@@ -196,6 +196,9 @@ class Config:
     video_align_prior: float = 1e-4  # the fit's pull towards the predicted lattice (per node, against the mean data term)
     video_align_follow: float = 0.3  # the filter takes this share of a measured change at once (alpha)
     video_align_max_lag_px: float = 1.0  # ... and never lags the measured lattice by more than this
+    # --- video, fine tuning: a moving rig's steady canvas (video/steady.py) --------------------
+    video_steady_follow: float = 0.1  # the output's path takes this share of the target's camera path's change at once (alpha)
+    video_steady_max_px: float = 24.0  # ... and never lags it by more than this (output px; --crop gives it up on every side); 0: off
     # --- video, fine tuning: the per-frame seam -----------------------------------------------
     video_seam_band_ratio: float = 0.05  # band half-width, x the canvas diagonal (room to go round an object)
     video_seam_band_min_px: int = 8  # band half-width at least this
@@ -362,6 +365,7 @@ RANGES: dict[str, Range] = {
     "video_align_lattice_nodes": _above(1, 200), "video_align_seam_px": Range(0, 10000),
     "video_align_seam_weight": Range(1, 1000), "video_align_bend": Range(0, 1000), "video_align_tukey_px": _above(0, 1000),
     "video_align_prior": Range(0, 1000), "video_align_follow": _above(0, 1), "video_align_max_lag_px": _above(0, 10000),
+    "video_steady_follow": _above(0, 1), "video_steady_max_px": Range(0, 10000),
     "video_estimate_lookahead_s": Range(0, 60), "seam_prior_weight": Range(0, 1000), "video_blank_max_std": Range(0, 255),
     "video_seam_band_ratio": _above(0, 1), "video_seam_band_min_px": Range(1, 4096), "video_seam_line_step": Range(1, 64),
     "video_seam_frame_cells": Range(8, 8192), "video_seam_noise": Range(0, 255), "video_seam_still_box_px": Range(1, 64),
