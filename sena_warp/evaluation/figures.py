@@ -20,7 +20,7 @@ from sena_warp.stitch import Panorama, Warp
 from sena_warp.warp_map import canvas_views, forward_points, remap_image
 from sena_warp.zone import overlap_x_extent
 
-from . import naturalness
+from . import dense, naturalness
 
 from .metrics import (Forward, anchor_residuals_px, forward_anisotropy, line_bend_pct, long_segments,
                       overlap_psnr_ssim, transition_mad)
@@ -166,6 +166,57 @@ def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: C
         "visible_bend_max_pct": float(bends.max()) if bends.size else math.nan,
         "continuity_px": float(np.median(continuity)) if continuity.size else math.nan,
         "cut_lines": int(continuity.size),
+    }
+
+
+def dense_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
+    """Issue 35's dense figures of a finished stitch (``dense``), in the working frame on the canvas.
+
+    ``seam_misalign_*_px``, ``border_misalign_*_px``: median and 95th percentile of the flow between the
+    views as the panorama shows them, at the seam's textured band and at the borders' (NaN: no such
+    pixel); ``doubled_pct``, ``lost_pct``: of the consistent textured overlap pixels, those shown twice
+    or nowhere; ``dup_objects``, ``dup_object_px``: such regions of at least ``dense.OBJECT_MIN_PX``
+    pixels, the largest; ``tone_spread_pct``, ``tone_colour_pct``: tone fidelity of the
+    panorama, ``*_plain_pct`` of the plain one (each view times its gains, nothing else);
+    ``white_cast_grey`` and ``white_cast_plain_grey`` likewise. ``cfg.device`` resolved.
+    """
+    maps = pano.maps
+    warp, seam = maps.warp, maps.seam
+    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
+    raw = canvas_views(img_src, img_tgt, seam.maps.map_src_canvas, warp.overlap.canvas, cfg)
+    views = compensated_views(raw, seam.gains)
+    weight_src, weight_tgt = naturalness.view_weights(seam.maps.alpha_canvas, views.valid_src, views.valid_tgt)
+    seam_px, border_px = dense.switches(dense.shown_labels(weight_src, weight_tgt), views.valid_src, views.valid_tgt)
+    grey_src, grey_tgt = views.grey()
+    flow, flow_back = dense.view_flow(grey_src, grey_tgt, views.valid_src, views.valid_tgt)
+    texture_ok, across, ratio = dense.structure(grey_src, grey_tgt)
+    shift = dense.visible_shift(flow, across, ratio)
+    at_seam, at_border = dense.misalignment(shift, seam_px, border_px, views.both, texture_ok, seam.maps.seam_x_canvas,
+                                            cfg.transition_px)
+    shown = dense.copies(flow, flow_back, shift, weight_src, weight_tgt, views.both, texture_ok)
+    pures = (weight_src >= dense.PURE_WEIGHT, weight_tgt >= dense.PURE_WEIGHT)
+    gains = seam.gains
+    plain = np.where(pures[0][:, :, None], compensated(raw.src, gains.gain_src, gains.bias_src, 255.0),
+                     compensated(raw.tgt, gains.gain_tgt, gains.bias_tgt, 255.0))
+    pano_working = image_to_working(pano.image, maps.rig)[:, :, :3]
+    spread, colour = dense.tone_figures(pano_working, (raw.src, raw.tgt), pures)
+    spread_plain, colour_plain = dense.tone_figures(plain, (raw.src, raw.tgt), pures)
+    view = np.where(pures[0][:, :, None], raw.src, raw.tgt)
+    return {
+        "seam_misalign_median_px": at_seam.median_px,
+        "seam_misalign_p95_px": at_seam.p95_px,
+        "border_misalign_median_px": at_border.median_px,
+        "border_misalign_p95_px": at_border.p95_px,
+        "doubled_pct": shown.doubled_pct,
+        "lost_pct": shown.lost_pct,
+        "dup_objects": shown.objects,
+        "dup_object_px": shown.largest_px,
+        "tone_spread_pct": spread,
+        "tone_spread_plain_pct": spread_plain,
+        "tone_colour_pct": colour,
+        "tone_colour_plain_pct": colour_plain,
+        "white_cast_grey": dense.white_cast(pano_working, view, pures[0] | pures[1]),
+        "white_cast_plain_grey": dense.white_cast(plain, view, pures[0] | pures[1]),
     }
 
 
