@@ -4,7 +4,9 @@ The source is shown on one side of the seam, the target on the other; across a t
 the two are mixed by ``kernels/seam.py``'s ``source_alpha`` (the rule the seam maps' alpha follows). Each side gets its own per-channel affine gain (exposure
 compensation) and, within ``lf_px`` of the seam, a per-line offset that fades linearly to 0 (the
 low-frequency part of the seam blend: what is left of an exposure difference after the gains is
-spread over a wide band, while detail switches sides within T). The same kind of offset, per position
+spread over a wide band, while detail switches sides within T): added in grey levels, or (an
+image's panorama) a relative change of the side's gain, so that it is a smooth gain and changes no
+colour or contrast. The same kind of offset, per position
 along it, fades out from each of the target's two borders across the seam's direction (its top and
 bottom edges for a horizontal rig): beyond the seam's ends the canvas switches from the target to the
 source there, and the border blend hides what the gains leave of that step too.
@@ -209,6 +211,16 @@ def adjusted(sample: int, gain: int, bias: int, offset: int, tone: wp.vec2i) -> 
 
 
 @wp.func
+def with_offset(sample: int, gain: int, bias: int, offset: int, tone: wp.vec2i, relative: int) -> int:
+    """:func:`adjusted` with a side's low-frequency offset: added in 1/2**20 grey levels, or with
+    ``relative``, a relative change of the gain in 1/2**20 (the gain times 1 + offset / 2**20, before
+    the knee: the offset is a smooth gain, and white stays white)."""
+    if relative != 0:
+        return adjusted(sample, gain + int((wp.int64(gain) * wp.int64(offset)) >> wp.int64(20)), bias, 0, tone)
+    return adjusted(sample, gain, bias, offset, tone)
+
+
+@wp.func
 def clear_of_offsets(d: float, clear_px: float, border: wp.vec2, border_side: wp.array(dtype=int), bo: int, second: int,
                      channels: int) -> bool:
     """Whether no offset of a side reaches a pixel whatever the frame: at distance ``d`` from the static
@@ -393,12 +405,14 @@ def _composite_frame_kernel(channels: int):
         gain_tgt: wp.vec4i,
         bias_tgt: wp.vec4i,
         tone: wp.vec2i,
+        relative: int,
         fill: wp.vec4i,
         out: wp.array(dtype=wp.uint8),
     ):
         """out[y, x, c] from the plan; per side ``gain * sample + bias + lf_weight * lf[line, c]`` plus,
         with ``border_on``, ``lf_weight(line - border_lines[k]) * border[k, position, c]`` for both borders
-        (``second``: the element offset of border 1, positions x C).
+        (``second``: the element offset of border 1, positions x C); with ``relative``, those offsets
+        change the gain relatively instead (:func:`with_offset`).
 
         Flat arrays: ``img_*`` (H, W, C), ``out`` (Hc, Wc, C), ``plan*`` (Hc, Wc), ``lf_*`` (lines, C) and
         ``border_*`` (2, positions, C) in 1/2**20 grey levels; gains in 1/2**12, biases in 1/2**20 grey
@@ -487,7 +501,8 @@ def _composite_frame_kernel(channels: int):
                 if a >= 1.0:
                     for c in range(wp.static(channels)):
                         off = side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second)
-                        v = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], off, tone)
+                        v = with_offset(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], off,
+                                        tone, relative)
                         out[o + c] = grey_level(v)
                 elif a <= 0.0:
                     if kind == KIND_BAND:
@@ -497,7 +512,8 @@ def _composite_frame_kernel(channels: int):
                         fy = word_fy(word)
                     for c in range(wp.static(channels)):
                         off = side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second)
-                        v = adjusted(sample_fixed(img_tgt, p + c, fx, fy, steps[2], steps[3]), gain_tgt[c], bias_tgt[c], off, tone)
+                        v = with_offset(sample_fixed(img_tgt, p + c, fx, fy, steps[2], steps[3]), gain_tgt[c], bias_tgt[c], off,
+                                        tone, relative)
                         out[o + c] = grey_level(v)
                 else:
                     word_t = plan_tgt[q]
@@ -505,10 +521,11 @@ def _composite_frame_kernel(channels: int):
                     fx_t = word_fx(word_t)
                     fy_t = word_fy(word_t)
                     for c in range(wp.static(channels)):
-                        vs = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c],
-                                      side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second), tone)
-                        vt = adjusted(sample_fixed(img_tgt, p_t + c, fx_t, fy_t, steps[2], steps[3]), gain_tgt[c], bias_tgt[c],
-                                      side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second), tone)
+                        vs = with_offset(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c],
+                                         side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second), tone, relative)
+                        vt = with_offset(sample_fixed(img_tgt, p_t + c, fx_t, fy_t, steps[2], steps[3]), gain_tgt[c],
+                                         bias_tgt[c], side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second), tone,
+                                         relative)
                         out[o + c] = grey_level(int(a * float(vs) + (1.0 - a) * float(vt)))
 
     return composite_frame

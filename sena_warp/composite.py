@@ -92,11 +92,14 @@ class Compositor:
     / target (input frame); ``seam``: its layout. Runs on ``cfg.device`` (resolved,
     ``runtime.resolve_config``) with ``cfg.cpu_threads``. Gains default to the identity and offsets to
     zero until set; ``white``: the images' white level, where the gains' highlight knee runs to (None:
-    no knee, for planes without one such as chroma).
+    no knee, for planes without one such as chroma). ``relative_offsets``: the seam's and the borders'
+    low-frequency offsets are relative changes of each side's gain (0.05: 5 % brighter there), not
+    grey levels added.
     """
 
     def __init__(self, map_src_canvas: np.ndarray, map_tgt_canvas: np.ndarray, seam: SeamLayout, cfg: Config,
-                 white: float | None = 255.0):
+                 white: float | None = 255.0, relative_offsets: bool = False):
+        self.relative_offsets = bool(relative_offsets)
         device, threads = cfg.device, cfg.cpu_threads
         # The gains' highlight knee (``gains.tone_curve``): at gain_knee_ratio x the white level of the
         # images composited (None: no knee, e.g. chroma planes).
@@ -164,7 +167,8 @@ class Compositor:
                                  vec(gain_tgt, IDENTITY[0], GAIN_ONE), vec(bias_tgt, IDENTITY[1], LEVEL))
 
     def set_offsets(self, lf_src: np.ndarray, lf_tgt: np.ndarray) -> None:
-        """Low-frequency offsets (L, C) float32 of each side at the seam (grey levels)."""
+        """Low-frequency offsets (L, C) float32 of each side at the seam (grey levels, or relative changes
+        of the gain with ``relative_offsets``)."""
         channels = lf_src.shape[1]
         arrays = self._lf.get(channels)
         if arrays is None:
@@ -178,8 +182,9 @@ class Compositor:
 
     def set_border_offsets(self, border_lines: tuple[float, float], border_src: np.ndarray,
                            border_tgt: np.ndarray) -> None:
-        """Low-frequency offsets (2, P, C) float32 of each side along the target's two borders (grey levels
-        at the border, fading like the seam's over ``lf_px``): border k lies at line coordinate
+        """Low-frequency offsets (2, P, C) float32 of each side along the target's two borders (grey levels at
+        the border, or relative changes of the gain with ``relative_offsets``, fading like the seam's over
+        ``lf_px``): border k lies at line coordinate
         ``border_lines[k]``, P positions along it (canvas columns when lines are rows, else rows)."""
         positions = self.canvas_shape[1] if self.layout.lines_are_rows else self.canvas_shape[0]
         channels = border_src.shape[2]
@@ -306,7 +311,8 @@ class Compositor:
         return tuple(np.array(list(v)[:channels], np.float64) / unit for v, unit in zip(self._gains[channels], units))
 
     def offsets(self, channels: int) -> tuple[np.ndarray, np.ndarray]:
-        """The low-frequency offsets (L, channels) float64 grey levels of each side, as applied."""
+        """The low-frequency offsets (L, channels) float64 of each side, as applied (grey levels, or relative
+        changes of the gain with ``relative_offsets``)."""
         self._ensure_defaults(channels)
         return tuple(a.numpy().reshape(self.lines, channels) / LEVEL for a in self._lf[channels])
 
@@ -386,7 +392,7 @@ class Compositor:
         inputs = [*buf.frame_inputs, self._frame_runs(buf, channels), buf.table, self.seam,
                   int(self.layout.lines_are_rows), float(self.layout.transition_px),
                   float(self.layout.smooth_sigma_px), float(self.layout.lf_px), lf_src, lf_tgt, *self._border[channels],
-                  *self._gains[channels], self.tone,
+                  *self._gains[channels], self.tone, int(self.relative_offsets),
                   wp.vec4i(*values, *[0] * (MAX_CHANNELS - channels)), buf.out_flat]
         runtime.launch_row_loops(COMPOSITE_FRAME_KERNELS[channels], *self.canvas_shape, inputs, self.device,
                                  self.threads)

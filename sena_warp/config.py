@@ -130,6 +130,19 @@ class Config:
     seam_blend_rows: int = 31  # seam blend: and averaged over this many rows
     border_blend: bool = True  # the seam blend along the target's borders beyond the seam's ends too
     border_blend_mad_grey: float = 6.0  # border blend: a block whose views differ by more (MAD) shows other content
+    seam_blend_gain: bool = True  # seam and border blend: one grey value per line, applied as a relative gain
+    # (no colour, no contrast change); False: per-channel grey levels added (the earlier version)
+
+    # --- Switch alignment (ours, switch_align.py; no step of the paper) -------------------------
+    switch_align: bool = True  # align the source to the target at the seam and the borders, cut again (False: paper)
+    switch_rounds: int = 1  # align and cut again this many times
+    switch_flow_preset: int = 1  # DIS optical flow preset between the views: 0 ultrafast, 1 fast, 2 medium
+    switch_band_px: float = 24.0  # the flow is followed this far from a switch, where both views are defined
+    switch_sigma_px: float = 6.0  # and smoothed along the switches by a normalised Gaussian of this sigma
+    switch_max_px: float = 40.0  # flow larger than this is not followed (a depth jump the seam must avoid)
+    switch_fade_px: float = 48.0  # the correction fades to 0 this far from its switch (smootherstep) at least,
+    switch_max_slope: float = 0.25  # and further where it is large: it changes by at most this per px
+    switch_cell_px: int = 4  # the correction field is worked out on cells this wide (it is smooth) and upsampled
 
     # --- Exposure compensation (Brown & Lowe 2007; no step of the paper) ------------------------
     gain_model: str = "channels"  # "channels": per-channel gains (gains.py); "opencv": cv2's ChannelsCompensator; "none"

@@ -164,14 +164,32 @@ def seam_maps(map_src_canvas: np.ndarray, canvas: Canvas, path: SeamPath, cfg: C
     )
 
 
+LEVEL_MIN_GREY = 16.0  # relative offsets: a view's level is taken as at least this (dark rows: no huge gains)
+
+
 @dataclass(frozen=True)
 class SeamOffsets:
     """The seam blend's low-frequency part: per canvas row, grey levels added to each view near the
-    seam (``src``, ``tgt``: (H, C) float32, full at the seam, fading linearly to 0 at ``fade_px``)."""
+    seam (``src``, ``tgt``: (H, C) float32, full at the seam, fading linearly to 0 at ``fade_px``).
+    ``level_src``, ``level_tgt``: (H,) float32 each view's mean grey level next to the seam, where the
+    offsets were measured (None: not measured), for :meth:`relative`."""
 
     src: np.ndarray
     tgt: np.ndarray
     fade_px: float
+    level_src: np.ndarray | None = None
+    level_tgt: np.ndarray | None = None
+
+    def relative(self) -> tuple[np.ndarray, np.ndarray]:
+        """The offsets as relative changes of each view's gain ((H, C) float32 each): the offset over the
+        level it was measured at (at least ``LEVEL_MIN_GREY``), what ``Compositor(relative_offsets=True)``
+        applies."""
+        return relative_to(self.src, self.level_src), relative_to(self.tgt, self.level_tgt)
+
+
+def relative_to(offsets: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """Offsets in grey levels as relative gains at ``level`` (broadcast against them), float32."""
+    return (offsets / np.maximum(level, LEVEL_MIN_GREY)[..., None]).astype(np.float32)
 
 
 def running_mean(values: np.ndarray, known: np.ndarray, window: int) -> np.ndarray:
@@ -190,7 +208,10 @@ def running_mean(values: np.ndarray, known: np.ndarray, window: int) -> np.ndarr
 
 def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, cfg: Config) -> SeamOffsets:
     """Offsets that take half the two views' mean difference next to the seam off one side and add it
-    to the other (module docstring); zero when ``cfg.seam_blend_ratio`` is 0.
+    to the other (module docstring), with each view's mean level there; zero when
+    ``cfg.seam_blend_ratio`` is 0. With ``cfg.seam_blend_gain`` the difference is the grey one, the same
+    for every channel (the gains took the colour; a colour residual next to the seam is content, and
+    spread over the blend it tints what it reaches).
 
     views: the gain-compensated canvas views; seam_x_canvas: (H,) seam x per row.
     """
@@ -198,7 +219,8 @@ def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, 
     channels = views.src.shape[2]
     if cfg.seam_blend_ratio <= 0:
         zeros = np.zeros((height, channels), np.float32)
-        return SeamOffsets(zeros, zeros.copy(), 0.0)
+        level = np.full(height, 255.0, np.float32)
+        return SeamOffsets(zeros, zeros.copy(), 0.0, level, level.copy())
     seam_x = np.asarray(seam_x_canvas, np.float64)
     reach = cfg.seam_blend_strip_px
     # Only the columns within reach of each row's seam: (H, 2 reach + 2) of them, not the whole canvas.
@@ -207,11 +229,17 @@ def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, 
     cols = np.clip(cols, 0, width - 1)
     rows = np.arange(height)[:, None]
     strip = inside & views.both[rows, cols] & (np.abs(cols - seam_x[:, None]) <= reach)
-    diff = (views.src[rows, cols].astype(np.float32) - views.tgt[rows, cols].astype(np.float32)) * strip[:, :, None]
-    count = strip.sum(axis=1)
-    per_row = diff.sum(axis=1) / np.maximum(count, 1)[:, None]
-    delta = running_mean(per_row, count > 0, cfg.seam_blend_rows).astype(np.float32)
-    return SeamOffsets(-0.5 * delta, 0.5 * delta, float(cfg.seam_blend_ratio * diag_px))
+    src = views.src[rows, cols].astype(np.float32) * strip[:, :, None]
+    tgt = views.tgt[rows, cols].astype(np.float32) * strip[:, :, None]
+    count = np.maximum(strip.sum(axis=1), 1)[:, None]
+    means = np.concatenate([src.sum(axis=1) / count, tgt.sum(axis=1) / count], axis=1)
+    per_row = running_mean(means, strip.any(axis=1), cfg.seam_blend_rows).astype(np.float32)
+    mean_src, mean_tgt = per_row[:, :channels], per_row[:, channels:]
+    delta = mean_src - mean_tgt
+    if cfg.seam_blend_gain:
+        delta = np.repeat(delta.mean(axis=1, keepdims=True), channels, axis=1)
+    return SeamOffsets(-0.5 * delta, 0.5 * delta, float(cfg.seam_blend_ratio * diag_px), mean_src.mean(axis=1),
+                       mean_tgt.mean(axis=1))
 
 
 @dataclass(frozen=True)
@@ -220,12 +248,20 @@ class BorderOffsets:
     ``lines`` the two borders' y (between the target's first row and the one above it, between its
     last and the one below); ``src``, ``tgt``: (2, W, C) float32 grey levels added to each view per
     canvas column at that border, fading linearly to 0 at ``fade_px`` from it; ``on``: False when
-    off (all zero)."""
+    off (all zero). ``level_src``, ``level_tgt``: (2, W) float32 each view's mean grey level just
+    inside the border (None: not measured), for :meth:`relative`."""
 
     lines: tuple[float, float]
     src: np.ndarray
     tgt: np.ndarray
     on: bool
+    level_src: np.ndarray | None = None
+    level_tgt: np.ndarray | None = None
+
+    def relative(self) -> tuple[np.ndarray, np.ndarray]:
+        """The offsets as relative changes of each view's gain ((2, W, C) float32 each), as
+        :meth:`SeamOffsets.relative`."""
+        return relative_to(self.src, self.level_src), relative_to(self.tgt, self.level_tgt)
 
 
 def with_seam_offsets(img: np.ndarray, rows: slice, seam_x_canvas: np.ndarray, per_row: np.ndarray,
@@ -278,8 +314,9 @@ def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamO
     oy = int(round(offset_tgt[1]))
     lines = (oy - 0.5, oy + height_tgt - 0.5)
     zeros = np.zeros((2, width, channels), np.float32)
+    levels = np.full((2, 2, width), 255.0, np.float32)  # (view, border, column)
     if not cfg.border_blend or offsets.fade_px <= 0:
-        return BorderOffsets(lines, zeros, zeros.copy(), False)
+        return BorderOffsets(lines, zeros, zeros.copy(), False, *levels)
     strip = max(1, cfg.seam_blend_strip_px)
     block = max(1, cfg.seam_blend_rows)
     inside_rows = (slice(max(oy, 0), min(oy + strip, height)),
@@ -295,6 +332,8 @@ def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamO
         diff = (with_seam_offsets(views.src, rows, seam_x, offsets.src, offsets.fade_px)
                 - with_seam_offsets(views.tgt, rows, seam_x, offsets.tgt, offsets.fade_px))
         used = shown_tgt & views.valid_src[beyond][None, :]
+        for side, img in enumerate((views.src, views.tgt)):
+            levels[side, k] = column_level(img[rows], used, block)
         centres, medians = block_medians(diff, used, block, cfg.border_blend_mad_grey)
         seam_at = float(seam_x[rows.start if k == 0 else rows.stop - 1])
         if not len(centres) or not np.isfinite(seam_at):
@@ -303,4 +342,16 @@ def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamO
         along = np.interp(cols, np.r_[seam_at, centres[right]], np.r_[0.0, medians[right]], left=0.0)
         goes_on = np.convolve(views.valid_src[beyond].astype(np.float64), np.ones(block) / block, "same")
         delta[k] = (along * goes_on)[:, None]
-    return BorderOffsets(lines, -0.5 * delta, 0.5 * delta, True)
+    return BorderOffsets(lines, -0.5 * delta, 0.5 * delta, True, *levels)
+
+
+def column_level(img: np.ndarray, used: np.ndarray, block: int) -> np.ndarray:
+    """(W,) float32: the mean grey level of a strip (R, W, C) per column where ``used`` (R, W), averaged
+    over ``block`` columns; columns without any used pixel near take the nearest that has one (255
+    where none has)."""
+    grey = img.astype(np.float32).mean(axis=2)
+    count = used.sum(axis=0)
+    if not count.any():
+        return np.full(len(count), 255.0, np.float32)
+    mean = (grey * used).sum(axis=0) / np.maximum(count, 1)
+    return running_mean(mean[:, None], count > 0, block)[:, 0].astype(np.float32)

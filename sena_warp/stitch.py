@@ -12,8 +12,8 @@ compositor never transposes frames.
 
 Where this departs from the paper (issue 13, ``docs/evaluation.md``), the paper's version stays one
 setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
-``seam_model="paper"`` (steps 8-9), ``gain_model="none"``, ``seam_blend_ratio=0``, ``border_blend=False``,
-``transition_px=24``.
+``seam_model="paper"`` (steps 8-9), ``switch_align=False``, ``gain_model="none"``, ``seam_blend_ratio=0``,
+``border_blend=False``, ``transition_px=24``.
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ from .partition import BorderOffsets, SeamMaps, SeamOffsets, border_offsets, sea
 from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .seam_path import SeamPath, seam_line
+from .switch_align import aligned_source_map
 from .warp_map import CanvasViews, canvas_views, forward_points, source_map_canvas
 from .zone import Zone, adequate_zone
 from sena_warp.kernels import runtime
@@ -91,7 +92,8 @@ class Warp:
 class Seam:
     """Steps 7-9 in the working frame (positions and maps on the working canvas): the zone, the seam's
     path and anchors, the seam maps, each view's gains and the seam blend's offsets (along the seam and
-    along the target's borders beyond its ends)."""
+    along the target's borders beyond its ends). ``map_cut_canvas``: (H, W, 2) float32 the source map
+    they ran on (step 6's, or step 6's aligned at the switches: ``switch_align``)."""
 
     zone: Zone
     path: SeamPath
@@ -99,6 +101,7 @@ class Seam:
     gains: Gains
     offsets: SeamOffsets
     border: BorderOffsets
+    map_cut_canvas: np.ndarray
 
     @property
     def anchors_src_canvas(self) -> np.ndarray:
@@ -182,16 +185,41 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndar
     with each view's gains and the seam blend; ``cfg.device`` resolved. ``matches_*``: every match
     (N, 2), working-frame source / target pixels: where its neighbours support it, the seam does not
     separate its two copies. ``prior_seam_tgt``: a seam to stay near, x per target row in target
-    pixels (NaN: none), e.g. the current seam of a video."""
-    canvas = warp.overlap.canvas
+    pixels (NaN: none), e.g. the current seam of a video.
+
+    With ``cfg.switch_align`` the source is then aligned to the target wherever that stitch switches
+    views (``switch_align``) and steps 7-9 run again on the aligned source, ``cfg.switch_rounds`` times.
+    """
     supported = neighbour_supported(matches_src, matches_tgt, cfg.support_neighbours, cfg.support_tol_px,
                                     cfg.support_min)
+    prior = _prior_on_canvas(prior_seam_tgt, warp.overlap.canvas)
+    seam = cut_seam(img_src, img_tgt, matches_src[supported], matches_tgt[supported], warp, warp.map_src_canvas, cfg,
+                    clock, prior)
+    for _ in range(cfg.switch_rounds if cfg.switch_align else 0):
+        with clock("switch_align"):
+            views = compensated_views(canvas_views(img_src, img_tgt, seam.map_cut_canvas, warp.overlap.canvas, cfg),
+                                      seam.gains)
+            map_aligned = aligned_source_map(seam.map_cut_canvas, *views.grey(), views.valid_src, views.valid_tgt,
+                                             seam.maps.alpha_canvas, cfg)
+        seam = cut_seam(img_src, img_tgt, matches_src[supported], matches_tgt[supported], warp, map_aligned, cfg,
+                        clock, prior)
+    return seam
+
+
+def cut_seam(img_src: np.ndarray, img_tgt: np.ndarray, copies_src: np.ndarray, copies_tgt: np.ndarray, warp: Warp,
+             map_src_canvas: np.ndarray, cfg: Config, clock: StageClock, prior_x_canvas: np.ndarray | None) -> Seam:
+    """Steps 7-9 on the source map ``map_src_canvas`` (H, W, 2) (step 6's, or aligned at the switches):
+    the seam runs where that source and the target agree, the seam maps resample that map.
+    ``copies_*``: the matches whose two copies the seam does not separate (N, 2), working-frame source /
+    target pixels; ``prior_x_canvas``: ``seam_line``'s."""
+    canvas = warp.overlap.canvas
+    affine = warp.glob.affine_src_to_tgt
     with clock("forward_points"):
-        pts_src_canvas = forward_points(warp.map_src_canvas, warp.glob.affine_src_to_tgt, canvas, warp.inliers_src, cfg)
-        copies_src_canvas = forward_points(warp.map_src_canvas, warp.glob.affine_src_to_tgt, canvas, matches_src[supported], cfg)
+        pts_src_canvas = forward_points(map_src_canvas, affine, canvas, warp.inliers_src, cfg)
+        copies_src_canvas = forward_points(map_src_canvas, affine, canvas, copies_src, cfg)
     pts_tgt_canvas = canvas.tgt_to_canvas(warp.inliers_tgt)
     with clock("views"):
-        views = canvas_views(img_src, img_tgt, warp.map_src_canvas, canvas, cfg)
+        views = canvas_views(img_src, img_tgt, map_src_canvas, canvas, cfg)
     with clock("gains"):
         gains = view_gains(views, cfg)
         views = compensated_views(views, gains)
@@ -199,13 +227,13 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndar
         zone = adequate_zone(pts_src_canvas, pts_tgt_canvas, views.both, *views.grey(), cfg)
     with clock("chain"):
         path = seam_line(zone, views, pts_src_canvas, pts_tgt_canvas, copies_src_canvas,
-                         canvas.tgt_to_canvas(matches_tgt[supported]), cfg, _prior_on_canvas(prior_seam_tgt, canvas))
+                         canvas.tgt_to_canvas(copies_tgt), cfg, prior_x_canvas)
     with clock("seam_maps"):
-        maps = seam_maps(warp.map_src_canvas, canvas, path, cfg)
+        maps = seam_maps(map_src_canvas, canvas, path, cfg)
     with clock("seam_blend"):
         offsets = seam_offsets(views, path.seam_x_canvas, _diagonal_px(img_src, img_tgt), cfg)
         border = border_offsets(views, path.seam_x_canvas, offsets, canvas.offset_tgt, img_tgt.shape[0], cfg)
-    return Seam(zone, path, maps, gains, offsets, border)
+    return Seam(zone, path, maps, gains, offsets, border, map_src_canvas)
 
 
 def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
@@ -251,16 +279,19 @@ def seam_layout(seam: Seam, rig: Rig, cfg: Config, band_px: float | None = None)
 
 def panorama_compositor(maps: StitchMaps, cfg: Config,
                         transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> Compositor:
-    """A compositor for BGR images of the two inputs: the maps, the seam, both views' gains and offsets.
+    """A compositor for BGR images of the two inputs: the maps, the seam, both views' gains and offsets
+    (with ``cfg.seam_blend_gain`` as relative gains: a smooth gain changes no colour or contrast).
     ``transparent``: per input (a, b), (H, W) bool pixels it must not sample (``without_transparent``)."""
     transparent_src, transparent_tgt = maps.rig.pick(*transparent)
+    relative = cfg.seam_blend_gain
     compositor = Compositor(without_transparent(maps.map_src_input, transparent_src),
-                            without_transparent(maps.map_tgt_input, transparent_tgt), maps.seam_input, cfg)
-    gains, offsets = maps.seam.gains, maps.seam.offsets
+                            without_transparent(maps.map_tgt_input, transparent_tgt), maps.seam_input, cfg,
+                            relative_offsets=relative)
+    gains, offsets, border = maps.seam.gains, maps.seam.offsets, maps.seam.border
     compositor.set_gains(len(gains.gain_src), gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt)
-    compositor.set_offsets(offsets.src, offsets.tgt)
-    if maps.seam.border.on:
-        compositor.set_border_offsets(maps.seam.border.lines, maps.seam.border.src, maps.seam.border.tgt)
+    compositor.set_offsets(*(offsets.relative() if relative else (offsets.src, offsets.tgt)))
+    if border.on:
+        compositor.set_border_offsets(border.lines, *(border.relative() if relative else (border.src, border.tgt)))
     return compositor
 
 

@@ -47,8 +47,7 @@ def reference(comp: Compositor, img_src, img_tgt, map_src, map_tgt, border=None)
     else:
         off_src, off_tgt = off_src[:, None, :], off_tgt[:, None, :]
     knee, white = comp.knee() or (math.inf, math.inf)
-    src = tone_curve(v_src, gain_src, bias_src, knee, white) + lf[..., None] * off_src
-    tgt = tone_curve(v_tgt, gain_tgt, bias_tgt, knee, white) + lf[..., None] * off_tgt
+    total_src, total_tgt = lf[..., None] * off_src, lf[..., None] * off_tgt
     if border is not None:
         lines, border_src, border_tgt = border
         height, width = alpha.shape
@@ -57,7 +56,13 @@ def reference(comp: Compositor, img_src, img_tgt, map_src, map_tgt, border=None)
             weight = np.clip(1 - np.abs(line - lines[k]) / comp.layout.lf_px, 0, None)[..., None]
             along_src, along_tgt = (b[k][None, :, :] if comp.layout.lines_are_rows else b[k][:, None, :]
                                     for b in (border_src, border_tgt))
-            src, tgt = src + weight * along_src, tgt + weight * along_tgt
+            total_src, total_tgt = total_src + weight * along_src, total_tgt + weight * along_tgt
+    if comp.relative_offsets:  # a relative change of the gain, before the knee
+        src = tone_curve(v_src, gain_src * (1 + total_src), bias_src, knee, white)
+        tgt = tone_curve(v_tgt, gain_tgt * (1 + total_tgt), bias_tgt, knee, white)
+    else:
+        src = tone_curve(v_src, gain_src, bias_src, knee, white) + total_src
+        tgt = tone_curve(v_tgt, gain_tgt, bias_tgt, knee, white) + total_tgt
     a = np.where(ok_src, np.where(ok_tgt, alpha, 1.0), 0.0)[..., None]
     covered = ok_src | ok_tgt
     return np.where(covered[..., None], np.clip(a * src + (1 - a) * tgt, 0, 255), 0.0), covered
@@ -120,6 +125,37 @@ def test_border_offsets_fade_from_both_borders_on_each_side(scene, lines_are_row
     near = np.abs(np.arange(lines) - 10.5) < 0.5 * seam.lf_px
     changed = np.abs(out.astype(int) - plain.astype(int)).max(axis=2)
     assert (changed[near] if lines_are_rows else changed[:, near]).max() >= 4  # the offsets are there to see
+
+
+@pytest.mark.parametrize("lines_are_rows", [True, False])
+def test_relative_offsets_are_a_gain_that_keeps_white_white(scene, lines_are_rows, warp_device):  # noqa: F811
+    """With ``relative_offsets`` the seam's and borders' offsets scale each side's gain (before its knee):
+    the kernel matches the reference, white squares stay white where the offsets darken their side by
+    20 %, and the mid-tones between them come out about 20 % darker than without the offsets."""
+    img_src, img_tgt, map_src, map_tgt, _ = scene
+    rows, cols = np.indices(img_src.shape[:2])
+    img_src = np.where((((rows // 24) + (cols // 24)) % 2 == 0)[..., None], np.uint8(255), img_src)  # white squares
+    seam = layout(scene, lines_are_rows)
+    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2), relative_offsets=True)
+    comp.set_gains(3, [1.1, 0.9, 1.0], [0.0, 0.0, 0.0], [0.95, 1.05, 1.0], [0.0, 0.0, 0.0])
+    lines = len(seam.positions)
+    comp.set_offsets(np.full((lines, 3), -0.2, np.float32), np.full((lines, 3), 0.1, np.float32))
+    positions = map_src.shape[1] if lines_are_rows else map_src.shape[0]
+    along = np.linspace(-0.1, 0.1, positions, dtype=np.float32)[:, None] * np.ones(3, np.float32)
+    border = ((10.5, lines - 20.5), np.stack([along, -along]), np.stack([-along, along]))
+    comp.set_border_offsets(*border)
+    out = comp.apply(img_src, img_tgt)
+    expected, covered = reference(comp, img_src, img_tgt, map_src, map_tgt, border)
+    assert np.abs(out.astype(np.float64) - expected).max() <= 1.0
+    white_src, _ = remap_reference(img_src, map_src)
+    alpha, lf = comp.seam_weights()
+    shown_white = (white_src.min(axis=2) >= 254.5) & (alpha > 0.999) & (lf > 0.3) & covered
+    assert shown_white.sum() > 50 and out[shown_white].min() >= 254  # fixed point: within a level
+    darkened = (white_src.max(axis=2) < 150) & (white_src.min(axis=2) > 40) & (alpha > 0.999) & (lf > 0.8) & covered
+    plain = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
+    plain.set_gains(3, [1.1, 0.9, 1.0], [0.0, 0.0, 0.0], [0.95, 1.05, 1.0], [0.0, 0.0, 0.0])
+    ratio = (out[darkened].astype(np.float64) + 0.5) / (plain.apply(img_src, img_tgt)[darkened] + 0.5)
+    assert darkened.sum() > 50 and 0.7 < np.median(ratio) < 0.9
 
 
 @pytest.mark.parametrize("device", DEVICES)

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from sena_warp.evaluation import dense, naturalness
+from sena_warp.switch_align import shown_labels, switch_pixels
 
 
 def shifted(img: np.ndarray, dx: float) -> np.ndarray:
@@ -34,9 +35,9 @@ def figures(src: np.ndarray, tgt: np.ndarray, rows_tgt: slice = slice(100, 400),
     grey_src, grey_tgt = (cv2.cvtColor(v, cv2.COLOR_BGR2GRAY).astype(np.float32) for v in (src, tgt))
     _, weight_src, weight_tgt, valid_src, valid_tgt, seam_x = panorama(src, tgt, 256.0, rows_tgt)
     grey_tgt = np.where(valid_tgt, grey_tgt, np.nan)
-    seam, border = dense.switches(dense.shown_labels(weight_src, weight_tgt), valid_src, valid_tgt)
-    flow, back = dense.view_flow(grey_src, grey_tgt, valid_src, valid_tgt)
-    texture_ok, across, ratio = dense.structure(grey_src, grey_tgt)
+    seam, border = switch_pixels(shown_labels(weight_src, weight_tgt), valid_src, valid_tgt)
+    src8, tgt8, flow, back = dense.flows(grey_src, grey_tgt, valid_src, valid_tgt)
+    texture_ok, across, ratio = dense.structure(src8, tgt8)
     shift = dense.visible_shift(flow, across, ratio)
     both = valid_src & valid_tgt
     at_seam, at_border = dense.misalignment(shift, seam, border, both, texture_ok, seam_x, 8.0)

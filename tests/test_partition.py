@@ -68,6 +68,25 @@ def test_seam_offsets_meet_halfway_and_vanish_when_off():
     assert np.all(off.src == 0) and np.all(off.tgt == 0) and off.fade_px == 0
 
 
+def test_seam_offsets_as_a_gain_are_grey_and_relative_to_the_level_they_were_measured_at():
+    """A source brighter than the target by (20, 10, 0) levels per channel at levels 120 / 110 / 100:
+    with ``seam_blend_gain`` each side moves by half the grey difference in every channel (no colour),
+    and as a gain that is that half over the side's own grey level; without it, per channel as before."""
+    height, width = 60, 100
+    src = np.tile(np.uint8([120, 110, 100]), (height, width, 1))
+    tgt = np.tile(np.uint8([100, 100, 100]), (height, width, 1))
+    valid = np.ones((height, width), bool)
+    views = CanvasViews(src, tgt, valid, valid)
+    offsets = seam_offsets(views, np.full(height, 50.0), 500.0, Config())
+    np.testing.assert_allclose(offsets.src, -5.0, atol=1e-4)
+    np.testing.assert_allclose(offsets.tgt, 5.0, atol=1e-4)
+    relative_src, relative_tgt = offsets.relative()
+    np.testing.assert_allclose(relative_src, -5.0 / 110.0, rtol=1e-4)
+    np.testing.assert_allclose(relative_tgt, 5.0 / 100.0, rtol=1e-4)
+    per_channel = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_gain=False))
+    np.testing.assert_allclose(per_channel.src[0], [-10.0, -5.0, 0.0], atol=1e-4)
+
+
 def test_seam_maps_alpha_and_target_map():
     canvas = Canvas(width=120, height=100, offset_tgt=(30.0, 4.0))
     tgt = np.array([[50.0, 0.0], [70.0, 60.0], [60.0, 99.0]])
@@ -174,6 +193,10 @@ def test_border_offsets_meet_halfway_across_the_targets_borders_and_leave_other_
     for k in range(2):
         np.testing.assert_allclose(border.src[k, inside], -5.0, atol=1.0)
         np.testing.assert_allclose(border.tgt[k, inside], 5.0, atol=1.0)
+    grey = img.astype(np.float32).mean(axis=2)
+    for k, rows in enumerate((slice(100, 112), slice(388, 400))):  # the level each side was measured at
+        assert border.level_src[k, inside].mean() == pytest.approx(grey[rows, inside].mean(), abs=2.0)
+        assert border.level_tgt[k, inside].mean() == pytest.approx(grey[rows, inside].mean() - 10.0, abs=2.0)
     other = border_offsets(_border_views(img, 100, 300, 150, img[::-1]), seam_x, none, (150.0, 100.0), 300, cfg)
     assert np.abs(other.src).max() == 0 and np.abs(other.tgt).max() == 0
     off = border_offsets(_border_views(img, 100, 300, 150, darker), seam_x, none, (150.0, 100.0), 300,

@@ -91,3 +91,34 @@ def test_threads_reach_every_launch_of_a_video_stitch(bundled_dir, tmp_path, mon
     band = {"band_difference_kernel", "background_kernel", "band_cost_kernel", "strip_mean_kernel", "frame_runs_kernel"}
     assert {(device, threads) for key, device, threads in seen if key not in band} == {("cpu", THREADS)}
     assert {(device, threads) for key, device, threads in seen if key in band} == {("cpu", runtime.BAND_THREADS)}
+
+
+@pytest.mark.parametrize("changes, aligned", [(dict(switch_align=False), 0), (dict(), 1), (dict(switch_rounds=2), 2)])
+def test_switch_settings_reach_the_seam_stage(udisd_pair, monkeypatch, changes, aligned):
+    """``switch_align`` and ``switch_rounds`` decide how often the source is aligned at the switches (the
+    aligned map's kernel launches) and the seam cut again; the cut uses the aligned map."""
+    seen = launches(monkeypatch)
+    maps = stitch.estimate_maps(*udisd_pair, Config(device="cpu", **changes))
+    assert sum("displaced_map" in key for key, _, _ in seen) == aligned
+    moved = np.abs(maps.seam.map_cut_canvas - maps.warp.map_src_canvas).max()
+    assert (moved > 0.1) == (aligned > 0)
+
+
+@pytest.mark.parametrize("gain", [True, False])
+def test_seam_blend_gain_reaches_the_compositor(udisd_pair, monkeypatch, gain):
+    """``seam_blend_gain``: the panorama's compositor takes the seam blend as relative gains (or grey
+    levels), and the offsets it is given are those (a few % against a few levels)."""
+    made = []
+    real = stitch.Compositor
+
+    def spy(*args, **kwargs):
+        made.append(real(*args, **kwargs))
+        return made[-1]
+
+    monkeypatch.setattr(stitch, "Compositor", spy)
+    pano = stitch.stitch_images(*udisd_pair, Config(device="cpu", seam_blend_gain=gain))
+    comp = made[-1]
+    assert comp.relative_offsets is gain
+    applied = np.abs(comp.offsets(3)[0]).max()
+    assert applied == pytest.approx(np.abs(pano.maps.seam.offsets.relative()[0] if gain else pano.maps.seam.offsets.src).max(),
+                                    rel=1e-3, abs=1e-5)

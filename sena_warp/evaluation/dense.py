@@ -7,16 +7,17 @@ blotches on a brick wall pass between them. These are measured at every pixel. A
 plain arrays in the pipeline's working frame on the canvas (``naturalness``'s conventions), so SENA's
 variants are measured alike.
 
-* *Shown view* (:func:`shown_labels`): per canvas pixel, the view the panorama shows there (the one
+* *Shown view* (``switch_align.shown_labels``): per canvas pixel, the view the panorama shows there (the one
   weighing at least a half; none where neither view covers it). A *switch* is a pixel next to one
   showing the other view. It lies on the *seam* where both views are defined on both sides (the
   pipeline chose to switch there), else on a *border*: one view ends (the target's top or bottom
   edge beyond the seam's ends, the warped source's edge inside the target).
 * *Flow*: DIS optical flow (OpenCV, medium preset) from the target to the source, on the grey views
-  as they enter the panorama (warped, with their gains), over the overlap's bounding box; outside
-  its own valid area each view is continued by its nearest valid pixel (a line crossing the border
-  continues as a streak, so the flow across it is not pulled toward 0 as a fill with the other view
-  would pull it). The target's content at canvas pixel p is in the source at p + flow(p).
+  as they enter the panorama (warped, with their gains), over the overlap's bounding box
+  (``switch_align.view_flow``); outside its own valid area each view is continued by its nearest
+  valid pixel (a line crossing the border continues as a streak, so the flow across it is not pulled
+  toward 0 as a fill with the other view would pull it). The target's content at canvas pixel p is
+  in the source at p + flow(p). The switches are ``switch_align.switch_pixels``.
 * *Misalignment* (px): the part of the flow the image structure shows (:func:`visible_shift`: all
   of it at a corner, the part across the edge on a straight edge, where a shift along the edge
   changes nothing and the flow cannot see it) at the switch's band, where both views are defined
@@ -54,6 +55,8 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
+from sena_warp.switch_align import bounding_box, extended, view_flow
 
 from . import naturalness
 
@@ -97,68 +100,20 @@ class Copies:
     largest_px: int  # pixels of the largest doubled or lost region (0: none)
 
 
-def shown_labels(weight_src: np.ndarray, weight_tgt: np.ndarray) -> np.ndarray:
-    """(H, W) uint8: 1 where the panorama shows the source (its weight at least 0.5), 2 the target, 0 neither."""
-    return np.where(weight_src >= 0.5, 1, np.where(weight_tgt > 0.5, 2, 0)).astype(np.uint8)
-
-
-def switches(label: np.ndarray, valid_src: np.ndarray, valid_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(seam, border): (H, W) bool pixels next to (4-neighbour) a pixel showing the other view, split by
-    whether both views are defined at both pixels (a seam: chosen) or not (a border: a view ends)."""
-    both = valid_src & valid_tgt
-    seam, border = np.zeros(label.shape, bool), np.zeros(label.shape, bool)
-    height, width = label.shape
-    for dy, dx in ((0, 1), (1, 0)):
-        here = (slice(0, height - dy), slice(0, width - dx))
-        there = (slice(dy, height), slice(dx, width))
-        switch = (label[here] != label[there]) & (label[here] > 0) & (label[there] > 0)
-        chosen = switch & both[here] & both[there]
-        for part in (here, there):
-            seam[part] |= chosen
-            border[part] |= switch & ~chosen
-    return seam, border
-
-
-def extended(grey: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """(H, W) uint8: ``grey`` where valid, elsewhere its nearest valid pixel (0 where none is)."""
-    out = np.clip(np.rint(np.nan_to_num(grey)), 0, 255).astype(np.uint8)
-    if valid.all() or not valid.any():
-        return out
-    _, nearest = cv2.distanceTransformWithLabels((~valid).astype(np.uint8), cv2.DIST_L2, 5,
-                                                 labelType=cv2.DIST_LABEL_PIXEL)
-    ys, xs = np.nonzero(valid)
-    lookup = np.zeros(int(nearest.max()) + 1, np.int64)
-    lookup[nearest[ys, xs]] = ys * grey.shape[1] + xs
-    return out.ravel()[lookup[nearest]].reshape(grey.shape)
-
-
-def overlap_box(both: np.ndarray, margin: int) -> tuple[slice, slice] | None:
-    """The overlap's bounding box widened by ``margin``, clipped to the canvas; None without an overlap."""
-    rows, cols = np.flatnonzero(both.any(axis=1)), np.flatnonzero(both.any(axis=0))
-    if not rows.size:
-        return None
-    return (slice(max(rows[0] - margin, 0), min(rows[-1] + margin + 1, both.shape[0])),
-            slice(max(cols[0] - margin, 0), min(cols[-1] + margin + 1, both.shape[1])))
-
-
-def view_flow(grey_src: np.ndarray, grey_tgt: np.ndarray, valid_src: np.ndarray, valid_tgt: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """(flow target -> source, flow source -> target): (H, W, 2) float32 (dx, dy) over the canvas, 0
-    outside the overlap's widened box; each view continued past its own edge (:func:`extended`)."""
-    height, width = grey_src.shape
-    forward, backward = np.zeros((height, width, 2), np.float32), np.zeros((height, width, 2), np.float32)
-    box = overlap_box(valid_src & valid_tgt, FLOW_MARGIN_PX)
-    if box is None:
-        return forward, backward
-    src8, tgt8 = extended(grey_src[box], valid_src[box]), extended(grey_tgt[box], valid_tgt[box])
-    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
-    forward[box] = dis.calc(tgt8, src8, None)
-    backward[box] = dis.calc(src8, tgt8, None)
-    return forward, backward
+def flows(grey_src: np.ndarray, grey_tgt: np.ndarray, valid_src: np.ndarray, valid_tgt: np.ndarray
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(src8, tgt8, flow target -> source, flow source -> target) of two grey canvas views (NaN where
+    undefined): the views continued past their edges (``switch_align.extended``) and the flows on the
+    overlap's bounding box widened by ``FLOW_MARGIN_PX``, DIS medium preset (module docstring)."""
+    src8, tgt8 = extended(grey_src, valid_src), extended(grey_tgt, valid_tgt)
+    flow, back = view_flow(src8, tgt8, bounding_box(valid_src & valid_tgt, FLOW_MARGIN_PX),
+                           cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    return src8, tgt8, flow, back
 
 
 def structure(grey_src: np.ndarray, grey_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(textured (H, W) bool, across (H, W, 2) unit vector, ratio (H, W)) of two grey views on the canvas.
+    """(textured (H, W) bool, across (H, W, 2) unit vector, ratio (H, W)) of two grey views on the
+    canvas, each continued past its edge (:func:`flows`' src8, tgt8: no edge where a view ends).
 
     Per view the structure tensor J (Sobel gradients in grey levels per px, summed over
     ``TENSOR_BOX_PX`` square); textured where the square root of each view's larger eigenvalue is at
@@ -168,7 +123,7 @@ def structure(grey_src: np.ndarray, grey_tgt: np.ndarray) -> tuple[np.ndarray, n
     box = (TENSOR_BOX_PX, TENSOR_BOX_PX)
     tensors, strong = [], []
     for grey in (grey_src, grey_tgt):
-        grey = np.nan_to_num(grey).astype(np.float32)
+        grey = grey.astype(np.float32)
         gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3) / 8.0
         gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3) / 8.0
         jxx, jyy, jxy = (cv2.blur(v, box) for v in (gx * gx, gy * gy, gx * gy))

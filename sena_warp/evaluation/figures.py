@@ -17,6 +17,7 @@ from sena_warp.config import Config
 from sena_warp.gains import compensated, compensated_views
 from sena_warp.rig import image_to_working, matches_to_working
 from sena_warp.stitch import Panorama, Warp
+from sena_warp.switch_align import shown_labels, switch_pixels
 from sena_warp.warp_map import canvas_views, forward_points, remap_image
 from sena_warp.zone import overlap_x_extent
 
@@ -80,7 +81,7 @@ def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Conf
                               cfg.transition_px)
     del seam_src, valid_seam_src  # one canvas image fewer alive at a time (a large pair's peak memory)
     step6_src, valid_step6_src = remap_image(img_src, warp.map_src_canvas, cfg)
-    residuals = anchor_residuals_px(warp.map_src_canvas, seam.maps.map_src_canvas,
+    residuals = anchor_residuals_px(seam.map_cut_canvas, seam.maps.map_src_canvas,
                                     seam.anchors_src_canvas, seam.anchors_tgt_canvas)
     finite = residuals[np.isfinite(residuals)]
     return {
@@ -186,10 +187,9 @@ def dense_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Con
     raw = canvas_views(img_src, img_tgt, seam.maps.map_src_canvas, warp.overlap.canvas, cfg)
     views = compensated_views(raw, seam.gains)
     weight_src, weight_tgt = naturalness.view_weights(seam.maps.alpha_canvas, views.valid_src, views.valid_tgt)
-    seam_px, border_px = dense.switches(dense.shown_labels(weight_src, weight_tgt), views.valid_src, views.valid_tgt)
-    grey_src, grey_tgt = views.grey()
-    flow, flow_back = dense.view_flow(grey_src, grey_tgt, views.valid_src, views.valid_tgt)
-    texture_ok, across, ratio = dense.structure(grey_src, grey_tgt)
+    seam_px, border_px = switch_pixels(shown_labels(weight_src, weight_tgt), views.valid_src, views.valid_tgt)
+    src8, tgt8, flow, flow_back = dense.flows(*views.grey(), views.valid_src, views.valid_tgt)
+    texture_ok, across, ratio = dense.structure(src8, tgt8)
     shift = dense.visible_shift(flow, across, ratio)
     at_seam, at_border = dense.misalignment(shift, seam_px, border_px, views.both, texture_ok, seam.maps.seam_x_canvas,
                                             cfg.transition_px)
