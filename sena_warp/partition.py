@@ -167,6 +167,37 @@ def seam_maps(map_src_canvas: np.ndarray, canvas: Canvas, path: SeamPath, cfg: C
 LEVEL_MIN_GREY = 16.0  # relative offsets: a view's level is taken as at least this (dark rows: no huge gains)
 
 
+def thin_beyond_target(valid_src_canvas: np.ndarray, seam_x_canvas: np.ndarray, offset_tgt: tuple[float, float],
+                       shape_tgt: tuple[int, ...], max_px: float) -> np.ndarray:
+    """(H, W) bool: the source beyond the target's top, bottom and far (right) borders where it goes on
+    for fewer than ``max_px`` pixels past them, next to where the target is shown (right of the seam):
+    a strip that thin shows nothing whole, only content the border cuts, and what is left of the
+    parallax shifts it against the target along the whole border.
+
+    valid_src_canvas: (H, W) bool where the source is defined on the canvas; seam_x_canvas: (H,) seam
+    x per row; offset_tgt: the target's (x, y) on the canvas; shape_tgt: its (h, w, ...).
+    """
+    height, width = valid_src_canvas.shape
+    ox, oy = (int(round(v)) for v in offset_tgt)
+    h, w = shape_tgt[:2]
+    thin = np.zeros((height, width), bool)
+    seam_x = np.nan_to_num(np.asarray(seam_x_canvas, np.float64), nan=np.inf)
+    cols = np.arange(width)
+    for edge, beyond in ((oy, np.arange(oy - 1, -1, -1)), (oy + h - 1, np.arange(oy + h, height))):
+        if not beyond.size or not 0 <= edge < height:
+            continue
+        run = np.cumprod(valid_src_canvas[beyond], axis=0).astype(bool)  # unbroken from the border out
+        length = run.sum(axis=0)
+        shown_tgt = (cols >= ox) & (cols < ox + w) & (cols > seam_x[edge])
+        thin[beyond] |= run & (shown_tgt & (length < max_px))[None, :]
+    beyond = np.arange(ox + w, width)
+    rows = slice(max(oy, 0), min(oy + h, height))
+    if beyond.size:
+        run = np.cumprod(valid_src_canvas[rows][:, beyond], axis=1).astype(bool)
+        thin[rows, ox + w:] |= run & (run.sum(axis=1) < max_px)[:, None]
+    return thin
+
+
 @dataclass(frozen=True)
 class SeamOffsets:
     """The seam blend's low-frequency part: per canvas row, grey levels added to each view near the

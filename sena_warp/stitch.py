@@ -12,8 +12,8 @@ compositor never transposes frames.
 
 Where this departs from the paper (issue 13, ``docs/evaluation.md``), the paper's version stays one
 setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
-``seam_model="paper"`` (steps 8-9), ``switch_align=False``, ``gain_model="none"``, ``seam_blend_ratio=0``,
-``border_blend=False``, ``transition_px=24``.
+``seam_model="paper"`` (steps 8-9), ``switch_align=False``, ``thin_strip_ratio=0``, ``gain_model="none"``,
+``seam_blend_ratio=0``, ``border_blend=False``, ``transition_px=24``.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -37,7 +37,8 @@ from .gate import gate_canvas, guard_field
 from .global_affine import GlobalAffine, fit_global_affine, near_model
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
-from .partition import BorderOffsets, SeamMaps, SeamOffsets, border_offsets, seam_maps, seam_offsets
+from .partition import (BorderOffsets, SeamMaps, SeamOffsets, border_offsets, seam_maps, seam_offsets,
+                        thin_beyond_target)
 from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .seam_path import SeamPath, seam_line
@@ -230,6 +231,11 @@ def cut_seam(img_src: np.ndarray, img_tgt: np.ndarray, copies_src: np.ndarray, c
                          canvas.tgt_to_canvas(copies_tgt), cfg, prior_x_canvas)
     with clock("seam_maps"):
         maps = seam_maps(map_src_canvas, canvas, path, cfg)
+        if cfg.thin_strip_ratio > 0:  # left out: the source in thin strips beyond the target's borders
+            thin = thin_beyond_target(views.valid_src, path.seam_x_canvas, canvas.offset_tgt, img_tgt.shape,
+                                      cfg.thin_strip_ratio * _diagonal_px(img_src, img_tgt))
+            maps = replace(maps, map_src_canvas=np.where(thin[..., None], np.float32(np.nan), maps.map_src_canvas))
+            views = replace(views, valid_src=views.valid_src & ~thin)
     with clock("seam_blend"):
         offsets = seam_offsets(views, path.seam_x_canvas, _diagonal_px(img_src, img_tgt), cfg)
         border = border_offsets(views, path.seam_x_canvas, offsets, canvas.offset_tgt, img_tgt.shape[0], cfg)

@@ -40,6 +40,7 @@ MIN_SUPPORT, FULL_SUPPORT = 0.02, 0.08  # a switch's correction counts in full w
 SPREAD_FULL_PX, SPREAD_NONE_PX = 1.0, 4.0  # ... and where the followed flow near it agrees within this (std):
 # two depths, or wrong matches among right ones, leave the switch as it is
 FIELD_SIGMA_PX = 3.0  # the carried field is blurred by this: no tear where two switches' reaches meet
+SLOPE_ROUNDS = 4  # slope_limited: rounds of scaling the field down where it is steep
 
 
 def view_weights(alpha_canvas: np.ndarray, valid_src: np.ndarray, valid_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -143,7 +144,8 @@ def switch_correction(flow: np.ndarray, followed: np.ndarray, switches: np.ndarr
     or where it disagrees with itself (``SPREAD_FULL_PX``, ``SPREAD_NONE_PX``); carried to every cell
     from its nearest switch cell, weighted by 1 - smootherstep(distance / L), L = max(
     ``cfg.switch_fade_px``, 1.875 |C| / ``cfg.switch_max_slope``) (smootherstep's steepest slope is
-    1.875 / L), and blurred by ``FIELD_SIGMA_PX``.
+    1.875 / L), blurred by ``FIELD_SIGMA_PX`` and kept from changing faster than ``cfg.switch_max_slope``
+    anywhere (:func:`slope_limited`).
     """
     height, width = switches.shape
     if not switches.any() or not followed.any():
@@ -175,7 +177,26 @@ def switch_correction(flow: np.ndarray, followed: np.ndarray, switches: np.ndarr
     t = np.clip(distance * cell / reach, 0.0, 1.0)
     fade = 1.0 - t * t * t * (t * (6.0 * t - 15.0) + 10.0)
     field = cv2.GaussianBlur((carried * fade[..., None]).astype(np.float32), (0, 0), FIELD_SIGMA_PX / cell)
+    field = slope_limited(field, cfg.switch_max_slope * cell)
     return cv2.resize(field, (small[0] * cell, small[1] * cell), interpolation=cv2.INTER_LINEAR)[:height, :width]
+
+
+def slope_limited(field: np.ndarray, max_slope: float) -> np.ndarray:
+    """(H, W, 2) float32 ``field`` scaled down where it changes by more than ``max_slope`` per pixel in any
+    direction (central differences, either component): what varies along a switch (a correction that
+    follows one depth here and another there) would bend every line there. ``SLOPE_ROUNDS`` times, each
+    scale the smallest within a pixel and blurred, so that the scaling makes no steep edge of its own."""
+    for _ in range(SLOPE_ROUNDS):
+        steepest = np.zeros(field.shape[:2], np.float32)
+        for k in range(2):
+            gy, gx = np.gradient(field[..., k])
+            steepest = np.maximum(steepest, np.maximum(np.abs(gx), np.abs(gy)))
+        if steepest.max() <= max_slope:
+            break
+        scale = np.minimum(1.0, max_slope / np.maximum(steepest, 1e-6)).astype(np.float32)
+        scale = cv2.GaussianBlur(cv2.erode(scale, np.ones((3, 3), np.uint8)), (0, 0), 1.0)
+        field = field * scale[..., None]
+    return field
 
 
 def displaced_map(map_src_canvas: np.ndarray, field_canvas: np.ndarray, cfg: Config) -> np.ndarray:

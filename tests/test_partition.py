@@ -10,7 +10,8 @@ from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.evaluation.metrics import anchor_residuals_px, transition_mad
 from sena_warp.imageio import read_image
-from sena_warp.partition import SeamOffsets, border_offsets, seam_maps, seam_offsets, seam_rows, smooth_curve
+from sena_warp.partition import (SeamOffsets, border_offsets, seam_maps, seam_offsets, seam_rows, smooth_curve,
+                                 thin_beyond_target)
 from sena_warp.seam_path import straight_path
 from sena_warp.warp_map import CanvasViews
 
@@ -202,3 +203,20 @@ def test_border_offsets_meet_halfway_across_the_targets_borders_and_leave_other_
     off = border_offsets(_border_views(img, 100, 300, 150, darker), seam_x, none, (150.0, 100.0), 300,
                          cfg.replace(border_blend=False))
     assert not off.on and np.abs(off.tgt).max() == 0
+
+
+def test_thin_strips_of_the_source_beyond_the_targets_borders_are_found():
+    """The target at rows 20-79, columns 40-139 of a 100 x 160 canvas, the seam down x 60. The source goes
+    on 5 rows above the target's top border up to column 99 and 20 rows beyond it from there; 3 rows
+    below its bottom border; 4 columns beyond its right border. With 12 px as the limit the 5-row strip
+    right of the seam, the 3-row one and the 4-column one are thin; the 20-row part and everything left
+    of the seam are not."""
+    valid = np.zeros((100, 160), bool)
+    valid[15:83, :144] = True
+    valid[0:20, 100:144] = True  # 20 rows above the border (all of the canvas there)
+    seam_x = np.full(100, 60.0)
+    thin = thin_beyond_target(valid, seam_x, (40.0, 20.0), (60, 100, 3), 12.0)
+    assert thin[15:20, 61:100].all() and not thin[15:20, :60].any() and not thin[:20, 100:].any()
+    assert thin[80:83, 61:140].all() and not thin[80:83, :60].any()
+    assert thin[20:80, 140:144].all()
+    assert thin.sum() == 5 * 39 + 3 * 79 + 60 * 4

@@ -16,7 +16,7 @@ import numpy as np
 from sena_warp.config import Config
 from sena_warp.gains import compensated, compensated_views
 from sena_warp.rig import image_to_working, matches_to_working
-from sena_warp.stitch import Panorama, Warp
+from sena_warp.stitch import Panorama, Warp, panorama_compositor
 from sena_warp.switch_align import shown_labels, switch_pixels
 from sena_warp.warp_map import canvas_views, forward_points, remap_image
 from sena_warp.zone import overlap_x_extent
@@ -177,9 +177,10 @@ def dense_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Con
     views as the panorama shows them, at the seam's textured band and at the borders' (NaN: no such
     pixel); ``doubled_pct``, ``lost_pct``: of the consistent textured overlap pixels, those shown twice
     or nowhere; ``dup_objects``, ``dup_object_px``: such regions of at least ``dense.OBJECT_MIN_PX``
-    pixels, the largest; ``tone_spread_pct``, ``tone_colour_pct``: tone fidelity of the
-    panorama, ``*_plain_pct`` of the plain one (each view times its gains, nothing else);
-    ``white_cast_grey`` and ``white_cast_plain_grey`` likewise. ``cfg.device`` resolved.
+    pixels, the largest; ``tone_spread_pct``, ``tone_colour_pct``: tone fidelity of the panorama
+    against the views as the same compositor shows them (:func:`rendered`), ``*_plain_pct`` of the plain
+    panorama (each view times its gains, nothing else); ``white_cast_grey`` and
+    ``white_cast_plain_grey`` likewise. ``cfg.device`` resolved.
     """
     maps = pano.maps
     warp, seam = maps.warp, maps.seam
@@ -195,13 +196,10 @@ def dense_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Con
                                             cfg.transition_px)
     shown = dense.copies(flow, flow_back, shift, weight_src, weight_tgt, views.both, texture_ok)
     pures = (weight_src >= dense.PURE_WEIGHT, weight_tgt >= dense.PURE_WEIGHT)
-    gains = seam.gains
-    plain = np.where(pures[0][:, :, None], compensated(raw.src, gains.gain_src, gains.bias_src, 255.0),
-                     compensated(raw.tgt, gains.gain_tgt, gains.bias_tgt, 255.0))
+    view, plain = (rendered(img_a, img_b, pano, cfg, with_gains) for with_gains in (False, True))
     pano_working = image_to_working(pano.image, maps.rig)[:, :, :3]
-    spread, colour = dense.tone_figures(pano_working, (raw.src, raw.tgt), pures)
-    spread_plain, colour_plain = dense.tone_figures(plain, (raw.src, raw.tgt), pures)
-    view = np.where(pures[0][:, :, None], raw.src, raw.tgt)
+    spread, colour = dense.tone_figures(pano_working, (view, view), pures)
+    spread_plain, colour_plain = dense.tone_figures(plain, (view, view), pures)
     return {
         "seam_misalign_median_px": at_seam.median_px,
         "seam_misalign_p95_px": at_seam.p95_px,
@@ -218,6 +216,25 @@ def dense_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Con
         "white_cast_grey": dense.white_cast(pano_working, view, pures[0] | pures[1]),
         "white_cast_plain_grey": dense.white_cast(plain, view, pures[0] | pures[1]),
     }
+
+
+def rendered(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config, with_gains: bool) -> np.ndarray:
+    """(H, W, 3) uint8 working-canvas panorama of a finished stitch composited again with no seam blend:
+    each view as it is (``with_gains`` False) or times its gains alone (the plain panorama). The same
+    compositor and sampling as the panorama's, so that comparing them sees tones, not resampling."""
+    maps = pano.maps
+    compositor = panorama_compositor(maps, cfg)
+    gains = maps.seam.gains
+    channels = len(gains.gain_src)
+    if not with_gains:
+        ones, zeros = np.ones(channels), np.zeros(channels)
+        compositor.set_gains(channels, ones, zeros, ones, zeros)
+    lines = np.zeros((compositor.lines, channels), np.float32)
+    compositor.set_offsets(lines, lines)
+    if maps.seam.border.on:
+        along = np.zeros_like(maps.seam.border.src)
+        compositor.set_border_offsets(maps.seam.border.lines, along, along)
+    return image_to_working(compositor.apply(*maps.rig.pick(img_a, img_b)), maps.rig)
 
 
 def report_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
