@@ -137,11 +137,11 @@ class Config:
 
     # --- Switch alignment (ours, switch_align.py; no step of the paper) -------------------------
     switch_align: bool = True  # align the source to the target at the seam and the borders, cut again (False: paper)
-    switch_rounds: int = 1  # align and cut again this many times
+    switch_rounds: int = 2  # align and cut again this many times
     switch_flow_preset: int = 1  # DIS optical flow preset between the views: 0 ultrafast, 1 fast, 2 medium
     switch_band_px: float = 24.0  # the flow is followed this far from a switch, where both views are defined
-    switch_sigma_px: float = 6.0  # and smoothed along the switches by a normalised Gaussian of this sigma
-    switch_max_px: float = 40.0  # flow larger than this is not followed (a depth jump the seam must avoid)
+    switch_sigma_px: float = 8.0  # and smoothed along the switches by a normalised Gaussian of this sigma
+    switch_max_px: float = 80.0  # flow larger than this is not followed (a depth jump the seam must avoid)
     switch_fade_px: float = 48.0  # the correction fades to 0 this far from its switch (smootherstep) at least,
     switch_max_slope: float = 0.25  # and further where it is large: it changes by at most this per px
     switch_cell_px: int = 4  # the correction field is worked out on cells this wide (it is smooth) and upsampled

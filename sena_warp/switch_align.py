@@ -40,6 +40,9 @@ MIN_SUPPORT, FULL_SUPPORT = 0.02, 0.08  # a switch's correction counts in full w
 SPREAD_FULL_PX, SPREAD_NONE_PX = 1.0, 4.0  # ... and where the followed flow near it agrees within this (std):
 # two depths, or wrong matches among right ones, leave the switch as it is
 FIELD_SIGMA_PX = 3.0  # the carried field is blurred by this: no tear where two switches' reaches meet
+KNOWN_SUPPORT = 0.2  # carried_out: a coarse cell is known in full where this share of it is trusted switch cells
+HARMONIC_ROUNDS = 24  # carried_out: Jacobi rounds per pyramid level
+FOLD_SLOPE = 0.5  # the field is scaled down where it changes by more than this per px (far from a fold at 1)
 SLOPE_ROUNDS = 4  # slope_limited: rounds of scaling the field down where it is steep
 
 
@@ -142,10 +145,11 @@ def switch_correction(flow: np.ndarray, followed: np.ndarray, switches: np.ndarr
     upsampled bilinearly: at each switch cell, the normalised Gaussian average (``cfg.switch_sigma_px``)
     of the followed flow, trusted in part where little of it is near (``MIN_SUPPORT``, ``FULL_SUPPORT``)
     or where it disagrees with itself (``SPREAD_FULL_PX``, ``SPREAD_NONE_PX``); carried to every cell
-    from its nearest switch cell, weighted by 1 - smootherstep(distance / L), L = max(
+    from the switch cells near it, as far as they are trusted (:func:`carried_out`), weighted by
+    1 - smootherstep(distance to a trusted switch cell / L), L = max(
     ``cfg.switch_fade_px``, 1.875 |C| / ``cfg.switch_max_slope``) (smootherstep's steepest slope is
-    1.875 / L), blurred by ``FIELD_SIGMA_PX`` and kept from changing faster than ``cfg.switch_max_slope``
-    anywhere (:func:`slope_limited`).
+    1.875 / L), blurred by ``FIELD_SIGMA_PX`` and kept from changing faster than ``FOLD_SLOPE`` anywhere
+    (:func:`slope_limited`: where two switches want very different corrections close together).
     """
     height, width = switches.shape
     if not switches.any() or not followed.any():
@@ -163,22 +167,42 @@ def switch_correction(flow: np.ndarray, followed: np.ndarray, switches: np.ndarr
                                 - (smooth * smooth).sum(axis=2), 0.0))
     trust = np.clip((support - MIN_SUPPORT) / (FULL_SUPPORT - MIN_SUPPORT), 0.0, 1.0)
     trust *= np.clip((SPREAD_NONE_PX - spread) / (SPREAD_NONE_PX - SPREAD_FULL_PX), 0.0, 1.0)
-    smooth *= trust[..., None]
     corrected = on_switch & (trust > 0)
     if not corrected.any():
         return np.zeros((height, width, 2), np.float32)
-    distance, nearest = cv2.distanceTransformWithLabels((~corrected).astype(np.uint8), cv2.DIST_L2, 5,
-                                                        labelType=cv2.DIST_LABEL_PIXEL)
-    ys, xs = np.nonzero(corrected)
-    at_switch = np.zeros((int(nearest.max()) + 1, 2), np.float32)
-    at_switch[nearest[ys, xs]] = smooth[ys, xs]
-    carried = at_switch[nearest]
+    distance = cv2.distanceTransform((~corrected).astype(np.uint8), cv2.DIST_L2, 5)
+    carried = carried_out(smooth, np.where(on_switch, trust, 0.0).astype(np.float32))
     reach = np.maximum(cfg.switch_fade_px, 1.875 * np.hypot(carried[..., 0], carried[..., 1]) / cfg.switch_max_slope)
     t = np.clip(distance * cell / reach, 0.0, 1.0)
     fade = 1.0 - t * t * t * (t * (6.0 * t - 15.0) + 10.0)
     field = cv2.GaussianBlur((carried * fade[..., None]).astype(np.float32), (0, 0), FIELD_SIGMA_PX / cell)
-    field = slope_limited(field, cfg.switch_max_slope * cell)
+    field = slope_limited(field, FOLD_SLOPE * cell)
     return cv2.resize(field, (small[0] * cell, small[1] * cell), interpolation=cv2.INTER_LINEAR)[:height, :width]
+
+
+def carried_out(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """(H, W, 2) float32: ``values`` (H, W, 2), known with confidence ``weight`` (H, W) in [0, 1], carried
+    to every cell by a harmonic extension: each cell the weighted mix of its known value and the mean of
+    its neighbours (free cells: the mean alone). On the switches the values themselves where they are
+    trusted, their neighbours' where not, and between two switches that disagree a smooth blend of
+    both, never beyond them: no tear where the nearest switch changes, no bump. Solved coarse to fine on
+    a Gaussian pyramid, ``HARMONIC_ROUNDS`` Jacobi rounds a level from the coarser level's solution."""
+    num, den = values * weight[..., None], weight
+    levels = []
+    while True:
+        levels.append((num / np.maximum(den, 1e-12)[..., None], np.clip(den / KNOWN_SUPPORT, 0.0, 1.0)[..., None]))
+        if min(den.shape) < 8:
+            break
+        num, den = cv2.pyrDown(num), cv2.pyrDown(den)
+    known_values, known = levels[-1]
+    field = np.zeros_like(known_values)
+    total = known.sum()
+    field[:] = (known_values * known).sum(axis=(0, 1)) / total if total > 0 else 0.0
+    for known_values, known in levels[::-1]:
+        field = cv2.resize(field, known.shape[1::-1], interpolation=cv2.INTER_LINEAR)
+        for _ in range(HARMONIC_ROUNDS):
+            field = known * known_values + (1.0 - known) * cv2.blur(field, (3, 3))
+    return field.astype(np.float32)
 
 
 def slope_limited(field: np.ndarray, max_slope: float) -> np.ndarray:

@@ -62,10 +62,10 @@ def test_the_correction_fades_no_faster_than_its_slope_allows(udisd_pair):
 
 
 def test_misalignment_beyond_the_limit_is_not_followed(udisd_pair):
-    """A 60 px misalignment is more than ``switch_max_px``: a local warp that large would fold the
+    """A 100 px misalignment is more than ``switch_max_px``: a local warp that large would fold the
     source, and the map stays as it was."""
     img = udisd_pair[0]
-    map_src, *views = canvas_case(img, 60.0, slice(0, 512))
+    map_src, *views = canvas_case(img, 100.0, slice(0, 512))
     aligned = aligned_source_map(map_src, *views, CFG)
     assert np.hypot(*(aligned - map_src).transpose(2, 0, 1)).max() < 0.5
 
