@@ -194,25 +194,25 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndar
     supported = neighbour_supported(matches_src, matches_tgt, cfg.support_neighbours, cfg.support_tol_px,
                                     cfg.support_min)
     prior = _prior_on_canvas(prior_seam_tgt, warp.overlap.canvas)
-    seam = cut_seam(img_src, img_tgt, matches_src[supported], matches_tgt[supported], warp, warp.map_src_canvas, cfg,
-                    clock, prior)
+    copies = matches_src[supported], matches_tgt[supported]
+    seam, views = cut_seam(img_src, img_tgt, *copies, warp, warp.map_src_canvas, cfg, clock, prior)
     for _ in range(cfg.switch_rounds if cfg.switch_align else 0):
         with clock("switch_align"):
-            views = compensated_views(canvas_views(img_src, img_tgt, seam.map_cut_canvas, warp.overlap.canvas, cfg),
-                                      seam.gains)
             map_aligned = aligned_source_map(seam.map_cut_canvas, *views.grey(), views.valid_src, views.valid_tgt,
                                              seam.maps.alpha_canvas, cfg)
-        seam = cut_seam(img_src, img_tgt, matches_src[supported], matches_tgt[supported], warp, map_aligned, cfg,
-                        clock, prior)
+        seam, views = cut_seam(img_src, img_tgt, *copies, warp, map_aligned, cfg, clock, prior, seam.gains)
     return seam
 
 
 def cut_seam(img_src: np.ndarray, img_tgt: np.ndarray, copies_src: np.ndarray, copies_tgt: np.ndarray, warp: Warp,
-             map_src_canvas: np.ndarray, cfg: Config, clock: StageClock, prior_x_canvas: np.ndarray | None) -> Seam:
+             map_src_canvas: np.ndarray, cfg: Config, clock: StageClock, prior_x_canvas: np.ndarray | None,
+             gains: Gains | None = None) -> tuple[Seam, CanvasViews]:
     """Steps 7-9 on the source map ``map_src_canvas`` (H, W, 2) (step 6's, or aligned at the switches):
     the seam runs where that source and the target agree, the seam maps resample that map.
     ``copies_*``: the matches whose two copies the seam does not separate (N, 2), working-frame source /
-    target pixels; ``prior_x_canvas``: ``seam_line``'s."""
+    target pixels; ``prior_x_canvas``: ``seam_line``'s; ``gains``: the views' gains, measured here when
+    None (a source aligned locally keeps the gains measured before). Returns the seam and the views it
+    was cut on, with their gains, where the panorama shows them (thin strips left out)."""
     canvas = warp.overlap.canvas
     affine = warp.glob.affine_src_to_tgt
     with clock("forward_points"):
@@ -222,7 +222,7 @@ def cut_seam(img_src: np.ndarray, img_tgt: np.ndarray, copies_src: np.ndarray, c
     with clock("views"):
         views = canvas_views(img_src, img_tgt, map_src_canvas, canvas, cfg)
     with clock("gains"):
-        gains = view_gains(views, cfg)
+        gains = view_gains(views, cfg) if gains is None else gains
         views = compensated_views(views, gains)
     with clock("zone"):
         zone = adequate_zone(pts_src_canvas, pts_tgt_canvas, views.both, *views.grey(), cfg)
@@ -239,7 +239,7 @@ def cut_seam(img_src: np.ndarray, img_tgt: np.ndarray, copies_src: np.ndarray, c
     with clock("seam_blend"):
         offsets = seam_offsets(views, path.seam_x_canvas, _diagonal_px(img_src, img_tgt), cfg)
         border = border_offsets(views, path.seam_x_canvas, offsets, canvas.offset_tgt, img_tgt.shape[0], cfg)
-    return Seam(zone, path, maps, gains, offsets, border, map_src_canvas)
+    return Seam(zone, path, maps, gains, offsets, border, map_src_canvas), views
 
 
 def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
