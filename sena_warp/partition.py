@@ -164,38 +164,35 @@ def seam_maps(map_src_canvas: np.ndarray, canvas: Canvas, path: SeamPath, cfg: C
     )
 
 
-LEVEL_MIN_GREY = 16.0  # relative offsets: a view's level is taken as at least this (dark rows: no huge gains)
+def thin_strips(label: np.ndarray, max_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """(source, target): (H, W) bool pixels of a view the panorama shows only in a strip thinner than
+    ``max_px`` along the canvas's edge of what it covers, before the other view takes over: the source
+    a few px beyond the target's top, bottom or far border, the target a few px beyond the warped
+    source's edge. A strip that thin shows nothing whole, only content the switch cuts, and what is
+    left of the parallax shifts it against the other view all along (issue 35).
 
-
-def thin_beyond_target(valid_src_canvas: np.ndarray, seam_x_canvas: np.ndarray, offset_tgt: tuple[float, float],
-                       shape_tgt: tuple[int, ...], max_px: float) -> np.ndarray:
-    """(H, W) bool: the source beyond the target's top, bottom and far (right) borders where it goes on
-    for fewer than ``max_px`` pixels past them, next to where the target is shown (right of the seam):
-    a strip that thin shows nothing whole, only content the border cuts, and what is left of the
-    parallax shifts it against the target along the whole border.
-
-    valid_src_canvas: (H, W) bool where the source is defined on the canvas; seam_x_canvas: (H,) seam
-    x per row; offset_tgt: the target's (x, y) on the canvas; shape_tgt: its (h, w, ...).
+    label: (H, W) uint8 the view shown per canvas pixel (``switch_align.shown_labels``: 1 source, 2
+    target, 0 none). Per column from the top and from the bottom, per row from the left and the right:
+    the first run of one view, where the other view follows it directly and it is shorter than max_px.
     """
-    height, width = valid_src_canvas.shape
-    ox, oy = (int(round(v)) for v in offset_tgt)
-    h, w = shape_tgt[:2]
-    thin = np.zeros((height, width), bool)
-    seam_x = np.nan_to_num(np.asarray(seam_x_canvas, np.float64), nan=np.inf)
-    cols = np.arange(width)
-    for edge, beyond in ((oy, np.arange(oy - 1, -1, -1)), (oy + h - 1, np.arange(oy + h, height))):
-        if not beyond.size or not 0 <= edge < height:
-            continue
-        run = np.cumprod(valid_src_canvas[beyond], axis=0).astype(bool)  # unbroken from the border out
+    thin = np.zeros(label.shape, bool)
+    for flip_rows, transpose in ((False, False), (True, False), (False, True), (True, True)):
+        lab = label.T if transpose else label
+        lab = lab[::-1] if flip_rows else lab
+        shown = lab > 0
+        rows = np.arange(lab.shape[0])[:, None]
+        first = np.argmax(shown, axis=0)[None, :]
+        view = np.take_along_axis(lab, first, axis=0)
+        run = np.cumprod((lab == view) | (rows < first), axis=0).astype(bool) & (rows >= first)
         length = run.sum(axis=0)
-        shown_tgt = (cols >= ox) & (cols < ox + w) & (cols > seam_x[edge])
-        thin[beyond] |= run & (shown_tgt & (length < max_px))[None, :]
-    beyond = np.arange(ox + w, width)
-    rows = slice(max(oy, 0), min(oy + h, height))
-    if beyond.size:
-        run = np.cumprod(valid_src_canvas[rows][:, beyond], axis=1).astype(bool)
-        thin[rows, ox + w:] |= run & (run.sum(axis=1) < max_px)[:, None]
-    return thin
+        after = np.take_along_axis(lab, np.minimum(first[0] + length, lab.shape[0] - 1)[None, :], axis=0)[0]
+        strip = run & ((length < max_px) & (first[0] + length < lab.shape[0]) & (after > 0) & (after != view[0]))[None, :]
+        strip = strip[::-1] if flip_rows else strip
+        thin |= strip.T if transpose else strip
+    return thin & (label == 1), thin & (label == 2)
+
+
+LEVEL_MIN_GREY = 16.0  # relative offsets: a view's level is taken as at least this (dark rows: no huge gains)
 
 
 @dataclass(frozen=True)

@@ -38,11 +38,11 @@ from .global_affine import GlobalAffine, fit_global_affine, near_model
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
 from .partition import (BorderOffsets, SeamMaps, SeamOffsets, border_offsets, seam_maps, seam_offsets,
-                        thin_beyond_target)
+                        thin_strips)
 from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .seam_path import SeamPath, seam_line
-from .switch_align import aligned_source_map
+from .switch_align import aligned_source_map, shown_labels, view_weights
 from .warp_map import CanvasViews, canvas_views, forward_points, source_map_canvas
 from .zone import Zone, adequate_zone
 from sena_warp.kernels import runtime
@@ -231,11 +231,13 @@ def cut_seam(img_src: np.ndarray, img_tgt: np.ndarray, copies_src: np.ndarray, c
                          canvas.tgt_to_canvas(copies_tgt), cfg, prior_x_canvas)
     with clock("seam_maps"):
         maps = seam_maps(map_src_canvas, canvas, path, cfg)
-        if cfg.thin_strip_ratio > 0:  # left out: the source in thin strips beyond the target's borders
-            thin = thin_beyond_target(views.valid_src, path.seam_x_canvas, canvas.offset_tgt, img_tgt.shape,
-                                      cfg.thin_strip_ratio * _diagonal_px(img_src, img_tgt))
-            maps = replace(maps, map_src_canvas=np.where(thin[..., None], np.float32(np.nan), maps.map_src_canvas))
-            views = replace(views, valid_src=views.valid_src & ~thin)
+        if cfg.thin_strip_ratio > 0:  # left out: a view shown only in a thin strip where the other takes over
+            label = shown_labels(*view_weights(maps.alpha_canvas, views.valid_src, views.valid_tgt))
+            thin_src, thin_tgt = thin_strips(label, cfg.thin_strip_ratio * _diagonal_px(img_src, img_tgt))
+            nan = np.float32(np.nan)
+            maps = replace(maps, map_src_canvas=np.where(thin_src[..., None], nan, maps.map_src_canvas),
+                           map_tgt_canvas=np.where(thin_tgt[..., None], nan, maps.map_tgt_canvas))
+            views = replace(views, valid_src=views.valid_src & ~thin_src, valid_tgt=views.valid_tgt & ~thin_tgt)
     with clock("seam_blend"):
         offsets = seam_offsets(views, path.seam_x_canvas, _diagonal_px(img_src, img_tgt), cfg)
         border = border_offsets(views, path.seam_x_canvas, offsets, canvas.offset_tgt, img_tgt.shape[0], cfg)

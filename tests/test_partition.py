@@ -11,7 +11,7 @@ from sena_warp.config import Config
 from sena_warp.evaluation.metrics import anchor_residuals_px, transition_mad
 from sena_warp.imageio import read_image
 from sena_warp.partition import (SeamOffsets, border_offsets, seam_maps, seam_offsets, seam_rows, smooth_curve,
-                                 thin_beyond_target)
+                                 thin_strips)
 from sena_warp.seam_path import straight_path
 from sena_warp.warp_map import CanvasViews
 
@@ -205,18 +205,22 @@ def test_border_offsets_meet_halfway_across_the_targets_borders_and_leave_other_
     assert not off.on and np.abs(off.tgt).max() == 0
 
 
-def test_thin_strips_of_the_source_beyond_the_targets_borders_are_found():
-    """The target at rows 20-79, columns 40-139 of a 100 x 160 canvas, the seam down x 60. The source goes
-    on 5 rows above the target's top border up to column 99 and 20 rows beyond it from there; 3 rows
-    below its bottom border; 4 columns beyond its right border. With 12 px as the limit the 5-row strip
-    right of the seam, the 3-row one and the 4-column one are thin; the 20-row part and everything left
-    of the seam are not."""
-    valid = np.zeros((100, 160), bool)
-    valid[15:83, :144] = True
-    valid[0:20, 100:144] = True  # 20 rows above the border (all of the canvas there)
-    seam_x = np.full(100, 60.0)
-    thin = thin_beyond_target(valid, seam_x, (40.0, 20.0), (60, 100, 3), 12.0)
-    assert thin[15:20, 61:100].all() and not thin[15:20, :60].any() and not thin[:20, 100:].any()
-    assert thin[80:83, 61:140].all() and not thin[80:83, :60].any()
-    assert thin[20:80, 140:144].all()
-    assert thin.sum() == 5 * 39 + 3 * 79 + 60 * 4
+def test_thin_strips_of_either_view_where_the_other_takes_over_are_found():
+    """A 100 x 160 canvas: the target shown at rows 20-79, columns 61-139 (right of a seam down x 60), the
+    source elsewhere where it goes: left of the seam from row 3 (so the target's 2 rows above it, columns
+    40-60, are a thin strip of the target), 5 rows above the target up to column 99 and 20 rows from
+    there, 3 rows below it, 4 columns right of it. With 12 px as the limit the 2-row target strip, the
+    5-row, 3-row and 4-column source strips are thin; the 20-row part and the source left of the target
+    (where nothing takes over) are not."""
+    label = np.zeros((100, 160), np.uint8)
+    label[15:83, :144] = 1
+    label[0:20, 100:144] = 1
+    label[20:80, 61:140] = 2
+    label[3:15, :61] = 1  # left of the seam the source starts at row 3 ...
+    label[0:3, 40:61] = 2  # ... with the target above its top edge there
+    thin_src, thin_tgt = thin_strips(label, 12.0)
+    assert thin_src[15:20, 61:100].all() and not thin_src[:20, 100:140].any()
+    assert thin_src[80:83, 61:140].all() and thin_src[20:80, 140:144].all()
+    assert not thin_src[:, :61].any()
+    assert thin_src.sum() == 5 * 39 + 3 * 79 + 60 * 4
+    assert thin_tgt[0:3, 40:61].all() and thin_tgt.sum() == 3 * 21

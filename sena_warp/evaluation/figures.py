@@ -9,6 +9,7 @@ in the target frame (the UDIS-D protocol: the warped source against the target).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -18,7 +19,7 @@ from sena_warp.gains import compensated, compensated_views
 from sena_warp.rig import image_to_working, matches_to_working
 from sena_warp.stitch import Panorama, Warp, panorama_compositor
 from sena_warp.switch_align import shown_labels, switch_pixels
-from sena_warp.warp_map import canvas_views, forward_points, remap_image
+from sena_warp.warp_map import CanvasViews, canvas_views, forward_points, remap_image
 from sena_warp.zone import overlap_x_extent
 
 from . import dense, naturalness
@@ -127,6 +128,15 @@ def identity(pts: np.ndarray) -> np.ndarray:
     return np.asarray(pts, np.float64)
 
 
+def panorama_views(img_src: np.ndarray, img_tgt: np.ndarray, pano: Panorama, cfg: Config) -> CanvasViews:
+    """Both working-frame views on the canvas as the panorama samples them (before their gains): the
+    source by the seam maps, the target at its offset, each valid only where its seam map samples it
+    (a thin strip left out is not shown)."""
+    maps = pano.maps.seam.maps
+    views = canvas_views(img_src, img_tgt, maps.map_src_canvas, pano.maps.warp.overlap.canvas, cfg)
+    return replace(views, valid_tgt=views.valid_tgt & np.isfinite(maps.map_tgt_canvas[..., 0]))
+
+
 def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
     """Issue 13's figures of a finished stitch (``naturalness``), in the working frame on the canvas.
 
@@ -140,7 +150,7 @@ def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: C
     warp, seam = maps.warp, maps.seam
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
     canvas = warp.overlap.canvas
-    views = compensated_views(canvas_views(img_src, img_tgt, seam.maps.map_src_canvas, canvas, cfg), seam.gains)
+    views = compensated_views(panorama_views(img_src, img_tgt, pano, cfg), seam.gains)
     weight_src, weight_tgt = naturalness.view_weights(seam.maps.alpha_canvas, views.valid_src, views.valid_tgt)
 
     def forward(pts: np.ndarray) -> np.ndarray:
@@ -185,7 +195,7 @@ def dense_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Con
     maps = pano.maps
     warp, seam = maps.warp, maps.seam
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
-    raw = canvas_views(img_src, img_tgt, seam.maps.map_src_canvas, warp.overlap.canvas, cfg)
+    raw = panorama_views(img_src, img_tgt, pano, cfg)
     views = compensated_views(raw, seam.gains)
     weight_src, weight_tgt = naturalness.view_weights(seam.maps.alpha_canvas, views.valid_src, views.valid_tgt)
     seam_px, border_px = switch_pixels(shown_labels(weight_src, weight_tgt), views.valid_src, views.valid_tgt)
