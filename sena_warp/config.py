@@ -129,7 +129,7 @@ class Config:
     seam_blend_strip_px: int = 12  # seam blend: the offsets are measured within this of the seam
     seam_blend_rows: int = 31  # seam blend: and averaged over this many rows
     border_blend: bool = True  # the seam blend along the target's borders beyond the seam's ends too
-    border_blend_mad_grey: float = 6.0  # border blend: a block whose views differ by more (MAD) shows other content
+    border_blend_mad_grey: float = 6.0  # seam and border blend: a row or block whose views differ by more (MAD) shows other content
     thin_strip_ratio: float = 0.02  # a view shown only in a strip thinner than this x image diagonal where the other
     # takes over (beyond the other's border) is left out: it shows nothing whole (0: kept, the earlier and the paper's)
     seam_blend_gain: bool = True  # seam and border blend: one grey value per line, applied as a relative gain

@@ -193,6 +193,8 @@ def thin_strips(label: np.ndarray, max_px: float) -> tuple[np.ndarray, np.ndarra
 
 
 LEVEL_MIN_GREY = 16.0  # relative offsets: a view's level is taken as at least this (dark rows: no huge gains)
+BLEND_LOG_SPREAD = 0.1  # seam blend as a gain: a row whose log ratio's median absolute deviation is larger ...
+BLEND_LOG_MAX = 0.3  # ... or whose ratio is further than this from 1 (log) shows other content, not an exposure
 
 
 @dataclass(frozen=True)
@@ -216,8 +218,10 @@ class SeamOffsets:
 
 
 def relative_to(offsets: np.ndarray, level: np.ndarray) -> np.ndarray:
-    """Offsets in grey levels as relative gains at ``level`` (broadcast against them), float32."""
-    return (offsets / np.maximum(level, LEVEL_MIN_GREY)[..., None]).astype(np.float32)
+    """Offsets in grey levels as relative gains at ``level`` (broadcast against them), float32, within
+    exp(+-``BLEND_LOG_MAX``) - 1: a larger ratio is not an exposure the blend should spread."""
+    relative = offsets / np.maximum(level, LEVEL_MIN_GREY)[..., None]
+    return np.clip(relative, np.expm1(-BLEND_LOG_MAX), np.expm1(BLEND_LOG_MAX)).astype(np.float32)
 
 
 def running_mean(values: np.ndarray, known: np.ndarray, window: int) -> np.ndarray:
@@ -237,9 +241,13 @@ def running_mean(values: np.ndarray, known: np.ndarray, window: int) -> np.ndarr
 def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, cfg: Config) -> SeamOffsets:
     """Offsets that take half the two views' mean difference next to the seam off one side and add it
     to the other (module docstring), with each view's mean level there; zero when
-    ``cfg.seam_blend_ratio`` is 0. With ``cfg.seam_blend_gain`` the difference is the grey one, the same
-    for every channel (the gains took the colour; a colour residual next to the seam is content, and
-    spread over the blend it tints what it reaches).
+    ``cfg.seam_blend_ratio`` is 0. With ``cfg.seam_blend_gain`` it is a ratio: per row the median log
+    ratio of the grey views, the same for every channel (the gains took the colour; a colour residual
+    next to the seam is content, and spread over the blend it tints what it reaches), from the rows
+    where it is one ratio (``BLEND_LOG_SPREAD``) near 1 (``BLEND_LOG_MAX``): elsewhere the views show
+    other things there, not one thing at two exposures, and those rows follow their neighbours. Each
+    side then moves half of it as a gain: offsets of (exp(-+ r / 2) - 1) x its level, which
+    :meth:`SeamOffsets.relative` turns back into those gains.
 
     views: the gain-compensated canvas views; seam_x_canvas: (H,) seam x per row.
     """
@@ -261,13 +269,29 @@ def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, 
     tgt = views.tgt[rows, cols].astype(np.float32) * strip[:, :, None]
     count = np.maximum(strip.sum(axis=1), 1)[:, None]
     means = np.concatenate([src.sum(axis=1) / count, tgt.sum(axis=1) / count], axis=1)
-    per_row = running_mean(means, strip.any(axis=1), cfg.seam_blend_rows).astype(np.float32)
-    mean_src, mean_tgt = per_row[:, :channels], per_row[:, channels:]
-    delta = mean_src - mean_tgt
-    if cfg.seam_blend_gain:
-        delta = np.repeat(delta.mean(axis=1, keepdims=True), channels, axis=1)
-    return SeamOffsets(-0.5 * delta, 0.5 * delta, float(cfg.seam_blend_ratio * diag_px), mean_src.mean(axis=1),
-                       mean_tgt.mean(axis=1))
+    known = strip.any(axis=1)
+    if not cfg.seam_blend_gain:
+        per_row = running_mean(means, known, cfg.seam_blend_rows).astype(np.float32)
+        delta = per_row[:, :channels] - per_row[:, channels:]
+        return SeamOffsets(-0.5 * delta, 0.5 * delta, float(cfg.seam_blend_ratio * diag_px),
+                           per_row[:, :channels].mean(axis=1), per_row[:, channels:].mean(axis=1))
+    # As a gain: the log ratio of the grey views, from the rows where it is one exposure ratio (small
+    # spread, not far from 1); elsewhere the views show other things there (parallax), not measured.
+    ratio = np.log((src.mean(axis=2) + 1.0) / (tgt.mean(axis=2) + 1.0))
+    median, spread = np.zeros(height), np.zeros(height)
+    ratio = np.where(strip, ratio, np.nan)[known]
+    median[known] = np.nanmedian(ratio, axis=1)
+    spread[known] = np.nanmedian(np.abs(ratio - median[known, None]), axis=1)
+    known &= (spread <= BLEND_LOG_SPREAD) & (np.abs(median) <= BLEND_LOG_MAX)
+    per_row = running_mean(np.concatenate([means, median[:, None]], axis=1), known, cfg.seam_blend_rows)
+    level_src, level_tgt = per_row[:, :channels].mean(axis=1), per_row[:, channels:2 * channels].mean(axis=1)
+    half = 0.5 * per_row[:, -1]
+    # Grey levels at each side's level, so that ``relative`` gives the gains exp(-+ half) - 1.
+    off_src = (np.exp(-half) - 1.0) * np.maximum(level_src, LEVEL_MIN_GREY)
+    off_tgt = (np.exp(half) - 1.0) * np.maximum(level_tgt, LEVEL_MIN_GREY)
+    return SeamOffsets(np.repeat(off_src[:, None], channels, axis=1).astype(np.float32),
+                       np.repeat(off_tgt[:, None], channels, axis=1).astype(np.float32),
+                       float(cfg.seam_blend_ratio * diag_px), level_src.astype(np.float32), level_tgt.astype(np.float32))
 
 
 @dataclass(frozen=True)

@@ -56,34 +56,43 @@ def test_smooth_correction_follows_the_anchors_without_kinks():
 
 
 def test_seam_offsets_meet_halfway_and_vanish_when_off():
+    """Views 110 and 100 by the seam meet halfway: in grey levels with ``seam_blend_gain`` off, in ratio
+    with it on, where rows whose views differ by a ratio no exposure explains follow their neighbours."""
     height, width = 60, 100
     src = np.full((height, width, 3), 110, np.uint8)
     tgt = np.full((height, width, 3), 100, np.uint8)
     valid = np.ones((height, width), bool)
     views = CanvasViews(src, tgt, valid, valid)
-    offsets = seam_offsets(views, np.full(height, 50.0), 500.0, Config())
+    offsets = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_gain=False))
     np.testing.assert_allclose(offsets.src, -5.0, atol=1e-5)
     np.testing.assert_allclose(offsets.tgt, 5.0, atol=1e-5)
     assert offsets.fade_px == pytest.approx(Config().seam_blend_ratio * 500.0)
+    relative_src, relative_tgt = seam_offsets(views, np.full(height, 50.0), 500.0, Config()).relative()
+    met = np.sqrt(111.0 * 101.0) - 1.0  # as gains the two meet at their geometric mean
+    np.testing.assert_allclose(110.0 * (1.0 + relative_src), met, atol=0.05)
+    np.testing.assert_allclose(100.0 * (1.0 + relative_tgt), met, atol=0.05)
+    src[30:], tgt[30:] = 40, 120  # other content in the lower half: a ratio of 3 is not an exposure
+    relative_src, _ = seam_offsets(CanvasViews(src, tgt, valid, valid), np.full(height, 50.0), 500.0, Config()).relative()
+    np.testing.assert_allclose(relative_src[45:], relative_src[:15], atol=1e-6)
     off = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_ratio=0.0))
     assert np.all(off.src == 0) and np.all(off.tgt == 0) and off.fade_px == 0
 
 
 def test_seam_offsets_as_a_gain_are_grey_and_relative_to_the_level_they_were_measured_at():
     """A source brighter than the target by (20, 10, 0) levels per channel at levels 120 / 110 / 100:
-    with ``seam_blend_gain`` each side moves by half the grey difference in every channel (no colour),
-    and as a gain that is that half over the side's own grey level; without it, per channel as before."""
+    with ``seam_blend_gain`` each side moves half way in ratio, the same gain in every channel (no
+    colour): the grey levels 110 and 100 meet near 105; without it, per channel and in grey levels."""
     height, width = 60, 100
     src = np.tile(np.uint8([120, 110, 100]), (height, width, 1))
     tgt = np.tile(np.uint8([100, 100, 100]), (height, width, 1))
     valid = np.ones((height, width), bool)
     views = CanvasViews(src, tgt, valid, valid)
     offsets = seam_offsets(views, np.full(height, 50.0), 500.0, Config())
-    np.testing.assert_allclose(offsets.src, -5.0, atol=1e-4)
-    np.testing.assert_allclose(offsets.tgt, 5.0, atol=1e-4)
+    np.testing.assert_allclose(offsets.src, -5.0, atol=0.1)
+    np.testing.assert_allclose(offsets.tgt, 5.0, atol=0.2)
     relative_src, relative_tgt = offsets.relative()
-    np.testing.assert_allclose(relative_src, -5.0 / 110.0, rtol=1e-4)
-    np.testing.assert_allclose(relative_tgt, 5.0 / 100.0, rtol=1e-4)
+    assert np.ptp(relative_src) < 1e-6 and np.ptp(relative_tgt) < 1e-6  # one gain for all channels
+    np.testing.assert_allclose(110.0 * (1.0 + relative_src), 100.0 * (1.0 + relative_tgt), atol=0.1)
     per_channel = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_gain=False))
     np.testing.assert_allclose(per_channel.src[0], [-10.0, -5.0, 0.0], atol=1e-4)
 
