@@ -10,9 +10,11 @@ Here the views are compared densely at every *switch* of a finished stitch (the 
 showing the other view: ``switch_pixels``): the optical flow from the target to the step-6 source
 (DIS, OpenCV) in a band around them, kept where both views are textured and the flow back returns
 to where it started; smoothed along the switches (a normalised Gaussian, ``cfg.switch_sigma_px``);
-and carried from each switch pixel to the canvas around it, fading to 0 (smootherstep) over
-``cfg.switch_fade_px``, or further where the correction is large (at most ``cfg.switch_max_slope``
-px of correction per px). The source map is resampled by that field (``M_a(u) = M_s(u + C(u))``,
+carried from the switches to the canvas around them by a harmonic extension (smooth between two
+switches that disagree, never beyond them); fading to 0 (smootherstep) over ``cfg.switch_fade_px``
+from the switches, or further where the correction is large (at most ``cfg.switch_max_slope`` px of
+correction per px), and kept well below a fold everywhere (``FOLD_SLOPE``). The source map is
+resampled by that field (``M_a(u) = M_s(u + C(u))``,
 Warp kernel ``kernels/seam.py``'s ``displaced_map_kernel``): where the seam and the borders run, the
 source now shows what the target shows, and far from them it keeps its step-6 shape. Steps 7-9
 then run again on the aligned source, so the seam also chooses where the views agree after the
@@ -207,9 +209,10 @@ def carried_out(values: np.ndarray, weight: np.ndarray) -> np.ndarray:
 
 def slope_limited(field: np.ndarray, max_slope: float) -> np.ndarray:
     """(H, W, 2) float32 ``field`` scaled down where it changes by more than ``max_slope`` per pixel in any
-    direction (central differences, either component): what varies along a switch (a correction that
-    follows one depth here and another there) would bend every line there. ``SLOPE_ROUNDS`` times, each
-    scale the smallest within a pixel and blurred, so that the scaling makes no steep edge of its own."""
+    direction (central differences, either component): where two switches close together want very
+    different corrections, the source would otherwise be squeezed toward a fold between them.
+    ``SLOPE_ROUNDS`` times, each scale the smallest within a pixel and blurred, so that the scaling
+    makes no steep edge of its own."""
     for _ in range(SLOPE_ROUNDS):
         steepest = np.zeros(field.shape[:2], np.float32)
         for k in range(2):
