@@ -23,8 +23,9 @@ variants are measured alike.
   changes nothing and the flow cannot see it) at the switch's band, where both views are defined
   and both are textured (an edge or corner: :func:`structure`): within T/2 of the seam (T =
   transition width: where the views mix) and within :data:`BORDER_BAND_PX` of a border. Median and
-  95th percentile, for the seam and the borders apart. A misalignment there is a step in every line
-  the switch crosses (nothing is blended across a border).
+  95th percentile, for the seam and the borders apart (none where fewer than :data:`MIN_BAND_PIXELS`
+  band pixels count: a border that is a corner of a few pixels). A misalignment there is a step in
+  every line the switch crosses (nothing is blended across a border).
 * *Shown twice / nowhere*: the flow gives every textured target pixel of the overlap its source
   copy at p + flow(p), where the flow back from there returns within :data:`CONSISTENT_PX` (the
   views see the same thing: not an occlusion). Copies whose visible shift is more than
@@ -63,6 +64,7 @@ from . import naturalness
 EDGE_GREY_PER_PX = 4.0  # a pixel is textured where each view's gradient energy (7x7) is at least this
 TENSOR_BOX_PX = 7  # the structure tensor's window
 BORDER_BAND_PX = 6  # misalignment at a border is read this far inside the overlap from it
+MIN_BAND_PIXELS = 100  # a switch with fewer textured band pixels than this (a corner) has no figure
 FLOW_MARGIN_PX = 16  # the flow runs on the overlap's bounding box widened by this
 CONSISTENT_PX = 1.0  # a target pixel's copy is trusted where the flow back returns within this
 OBJECT_CLOSE_PX = 3  # doubled / lost pixels this close join one object
@@ -84,8 +86,8 @@ class Misalignment:
     @staticmethod
     def of(values: np.ndarray) -> "Misalignment":
         values = np.asarray(values, np.float64)
-        if not values.size:
-            return Misalignment(float("nan"), float("nan"), 0)
+        if values.size < MIN_BAND_PIXELS:
+            return Misalignment(float("nan"), float("nan"), int(values.size))
         return Misalignment(float(np.median(values)), float(np.percentile(values, 95)), int(values.size))
 
 
