@@ -35,6 +35,7 @@ from sena_warp.kernels import runtime
 from sena_warp.kernels.seam import displaced_map_kernel
 
 CONSISTENT_PX = 1.5  # the flow is followed where the flow back returns within this
+EDGE_MARGIN_PX = 9  # ... at least half this far inside both views (DIS's patches are 8 px)
 EDGE_GREY_PER_PX = 4.0  # ... and both views are textured: each view's gradient energy (7x7) at least this
 TENSOR_BOX_PX = 7  # the structure tensor's window
 MIN_SUPPORT, FULL_SUPPORT = 0.02, 0.08  # a switch's correction counts in full where this share of the flow
@@ -263,6 +264,8 @@ def aligned_source_map(map_src_canvas: np.ndarray, grey_src: np.ndarray, grey_tg
         whole = (slice(None), slice(None))
         flow[box], flow_back = view_flow(src8, tgt8, whole, cfg.switch_flow_preset)
         textured = (edge_strength(src8) >= EDGE_GREY_PER_PX) & (edge_strength(tgt8) >= EDGE_GREY_PER_PX)
-        followed[box] = (near[box] & both[box] & textured & consistent(flow[box], flow_back, CONSISTENT_PX)
+        # Patches reaching past a view's edge see its continuation, not the scene: read the flow inside.
+        inside = cv2.erode((valid_src & valid_tgt)[box].astype(np.uint8), np.ones((EDGE_MARGIN_PX, EDGE_MARGIN_PX), np.uint8))
+        followed[box] = (near[box] & (inside > 0) & textured & consistent(flow[box], flow_back, CONSISTENT_PX)
                          & (np.hypot(flow[box][..., 0], flow[box][..., 1]) <= cfg.switch_max_px))
     return displaced_map(map_src_canvas, switch_correction(flow, followed, switches, cfg), cfg)
