@@ -150,7 +150,7 @@ def main() -> int:
     y_floor = y_floor_ms(compositor, *pairs[-1], cfg, args.repeats * 5)
     compositor.close()
     side_by_side = SideBySide(iter(pairs))
-    sbs = [side_by_side.composite_yuv(l.y, l.u, l.v, r.y, r.u, r.v) for l, r in pairs]
+    sbs = [side_by_side.composite_yuv(a.y, a.u, a.v, b.y, b.u, b.v) for a, b in pairs]
 
     decode_ms = cpu_per_frame_ms(lambda: decode(args.left, args.right, len(pairs), cfg.cpu_threads), len(pairs))
     with tempfile.TemporaryDirectory(dir=args.work) as temp:

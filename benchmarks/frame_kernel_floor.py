@@ -35,7 +35,7 @@ import warp as wp
 
 from sena_warp.composite import Compositor
 from sena_warp.config import Config
-from sena_warp.evaluation.bench import DATA_DIR, make_clip_pair, pair_paths
+from sena_warp.evaluation.bench import DATA_DIR, bench_pair, make_clip_pair
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import (KIND_FILL, KIND_TARGET, RowRuns, adjusted, grey_level, sample_fixed, word_fx,
                                          word_fy, word_offset)
@@ -134,7 +134,7 @@ def clip_pair(args: argparse.Namespace) -> tuple[Path, Path]:
     args.work.mkdir(parents=True, exist_ok=True)
     if args.left is not None:
         return args.left, args.right
-    return make_clip_pair(pair_paths(DATA_DIR), args.work, (1920, 1080), 5.0)
+    return make_clip_pair(bench_pair(DATA_DIR), args.work, (1920, 1080), 5.0)
 
 
 def main() -> int:

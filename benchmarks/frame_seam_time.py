@@ -31,7 +31,7 @@ import numpy as np
 
 from sena_warp import composite, seam_path
 from sena_warp.config import Config
-from sena_warp.evaluation.bench import DATA_DIR, make_clip_pair, pair_paths
+from sena_warp.evaluation.bench import DATA_DIR, bench_pair, make_clip_pair
 from sena_warp.kernels.runtime import resolve_config
 from sena_warp.video import frame_seam
 from sena_warp.video.reader import FrameReader
@@ -57,13 +57,18 @@ def time_parts() -> dict[str, list[float]]:
     """Wrap the per-frame seam's parts (:data:`PARTS`) to record each call's process CPU seconds."""
     seconds: dict[str, list[float]] = defaultdict(list)
     for owner, name, label in PARTS:
-        def timed(*args, _call=getattr(owner, name), _label=label, **kwargs):
-            start = time.process_time()
-            result = _call(*args, **kwargs)
-            seconds[_label].append(time.process_time() - start)
-            return result
-        setattr(owner, name, timed)
+        setattr(owner, name, _timed(getattr(owner, name), seconds[label]))
     return seconds
+
+
+def _timed(call, seconds: list[float]):
+    """``call``, appending each call's process CPU seconds to ``seconds``."""
+    def timed(*args, **kwargs):
+        start = time.process_time()
+        result = call(*args, **kwargs)
+        seconds.append(time.process_time() - start)
+        return result
+    return timed
 
 
 def main() -> int:
@@ -80,7 +85,7 @@ def main() -> int:
     cfg = resolve_config(Config(device="cpu", **changes))
     if args.left is None:
         args.work.mkdir(parents=True, exist_ok=True)
-        args.left, args.right = make_clip_pair(pair_paths(DATA_DIR), args.work, (1920, 1080), 5.0)
+        args.left, args.right = make_clip_pair(bench_pair(DATA_DIR), args.work, (1920, 1080), 5.0)
     left, right = yuv_planes(args.left, args.frames), yuv_planes(args.right, args.frames)
     # One estimate, on the first pair, and no drift checks: nothing else of the process runs
     # while the seam is timed (a worker's estimate would count in the process's CPU time).

@@ -61,10 +61,10 @@ def facts(out: Path) -> None:
 
 def bench(size: str, device: str, seconds: float, data: Path, out: Path) -> None:
     from sena_warp.config import Config
-    from sena_warp.evaluation.bench import run_bench
+    from sena_warp.evaluation.bench import bench_pair, run_bench
 
     work = out / "work"
-    row = run_bench([size], seconds, work, Config(device=device), data)[0]
+    row = run_bench([size], seconds, work, Config(device=device), bench_pair(data))[0]
     stitch = json.loads((work / f"stitch_{row['size']}.json").read_text())  # the end-to-end run's report
     row.update(device=device, composite_fps=1000.0 / row["warp_ms"], encoder=stitch["output"]["encoder"],
                notes=stitch["notes"])

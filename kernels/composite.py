@@ -34,9 +34,10 @@ from __future__ import annotations
 
 import warp as wp
 
+from sena_warp.kernels import MODULE_OPTIONS
 from sena_warp.kernels.seam import source_alpha
 
-wp.set_module_options({"enable_backward": False})  # see the package docstring
+wp.set_module_options(MODULE_OPTIONS)  # see the package docstring
 
 KIND_FILL = wp.constant(0)  # no side covers the pixel: the fill value
 KIND_SOURCE = wp.constant(1)  # the source alone
@@ -376,7 +377,7 @@ def _composite_frame_kernel(channels: int):
     multiply inside ``lf_px`` of the seam.
     """
 
-    @wp.kernel(module="unique", module_options={"enable_backward": False})
+    @wp.kernel(module="unique", module_options=MODULE_OPTIONS)
     def composite_frame(
         row0: int,
         col_step: int,

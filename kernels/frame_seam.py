@@ -13,9 +13,10 @@ from __future__ import annotations
 
 import warp as wp
 
+from sena_warp.kernels import MODULE_OPTIONS
 from sena_warp.kernels.composite import holds_both
 
-wp.set_module_options({"enable_backward": False})  # see the package docstring
+wp.set_module_options(MODULE_OPTIONS)  # see the package docstring
 
 
 @wp.kernel

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import warp as wp
 
-wp.set_module_options({"enable_backward": False})  # see the package docstring
+from sena_warp.kernels import MODULE_OPTIONS
+
+wp.set_module_options(MODULE_OPTIONS)  # see the package docstring
 
 
 @wp.func

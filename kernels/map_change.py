@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import warp as wp
 
+from sena_warp.kernels import MODULE_OPTIONS
 from sena_warp.kernels.composite import inside
 
-wp.set_module_options({"enable_backward": False})  # see the package docstring
+wp.set_module_options(MODULE_OPTIONS)  # see the package docstring
 
 DEVICE = "cpu"  # where this module's kernels always run
 NOT_COUNTED = wp.constant(float("nan"))  # a pixel either map does not sample (or outside the overlap)

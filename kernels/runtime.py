@@ -17,22 +17,49 @@ and launches with ``cfg.cpu_threads``::
 
 from __future__ import annotations
 
+import atexit
 import importlib
 import os
 import pkgutil
+import shutil
+import tempfile
 import threading
-from concurrent.futures import ThreadPoolExecutor
+import time
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
 
 import numpy as np
 import warp as wp
+import warp._src.build  # init_kernel_cache: where Warp keeps compiled kernels
 
 from sena_warp.config import Config
 from sena_warp.errors import InputError
-from sena_warp.progress import stage
+from sena_warp import native_stderr
+from sena_warp.progress import LOGGER, Count, stage
 
 # The init banner would go to stdout of every CLI run; Warp reads the level when it initialises
 # (``config.quiet`` is deprecated in favour of this in Warp 1.19).
 wp.config.log_level = wp.LOG_WARNING
+
+
+def _usable_kernel_cache() -> None:
+    """Point Warp at a temporary kernel cache, saying so once, when its own cannot be written.
+
+    Warp keeps compiled kernels under ``WARP_CACHE_PATH`` or the user's cache folder (under HOME) and
+    fails to start when that cannot be created; a read-only HOME or a mistyped path would stop every
+    run with a traceback. The temporary cache is removed at exit, so such runs compile every time.
+    """
+    try:
+        # Warp's own resolution of the folder (WARP_CACHE_PATH, else the user cache), as wp.init() does it.
+        warp._src.build.init_kernel_cache(wp.config.kernel_cache_dir)
+        with tempfile.TemporaryFile(dir=wp.config.kernel_cache_dir):
+            pass
+    except OSError as exc:
+        unusable = exc.filename or wp.config.kernel_cache_dir or os.environ.get("WARP_CACHE_PATH", "")
+        wp.config.kernel_cache_dir = tempfile.mkdtemp(prefix="sena-warp-kernels-")
+        atexit.register(shutil.rmtree, wp.config.kernel_cache_dir, ignore_errors=True)
+        LOGGER.warning(f"kernel cache {unusable} cannot be written ({exc.strerror}): using a temporary one, so "
+                       f"kernels compile on every run; set WARP_CACHE_PATH to a writable folder")
 
 
 def _init_without_driver_noise() -> None:
@@ -42,22 +69,28 @@ def _init_without_driver_noise() -> None:
     driver" on every run: a second stderr line in front of the CLI's one-line messages. Whether
     CUDA is there is decided by ``resolve_device``, which says so in its own words.
     """
-    saved = os.dup(2)
-    try:
-        with open(os.devnull, "w") as devnull:
-            os.dup2(devnull.fileno(), 2)
-            wp.init()
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
+    with native_stderr.caught():
+        wp.init()
 
 
+_usable_kernel_cache()
 _init_without_driver_noise()
 
 _pools: dict[int, ThreadPoolExecutor] = {}
 _pools_lock = threading.Lock()
 _loaded: set[tuple[str, str]] = set()
-_compiling_said = False
+_loads: dict[tuple[str, str], Future] = {}  # (module name, device) -> its load, under way or done
+_loads_lock = threading.Lock()
+_compile_pool = ThreadPoolExecutor(max_workers=os.cpu_count() or 1, thread_name_prefix="sena-warp-load")
+_compile_count: "_CompileCount | None" = None
+# Shipped builds, one folder per module (tools/ship_kernels.py), under the Warp version they were built with:
+# a CPU object holds that version's native code, so another version compiles instead of loading it.
+SHIPPED = Path(__file__).resolve().parent / "built"
+BUILT = SHIPPED / wp.config.version
+SHIPPED_PTX_ARCH = 75  # the CUDA build shipped: PTX that the driver compiles on load for any GPU from sm_75 on
+# The kernel modules in the order a stitch first launches them: the estimate's (the lattice, the gate, the warp
+# map and its samples, the seam), then the frames'. Loaded in this order, the estimate's come first.
+FIRST_LAUNCHED = ("ffd", "gate", "remap", "sampling", "seam", "seam_path", "composite", "frame_seam", "map_change")
 
 
 def resolve_device(name: str) -> str:
@@ -99,33 +132,107 @@ def _pool(threads: int) -> ThreadPoolExecutor:
 
 
 def _ensure_loaded(kernel, device: str) -> None:
-    """Load (compile if needed) the kernel's module once, before bands launch concurrently."""
+    """Load the kernel's module once, before bands launch concurrently: wait for a load under way in the
+    background (:func:`prewarm`), or load it now."""
     if (kernel.module.name, device) not in _loaded:
         _load([kernel.module], device)
 
 
 def _load(modules: list[wp.Module], device: str) -> None:
-    """Load (compile if needed) Warp ``modules`` on ``device``, several at once on a thread per core
-    (Warp >= 1.19 loads CPU modules concurrently without losing any: NVIDIA/warp issues 1474 and 1705);
-    a first run says once that it compiles."""
-    if not _compiling_said and not all(_in_kernel_cache(module, device) for module in modules):
-        _say_compiling()
-    wp.force_load(device=device, modules=modules, max_workers=CORES)
-    _loaded.update((module.name, device) for module in modules)
+    """Load Warp ``modules`` on ``device`` (:func:`_start`) and wait until they are."""
+    for load in _start(modules, device):
+        load.result()
+
+
+def _start(modules: list[wp.Module], device: str) -> list[Future]:
+    """Start loading those of ``modules`` not loaded nor loading on ``device``, in their order, on a thread
+    per core (Warp >= 1.19 loads CPU modules concurrently without losing any: NVIDIA/warp issues 1474 and
+    1705); the load of each of ``modules``. Those that must be compiled (neither shipped nor in Warp's
+    kernel cache) are counted as they finish, with an estimate of the time left: a first run's wait."""
+    global _compile_count
+    with _loads_lock:
+        new = [m for m in modules if (m.name, device) not in _loads]
+        compiling = [m for m in new if shipped_build(m, device) is None and not _in_kernel_cache(m, device)]
+        if compiling:
+            if _compile_count is None or _compile_count.done >= _compile_count.total:
+                stage("compiling kernels (first run only)")
+                _compile_count = _CompileCount(compiling)
+            else:
+                _compile_count.total += len(compiling)
+        for module in new:
+            _loads[(module.name, device)] = _compile_pool.submit(
+                _load_one, module, device, _compile_count if module in compiling else None)
+        return [_loads[(m.name, device)] for m in modules]
+
+
+class _CompileCount(Count):
+    """Kernel modules compiled so far of those a run started compiling, shown as each one ends (with the
+    time left at the rate so far)."""
+
+    def __init__(self, modules: list[wp.Module]):
+        super().__init__("kernel modules compiled", len(modules), "modules/s")
+        self.done = 0
+
+    def finished(self, module: wp.Module, seconds: float) -> None:
+        with _loads_lock:
+            self.done += 1
+            done = self.done
+        LOGGER.debug("compiled %s in %.1f s", module.name.removeprefix("sena_warp.kernels."), seconds)
+        if done >= self.total:
+            self.close(done)
+        else:
+            self.update(done)
+
+
+def _load_one(module: wp.Module, device: str, count: _CompileCount | None) -> None:
+    """Load ``module`` on ``device``: its shipped build (``built/``), else Warp's kernel cache, else a compile
+    (a shipped build that does not load, e.g. for another LLVM, is compiled instead)."""
+    t0 = time.perf_counter()
+    built = shipped_build(module, device)
+    loaded = False
+    if built is not None:
+        binary, meta, arch = built
+        try:
+            module.load(device, block_dim=_block_dim(module, device), binary_path=str(binary), output_arch=arch,
+                        meta_path=str(meta))
+            loaded = True
+        except Exception:  # Warp raises plain Exception for a binary it cannot load
+            loaded = False
+    if not loaded:
+        wp.force_load(device=device, modules=[module], max_workers=0)
+    _loaded.add((module.name, device))
+    if count is not None:
+        count.finished(module, time.perf_counter() - t0)
+
+
+def _block_dim(module: wp.Module, device: str) -> int:
+    """The block size a launch of ``module``'s kernels loads: 1 on the CPU, the module's own on CUDA."""
+    return 1 if wp.get_device(device).is_cpu else module.options["block_dim"]
+
+
+def shipped_build(module: wp.Module, device: str) -> tuple[Path, Path, int | None] | None:
+    """(binary, metadata, CUDA arch or None) of the build of ``module`` for ``device`` in :data:`BUILT`, or
+    None where there is none for the module as it is now (its folder is named by the hash of its code and
+    options, so a kernel changed since ``tools/ship_kernels.py`` ran is compiled instead). CPU: an object
+    for any CPU of this kind (x86-64 Linux, by Warp's target hash in its name); CUDA: PTX for sm_75, which
+    the driver compiles on load for any GPU from sm_75 on."""
+    dev = wp.get_device(device)
+    ident = module.get_module_identifier(_block_dim(module, device))
+    folder = BUILT / ident
+    if dev.is_cpu:
+        binary, arch = folder / module._get_compile_output_name(dev, block_dim=1), None
+    elif dev.arch >= SHIPPED_PTX_ARCH:
+        binary, arch = folder / f"{ident}.sm{SHIPPED_PTX_ARCH}.ptx", SHIPPED_PTX_ARCH
+    else:
+        return None
+    meta = folder / f"{ident}.meta"
+    return (binary, meta, arch) if binary.is_file() and meta.is_file() else None
 
 
 def _in_kernel_cache(module, device: str) -> bool:
     """Whether Warp's kernel cache holds a build of ``module`` for ``device``: its folder is named by the
     hash of the variant that loads (CPU launches build block_dim 1, CUDA the module's block_dim)."""
-    block_dim = 1 if wp.get_device(device).is_cpu else module.options["block_dim"]
-    return os.path.isdir(os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(block_dim)))
-
-
-def _say_compiling() -> None:
-    """The one-time stage line of a first run, which spends seconds compiling (later runs load the cache)."""
-    global _compiling_said
-    _compiling_said = True
-    stage("compiling kernels (first run only)")
+    return os.path.isdir(os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(_block_dim(module, device))))
 
 
 def readonly_array(values, dtype, device: str) -> wp.array:
@@ -212,19 +319,36 @@ def loaded() -> frozenset[tuple[str, str]]:
     return frozenset(_loaded)
 
 
-def prewarm(device: str) -> None:
-    """Import every module of ``sena_warp.kernels`` and load (compile once, then cached) its kernels:
-    those at module level and the variants a module builds with a factory and lists in a dict. On
-    ``device``, or where a module says its kernels always run (its ``DEVICE``: work on host arrays);
-    the modules of one device together (:func:`_load`)."""
+def kernel_modules(device: str, channels: tuple[int, ...] | None = None) -> dict[str, list[wp.Module]]:
+    """Per Warp device, the modules of ``sena_warp.kernels``, in the order a stitch first launches them (the
+    estimate's, then the frames'): those at module level and the variants a module builds with a factory and
+    lists in a dict (of the frame kernels only those for ``channels``; None: all). On ``device``, or where a
+    module says its kernels always run (its ``DEVICE``: work on host arrays)."""
     package = importlib.import_module("sena_warp.kernels")
-    due: dict[str, dict[str, wp.Module]] = {}  # per device, the Warp modules not loaded yet, by name
-    for info in pkgutil.iter_modules(package.__path__):
-        module = importlib.import_module(f"sena_warp.kernels.{info.name}")
+    found: dict[str, dict[str, wp.Module]] = {}
+    names = sorted((info.name for info in pkgutil.iter_modules(package.__path__)),
+                   key=lambda name: FIRST_LAUNCHED.index(name) if name in FIRST_LAUNCHED else len(FIRST_LAUNCHED))
+    for name in names:
+        module = importlib.import_module(f"sena_warp.kernels.{name}")
         on = getattr(module, "DEVICE", device)
-        for obj in vars(module).values():
-            for kernel in obj.values() if isinstance(obj, dict) else (obj,):
-                if isinstance(kernel, wp.Kernel) and (kernel.module.name, on) not in _loaded:
-                    due.setdefault(on, {})[kernel.module.name] = kernel.module
-    for on, modules in due.items():
-        _load(list(modules.values()), on)
+        for attribute, obj in vars(module).items():
+            kernels = obj.items() if isinstance(obj, dict) else ((None, obj),)
+            for key, kernel in kernels:
+                if attribute == "COMPOSITE_FRAME_KERNELS" and channels is not None and key not in channels:
+                    continue
+                if isinstance(kernel, wp.Kernel):
+                    found.setdefault(on, {}).setdefault(kernel.module.name, kernel.module)
+    return {on: list(modules.values()) for on, modules in found.items()}
+
+
+def prewarm(device: str, channels: tuple[int, ...] | None = None, wait: bool = True) -> None:
+    """Load every module of ``sena_warp.kernels`` a stitch launches (:func:`kernel_modules`; ``channels``:
+    the frame kernels' channel counts it needs, None: all): shipped builds load at once, others come from
+    Warp's cache or are compiled, counted as they finish. ``wait`` False starts the loads in the
+    background and returns: a launch waits for its own module only, so a first run compiles the frame
+    kernels while the estimate's features run."""
+    for on, modules in kernel_modules(device, channels).items():
+        loads = _start(modules, on)
+        if wait:
+            for load in loads:
+                load.result()

@@ -18,9 +18,10 @@ from __future__ import annotations
 
 import warp as wp
 
+from sena_warp.kernels import MODULE_OPTIONS
 from sena_warp.kernels.gate import smootherstep
 
-wp.set_module_options({"enable_backward": False})  # see the package docstring
+wp.set_module_options(MODULE_OPTIONS)  # see the package docstring
 
 INV_SQRT2 = 0.7071067811865476
 INV_SQRT_2PI = 0.3989422804014327

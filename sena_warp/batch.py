@@ -4,14 +4,16 @@ JOBS is a folder of pair folders (each holding images ``a.*`` + ``b.*`` or video
 ``right.*``; the folder's name names the job), or a job list: TOML (``[defaults]`` and ``[[job]]``
 tables) or CSV (a header row, one job per row). A job gives its inputs (``a``/``b`` or
 ``left``/``right``, relative to the list's folder) and optionally ``name``, ``output`` (relative to
-DIR), ``reference``, ``crop`` (images), ``offset`` (videos: seconds, or "auto" to estimate them) and
-any setting of ``sena-warp config``. Settings apply in this order, the later winning: defaults, ``--config``, command-line
-options, the list's ``[defaults]``, the job's own.
+DIR), ``reference``, ``crop``, ``offset`` (videos: seconds, or "auto" to estimate them) and any setting
+of ``sena-warp config``. Settings and these keys apply in this order, the later winning: defaults,
+``--config``, command-line options (``--crop``, ``--offset``, ``--ss``/``--to``, ``--codec``, ...), the
+list's ``[defaults]``, the job's own.
 
 Each job writes ``DIR/NAME.png`` or ``DIR/NAME.mp4`` and then ``DIR/reports/NAME.json`` (its report
 with a ``job`` block: status, error, time). A job whose report says "ok" and whose output exists is
 complete and skipped by the next run, so an interrupted batch resumes where it stopped; a failed job
-is recorded with its error, the others go on, and it is tried again next time. At the end: a table
+is recorded with its error, the others go on, and it is tried again next time (``-y`` runs every job
+again, ``-n`` only those whose output does not exist). At the end: a table
 on stdout, ``DIR/summary.json``, and exit code 7 when any job failed.
 
 The same job function, :func:`run_entry`, runs in ``--jobs N`` local worker processes or as Ray
@@ -36,13 +38,13 @@ from typing import Callable, Iterator
 
 from .config import OFFSET_AUTO
 from .config_file import check_value, field_types, read_toml, unknown_key_error
-from .errors import InputError, StitchError
+from .errors import InputError, StitchError, out_of_memory
 from .jobs import INPUT_SUFFIXES, OUTPUT_SUFFIXES, PAIR_STEMS, Job, pair_inputs, run_job, summary_line
 from .outputs import atomic_output, make_folder
-from .progress import LOGGER, Count, echo
+from .progress import LOGGER, Count, echo, stage
 
 # Job keys besides the settings: name -> (type, the kind it applies to or None for both).
-JOB_KEYS = {"name": (str, None), "output": (str, None), "reference": (str, None), "crop": (bool, "image"),
+JOB_KEYS = {"name": (str, None), "output": (str, None), "reference": (str, None), "crop": (bool, None),
             "offset": (float, "video"), "a": (str, "image"), "b": (str, "image"), "left": (str, "video"),
             "right": (str, "video")}
 WORDS = {"offset": (OFFSET_AUTO,)}  # words a number key also takes
@@ -69,8 +71,10 @@ class Entry:
     report: str
 
 
-def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: dict) -> list[Entry]:
-    """The batch's jobs from a folder of pair folders or a .toml / .csv list; ``settings``: for every job.
+def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: dict,
+              options: dict | None = None) -> list[Entry]:
+    """The batch's jobs from a folder of pair folders or a .toml / .csv list; ``settings``: for every job;
+    ``options``: job keys (``crop``, ``offset``) for every job of a kind they apply to, under the list's own.
 
     Paths come back absolute (a Ray task may run elsewhere); names, outputs and inputs are checked.
     """
@@ -88,7 +92,7 @@ def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: d
         raise InputError(f"{source}: a job list is a .toml or .csv file (or give a folder of pair folders)")
     if not rows:
         raise InputError(f"{source}: no jobs found")
-    entries = [_entry({**defaults, **row}, where, source, out_dir, settings) for where, row in rows]
+    entries = [_entry({**defaults, **row}, where, source, out_dir, settings, options or {}) for where, row in rows]
     _check_unique(entries, source)
     return entries
 
@@ -151,7 +155,7 @@ def _from_text(key: str, text: str, where: str):
     return text
 
 
-def _entry(row: dict, where: str, source: Path, out_dir: Path, settings: dict) -> Entry:
+def _entry(row: dict, where: str, source: Path, out_dir: Path, settings: dict, given: dict) -> Entry:
     types = field_types()
     for key in row:
         if key not in JOB_KEYS and key not in types:
@@ -160,7 +164,8 @@ def _entry(row: dict, where: str, source: Path, out_dir: Path, settings: dict) -
     if len(kinds) != 1 or not all(stem in row for stem in PAIR_STEMS[kinds[0]]):
         raise InputError(f"{where}: give the inputs as a and b (images) or left and right (videos)")
     kind = kinds[0]
-    options = {key: _job_value(key, value, kind, where) for key, value in row.items() if key in JOB_KEYS}
+    options = {**{key: value for key, value in given.items() if JOB_KEYS[key][1] in (None, kind)},
+               **{key: _job_value(key, value, kind, where) for key, value in row.items() if key in JOB_KEYS}}
     base = source if source.is_dir() else source.parent
     inputs = tuple(str((base / options[stem]).resolve()) for stem in PAIR_STEMS[kind])
     name = options.get("name") or Path(inputs[0]).parent.name
@@ -224,8 +229,9 @@ def run_entry(entry: Entry) -> dict:
         error, exit_code = None, 0
     except StitchError as exc:
         error, exit_code = str(exc), exc.exit_code
-    except Exception as exc:  # a bug in one job must not stop the batch: recorded with its type
-        error, exit_code = f"{type(exc).__name__}: {exc}", 1
+    except Exception as exc:  # out of memory, or a bug in one job that must not stop the batch (recorded with its type)
+        known = out_of_memory(exc)
+        error, exit_code = (str(known), known.exit_code) if known else (f"{type(exc).__name__}: {exc}", 1)
     result = {
         "name": entry.name, "kind": entry.job.kind, "status": "failed" if error else "ok",
         "inputs": list(entry.job.inputs), "output": entry.job.output, "error": error, "exit_code": exit_code,
@@ -243,20 +249,40 @@ def _write_report(path: str, data: dict) -> None:
     write_json(path, data)
 
 
-def _failed(entry: Entry, error: str) -> dict:
+def _skipped(entry: Entry) -> dict:
+    """The result record of a job not run: its earlier run's record where its report has one."""
+    try:
+        earlier = json.loads(Path(entry.report).read_text())["job"]
+    except (OSError, ValueError, KeyError, TypeError):
+        earlier = {**_failed(entry, None), "exit_code": None}
+    return {**earlier, "status": "skipped"}
+
+
+def _failed(entry: Entry, error: str | None) -> dict:
     """The result record of a job whose worker itself failed (a crashed process, a lost Ray task)."""
     return {"name": entry.name, "kind": entry.job.kind, "status": "failed", "inputs": list(entry.job.inputs),
             "output": entry.job.output, "error": error, "exit_code": 1, "seconds": None, "host": None,
             "summary": None}
 
 
+def _started(entry: Entry) -> None:
+    """Say that ``entry`` starts (a batch hands a job to a worker only when one is free to run it)."""
+    LOGGER.info("%s: started (%s job: %s)", entry.name, entry.job.kind, Path(entry.job.inputs[0]).parent)
+
+
 def run_local(entries: list[Entry], workers: int) -> Iterator[dict]:
-    """Run ``entries`` in ``workers`` fresh processes; yield each result as its job finishes."""
+    """Run ``entries`` in ``workers`` fresh processes, at most one job per worker at a time (each said as it
+    starts); yield each result as its job finishes."""
+    waiting = list(reversed(entries))
     # spawn, not fork: the parent may hold Warp, onnxruntime and decoder threads, which fork does not copy
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        futures = {pool.submit(run_entry, entry): entry for entry in entries}
+        futures: dict = {}
         try:
-            while futures:
+            while waiting or futures:
+                while waiting and len(futures) < workers:
+                    entry = waiting.pop()
+                    _started(entry)
+                    futures[pool.submit(run_entry, entry)] = entry
                 done, _ = wait(futures, return_when=FIRST_COMPLETED)
                 for future in done:
                     entry = futures.pop(future)
@@ -278,6 +304,8 @@ def run_ray(entries: list[Entry], address: str, cpus: int) -> Iterator[dict]:
     except ImportError:
         raise InputError("--ray needs Ray: pip install 'sena-warp[cluster]'") from None
     quiet = dict(logging_level=logging.ERROR, log_to_driver=False)
+    # Ray takes seconds to start or reach: said before, so the wait is not silent.
+    stage(f"starting Ray here with {cpus} CPUs" if address == RAY_LOCAL else f"connecting to the Ray cluster at {address}")
     try:
         if address == RAY_LOCAL:
             ray.init(num_cpus=cpus, include_dashboard=False, **quiet)
@@ -287,13 +315,18 @@ def run_ray(entries: list[Entry], address: str, cpus: int) -> Iterator[dict]:
         raise InputError(f"--ray {address}: cannot connect ({' '.join(str(exc).split())})") from exc
     try:
         task = ray.remote(run_entry)
-        pending = {
-            task.options(num_cpus=max(entry.job.settings.get("cpu_threads", 1), 1),
-                         num_gpus=1 if entry.job.settings.get("device") == "cuda" else 0,
-                         max_retries=0).remote(entry): entry
-            for entry in entries
-        }
-        while pending:
+        cluster_cpus = int(ray.cluster_resources().get("CPU", cpus))
+        LOGGER.info("Ray: %d CPUs%s", cluster_cpus, "" if address == RAY_LOCAL else f" at {address}")
+        waiting, pending = list(reversed(entries)), {}
+        while waiting or pending:
+            # Handed to Ray only while the cluster has the CPUs to start them: "started" means started.
+            while waiting and (not pending or sum(_task_cpus(e) for e in pending.values()) + _task_cpus(waiting[-1])
+                               <= cluster_cpus):
+                entry = waiting.pop()
+                _started(entry)
+                pending[task.options(num_cpus=_task_cpus(entry),
+                                     num_gpus=1 if entry.job.settings.get("device") == "cuda" else 0,
+                                     max_retries=0).remote(entry)] = entry
             done, _ = ray.wait(list(pending), num_returns=1)
             entry = pending.pop(done[0])
             try:
@@ -304,15 +337,26 @@ def run_ray(entries: list[Entry], address: str, cpus: int) -> Iterator[dict]:
         ray.shutdown()
 
 
+def _task_cpus(entry: Entry) -> int:
+    """The CPUs a Ray task of ``entry`` reserves: its job's threads."""
+    return max(entry.job.settings.get("cpu_threads", 1), 1)
+
+
 def run_batch(entries: list[Entry], out_dir: str | os.PathLike, runner: Callable[[list[Entry]], Iterator[dict]],
-              runner_name: str) -> dict:
-    """Skip the complete entries, run the others with ``runner``, write ``DIR/summary.json``; the summary."""
+              runner_name: str, overwrite: str = "refuse") -> dict:
+    """Run the entries with ``runner``, write ``DIR/summary.json``; the summary.
+
+    ``overwrite`` (``outputs.OVERWRITE_MODES``, as ``-y`` / ``-n`` set it): "refuse" skips the entries an
+    earlier run completed (and redoes the others: the batch resumes), "overwrite" runs every entry
+    again, "skip" runs only those whose output does not exist.
+    """
     t0 = time.perf_counter()
-    todo = [e for e in entries if not is_complete(e)]
-    results = {e.name: {**json.loads(Path(e.report).read_text())["job"], "status": "skipped"}
-               for e in entries if e not in todo}
+    done_before = {"refuse": is_complete, "overwrite": lambda e: False, "skip": lambda e: Path(e.job.output).exists()}
+    todo = [e for e in entries if not done_before[overwrite](e)]
+    results = {e.name: _skipped(e) for e in entries if e not in todo}
     if results:
-        LOGGER.info("%d of %d jobs complete from an earlier run: skipped", len(results), len(entries))
+        why = "have an output already (-n)" if overwrite == "skip" else "complete from an earlier run"
+        LOGGER.info("%d of %d jobs %s: skipped", len(results), len(entries), why)
     count = Count("jobs", len(todo), "jobs/s")
     for done, result in enumerate(runner(todo) if todo else (), start=1):
         results[result["name"]] = result
@@ -354,16 +398,21 @@ def cmd_batch(args: argparse.Namespace) -> int:
     """``sena-warp batch``: run every job, print the table; BatchError (exit 7) when any failed."""
     out_dir = make_folder(args.out, "--out")
     cores = os.cpu_count() or 1
+    # Job keys given on the command line, for every job they apply to (a job list's own win).
+    options = {"offset": args.offset, **({"crop": True} if args.crop else {})}
     if args.ray:
         cpus = args.workers or cores
         # A task takes one thread unless told otherwise; Ray packs tasks onto the cluster's cores.
-        entries = read_jobs(args.jobs, out_dir, {"cpu_threads": 1, **args.settings})
-        summary = run_batch(entries, out_dir, lambda todo: run_ray(todo, args.ray, cpus), f"ray {args.ray}")
+        entries = read_jobs(args.jobs, out_dir, {"cpu_threads": 1, **args.settings}, options)
+        summary = run_batch(entries, out_dir, lambda todo: run_ray(todo, args.ray, cpus), f"ray {args.ray}",
+                            args.overwrite)
     else:
         workers = args.workers or 1
         # Workers share the cores: each job's Warp bands, onnxruntime and codecs get its part of them.
-        entries = read_jobs(args.jobs, out_dir, {"cpu_threads": max(cores // workers, 1), **args.settings})
-        summary = run_batch(entries, out_dir, lambda todo: run_local(todo, workers), f"{workers} local workers")
+        entries = read_jobs(args.jobs, out_dir, {"cpu_threads": max(cores // workers, 1), **args.settings}, options)
+        summary = run_batch(entries, out_dir, lambda todo: run_local(todo, workers),
+                            f"{workers} local worker{'s' if workers > 1 else ''}",
+                            args.overwrite)
     echo(summary_table(summary))
     if summary["failed"]:
         raise BatchError(f"{summary['failed']} of {summary['jobs']} jobs failed; their reports in "

@@ -22,7 +22,7 @@ import time
 
 from . import __version__
 from .config import CHOICES, OFFSET_AUTO, Config
-from .errors import InputError, StitchError
+from .errors import InputError, StitchError, out_of_memory
 from .outputs import OutputPlan
 from .progress import LOGGER, ConsoleHandler, echo
 
@@ -30,7 +30,10 @@ PROGRESS_MODES = ("auto", "bar", "plain", "json")
 # Command-line options that set a Config field: option dest -> field name.
 SETTING_OPTIONS = {"features": "features", "device": "device", "threads": "cpu_threads",
                    "max_megapixels": "max_input_megapixels", "rig": "video_rig", "reestimate": "video_reestimate_s",
-                   "crf": "video_crf", "preset": "video_preset", "codec": "video_codec", "audio": "video_audio"}
+                   "crf": "video_crf", "preset": "video_preset", "codec": "video_codec", "audio": "video_audio",
+                   "bitrate": "video_bitrate_kbps", "maxrate": "video_maxrate_kbps", "ss": "video_start_s",
+                   "to": "video_end_s", "max_width": "video_max_width"}
+RATE_UNITS = {"": 0.001, "k": 1.0, "m": 1000.0}  # --bitrate 8M / 8000k / 8000000 (bit/s), in kbit/s
 HANDLED_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
@@ -57,43 +60,118 @@ def _positive_int(text: str) -> int:
     return value
 
 
-def _output_options() -> argparse.ArgumentParser:
-    """Options every subcommand takes: version, verbosity, progress style."""
-    p = argparse.ArgumentParser(add_help=False)
-    p.add_argument("--version", action="version", version=f"sena-warp {__version__}")
+def _seconds(text: str) -> float:
+    """A time as ffmpeg takes one: seconds (``90``, ``90.5``) or ``[HH:]MM:SS[.fff]`` (``1:30``)."""
+    try:
+        parts = [float(part) for part in text.split(":")]
+    except ValueError:
+        parts = []
+    if not 1 <= len(parts) <= 3 or any(part < 0 or part != part for part in parts):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a time; give seconds (90.5) or [HH:]MM:SS (1:30.5)")
+    value = 0.0
+    for part in parts:
+        value = 60 * value + part
+    return value
+
+
+def _rate_kbps(text: str) -> int:
+    """A bit rate as ffmpeg takes one (``8M``, ``8000k``, ``8000000``) in whole kbit/s."""
+    number, unit = (text[:-1], text[-1].lower()) if text[-1:].lower() in ("k", "m") else (text, "")
+    try:
+        kbps = round(float(number) * RATE_UNITS[unit])
+    except ValueError:
+        kbps = 0
+    if kbps < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a bit rate; give e.g. 8M, 8000k or 8000000 (bit/s)")
+    return kbps
+
+
+MAX_BENCH_SECONDS = 3600.0  # bench --seconds and --rss: clips of at most an hour
+
+
+def _clip_seconds(text: str) -> float:
+    """``bench --seconds`` / ``--rss``: a clip length in seconds, in (0, MAX_BENCH_SECONDS]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not 0 < value <= MAX_BENCH_SECONDS:  # also refuses nan
+        raise argparse.ArgumentTypeError(f"{text} s is not a clip length; give more than 0 and at most "
+                                         f"{MAX_BENCH_SECONDS:g} seconds")
+    return value
+
+
+def _add_messages(parser: argparse.ArgumentParser) -> None:
+    """Options every subcommand takes: verbosity, progress style, version (last in its help)."""
+    p = parser.add_argument_group("messages on stderr")
     loud = p.add_mutually_exclusive_group()
-    loud.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors on stderr, no summary")
+    loud.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors, no summary line")
     loud.add_argument("-v", "--verbose", action="store_true", help="also each step inside a stage and its time")
     p.add_argument("--progress", choices=PROGRESS_MODES, default="auto",
-                   help="progress on stderr: a redrawn line (bar), whole lines (plain) or one JSON object per "
-                        "line (json); auto = bar on a terminal, else plain (default: %(default)s)")
-    return p
+                   help="a redrawn line (bar), whole lines (plain) or one JSON object per line (json, its events "
+                        "in the README); auto = bar on a terminal, else plain (default: %(default)s)")
+    p.add_argument("--version", action="version", version=f"sena-warp {__version__}")
 
 
-def _settings_options() -> argparse.ArgumentParser:
+def _add_settings(parser: argparse.ArgumentParser) -> None:
     """Options that set Config fields (over a --config file, which is over the defaults)."""
-    p = argparse.ArgumentParser(add_help=False)
+    p = parser.add_argument_group("settings (all of them: sena-warp config)")
     p.add_argument("--config", metavar="FILE.toml",
                    help="settings file (see 'sena-warp config'); options given here win over it")
     p.add_argument("--threads", type=_positive_int, metavar="N",
                    help="threads for the Warp CPU kernels, onnxruntime and the video codecs (default: one per core)")
     p.add_argument("--features", choices=CHOICES["features"], help=f"feature detector (default: {Config.features})")
-    p.add_argument("--device", choices=CHOICES["device"], help=f"where the Warp kernels run (default: {Config.device})")
+    p.add_argument("--device", choices=CHOICES["device"],
+                   help=f"where the Warp kernels run; auto: a CUDA GPU where there is one (default: {Config.device})")
     p.add_argument("--max-megapixels", dest="max_megapixels", type=float, metavar="MP",
-                   help=f"refuse inputs larger than this, before decoding them (default: "
-                        f"{Config.max_input_megapixels:g}; see README)")
-    return p
+                   help=f"refuse larger inputs, before decoding them (default: {Config.max_input_megapixels:g})")
 
 
-def _overwrite_options() -> argparse.ArgumentParser:
+def _add_overwrite(parser: argparse.ArgumentParser) -> None:
     """-y / -n: what an existing output gets (one of ``outputs.OVERWRITE_MODES``; default: refused)."""
-    p = argparse.ArgumentParser(add_help=False)
-    group = p.add_mutually_exclusive_group()
+    group = parser.add_argument_group("outputs that exist").add_mutually_exclusive_group()
     group.add_argument("-y", "--overwrite", dest="overwrite", action="store_const", const="overwrite",
-                       default="refuse", help="replace outputs that exist (default: refuse them)")
+                       default="refuse", help="replace them (default: refuse them, exit 6)")
     group.add_argument("-n", "--no-overwrite", dest="overwrite", action="store_const", const="skip",
-                       help="do nothing when an output exists (exit 0)")
-    return p
+                       help="leave them and do nothing (exit 0)")
+
+
+def _add_video(parser: argparse.ArgumentParser) -> None:
+    """Options of a video stitch (settings too), for ``video`` and for every video job of ``batch``."""
+    span = parser.add_argument_group("span (times of the left video, after --offset: seconds or [HH:]MM:SS)")
+    span.add_argument("--ss", type=_seconds, metavar="TIME",
+                      help="start here, reached by seeking: only the span is decoded (default: the beginning)")
+    span.add_argument("--to", type=_seconds, metavar="TIME", help="end before this time (default: where the videos end)")
+    span.add_argument("-t", dest="duration", type=_seconds, metavar="TIME", help="or end this long after --ss")
+    rig = parser.add_argument_group("rig")
+    rig.add_argument("--offset", type=_offset, default=0.0, metavar="S|auto",
+                     help="seconds the right video started after the left one, or auto: estimated from the "
+                          "audio of both (else their motion), refused when unclear (default: 0)")
+    rig.add_argument("--rig", choices=CHOICES["video_rig"],
+                     help=f"static: maps estimated once (and moved with a camera that drifts); moving: "
+                          f"re-estimated every --reestimate seconds (default: {Config.video_rig})")
+    rig.add_argument("--reestimate", type=float, metavar="S",
+                     help=f"seconds between re-estimations of a moving rig (default: {Config.video_reestimate_s:g})")
+    picture = parser.add_argument_group("picture")
+    picture.add_argument("--crop", action="store_true",
+                         help="crop to the largest rectangle the first estimate covers (a video: for all of it)")
+    picture.add_argument("--max-width", dest="max_width", type=_positive_int, metavar="W",
+                         help="at most W pixels wide, aspect kept, made by the stitch's maps (default: as stitched)")
+    encoding = parser.add_argument_group("encoding")
+    encoding.add_argument("--codec", choices=CHOICES["video_codec"],
+                          help="H.264 (libx264, h264_nvenc) or HEVC (libx265, hevc_nvenc); NVENC falls back to the "
+                               "software encoder where it cannot open (default: h264_nvenc on a CUDA device, else "
+                               "libx264)")
+    encoding.add_argument("--crf", type=int, metavar="N",
+                          help=f"constant quality, 0-51: lower is better and larger (default: {Config.video_crf})")
+    encoding.add_argument("--bitrate", type=_rate_kbps, metavar="RATE",
+                          help="an average bit rate instead of --crf, e.g. 8M or 8000k")
+    encoding.add_argument("--maxrate", type=_rate_kbps, metavar="RATE",
+                          help="a peak bit rate capping --crf or --bitrate (with a buffer of 2 s of it)")
+    encoding.add_argument("--preset", choices=CHOICES["video_preset"], metavar="PRESET",
+                          help=f"x264/x265 speed preset, ultrafast ... placebo (default: {Config.video_preset})")
+    encoding.add_argument("--audio", choices=CHOICES["video_audio"],
+                          help=f"whose audio to copy (default: {Config.video_audio})")
 
 
 def _settings(args: argparse.Namespace) -> dict:
@@ -104,6 +182,13 @@ def _settings(args: argparse.Namespace) -> dict:
     settings = load_settings(args.config) if args.config else {}
     given = {field: check_value(field, getattr(args, dest), f"--{dest.replace('_', '-')}")
              for dest, field in SETTING_OPTIONS.items() if getattr(args, dest, None) is not None}
+    if getattr(args, "duration", None) is not None:  # -t: the span's end from its start
+        if "video_end_s" in given:
+            raise InputError("--to and -t both end the span; give one of them")
+        given["video_end_s"] = check_value("video_end_s", given.get("video_start_s", settings.get(
+            "video_start_s", Config.video_start_s)) + args.duration, "-t")
+    if "video_crf" in given and "video_bitrate_kbps" in given:
+        raise InputError("--crf and --bitrate are two ways to set the rate; give one of them")
     return {**settings, **given}
 
 
@@ -162,13 +247,13 @@ def cmd_video(args: argparse.Namespace) -> int:
         raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
     return _run_job(Job("video", (args.left, args.right), args.output, args.settings, report=args.report,
                         reference=args.reference, crop=args.crop, offset_s=args.offset, strict=args.strict,
-                        figures=args.figures, overwrite=args.overwrite))
+                        figures=args.figures, debug=args.debug, overwrite=args.overwrite))
 
 
 def cmd_config(args: argparse.Namespace) -> int:
-    from .config_file import check_config, config_toml
+    from .config_file import config_toml, settings_config
 
-    print(config_toml(check_config(Config().replace(**args.settings), "settings")), end="")
+    print(config_toml(settings_config(args.settings, "settings")), end="")
     return 0
 
 
@@ -183,55 +268,43 @@ def _offset(text: str) -> float | str:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    common, settings, overwrite = _output_options(), _settings_options(), _overwrite_options()
     parser = _Parser(
         prog="sena-warp",
-        description="Parallax-tolerant two-camera stitching (SENA) for image pairs and paired videos.",
+        description="Parallax-tolerant two-camera stitching (SENA) for image pairs and paired videos. "
+                    "'sena-warp COMMAND --help' says what a command takes.",
     )
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    def command(name: str, help_text: str, *parents: argparse.ArgumentParser) -> argparse.ArgumentParser:
-        return sub.add_parser(name, help=help_text, description=help_text[0].upper() + help_text[1:] + ".",
-                              parents=[common, *parents])
+    def command(name: str, help_text: str) -> argparse.ArgumentParser:
+        return sub.add_parser(name, help=help_text, description=help_text[0].upper() + help_text[1:] + ".")
 
-    p = command("match", "find and match features between two images", settings, overwrite)
-    p.add_argument("image_a")
-    p.add_argument("image_b")
-    p.add_argument("-o", "--output", help="write a picture of the matches (.jpg/.png)")
-    p.set_defaults(run=cmd_match)
+    def sections(p: argparse.ArgumentParser, *adders) -> None:
+        """The shared option groups, after the command's own options, then the messages."""
+        for add in (*adders, _add_messages):
+            add(p)
 
-    p = command("image", "stitch two images into a panorama", settings, overwrite)
-    p.add_argument("image_a")
-    p.add_argument("image_b")
-    p.add_argument("-o", "--output", required=True, help="panorama file: .png (transparent where uncovered) or .jpg")
-    p.add_argument("--report", help="write a JSON report (docs/report.md)")
+    p = command("image", "stitch two photos into a panorama")
+    p.add_argument("image_a", help="one photo; which is left (or top) is found from the matches")
+    p.add_argument("image_b", help="the other photo")
+    p.add_argument("-o", "--output", required=True,
+                   help="the panorama: .png (transparent where uncovered), .jpg, .tif or .webp")
+    p.add_argument("--report", metavar="FILE.json", help="also write a JSON report (docs/report.md)")
     p.add_argument("--debug", metavar="DIR", help="write a picture of each stage into DIR")
     p.add_argument("--crop", action="store_true", help="crop to the largest fully covered rectangle")
     p.add_argument("--reference", choices=("auto", "a", "b"), default="auto",
-                   help="input kept unwarped (default: auto = the right or bottom view)")
+                   help="the photo kept unwarped (default: auto = the right or bottom view)")
+    sections(p, _add_overwrite, _add_settings)
     p.set_defaults(run=cmd_image)
 
-    p = command("video", "stitch two synchronised videos", settings, overwrite)
+    p = command("video", "stitch two synchronised videos")
     p.add_argument("left", help="left (or top) video; its frames and times drive the output")
     p.add_argument("right", help="right (or bottom) video, paired to the left one by time")
-    p.add_argument("-o", "--output", required=True, help="output video (.mp4, .mov or .mkv), H.264")
-    p.add_argument("--offset", type=_offset, default=0.0, metavar="S|auto",
-                   help="seconds the right video started after the left one, or auto: estimated from the "
-                        "audio of both (else their motion), refused when unclear (default: 0)")
-    p.add_argument("--rig", choices=CHOICES["video_rig"],
-                   help=f"static: maps estimated once (and moved with a camera that drifts); moving: "
-                        f"re-estimated now and then (default: {Config.video_rig})")
-    p.add_argument("--crop", action="store_true",
-                   help="crop to the largest rectangle the first estimate covers, fixed for the whole video")
-    p.add_argument("--reestimate", type=float, metavar="S",
-                   help=f"seconds between re-estimations of a moving rig (default: {Config.video_reestimate_s})")
-    p.add_argument("--crf", type=int, help=f"constant quality, lower is better (default: {Config.video_crf})")
-    p.add_argument("--preset", choices=CHOICES["video_preset"], help=f"libx264 preset (default: {Config.video_preset})")
-    p.add_argument("--codec", choices=CHOICES["video_codec"],
-                   help="H.264 encoder (default: h264_nvenc when the device is cuda and it opens, else libx264)")
-    p.add_argument("--audio", choices=CHOICES["video_audio"], help=f"whose audio to copy (default: {Config.video_audio})")
-    p.add_argument("--report", help="write a JSON report (docs/report.md)")
+    p.add_argument("-o", "--output", required=True,
+                   help="the stitched video (.mp4, .mov or .mkv), or a picture (.png or .jpg) of the stitched frame "
+                        "at --ss, made in about the time of the estimate: a look at the rig before a long encode")
+    p.add_argument("--report", metavar="FILE.json", help="also write a JSON report (docs/report.md)")
+    p.add_argument("--debug", metavar="DIR", help="write a picture of each stage of the first estimate into DIR")
     p.add_argument("--figures", action="store_true",
                    help="measure the video over time (seam motion, exposure step, misalignment at the seam, "
                         "stability) into the report's 'figures'; slows the run")
@@ -239,9 +312,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="input kept unwarped: a = left, b = right (default: auto = the right or bottom view)")
     p.add_argument("--strict", action="store_true",
                    help="fail (exit 5) on damaged frames or a truncated input instead of replacing them with a warning")
+    sections(p, _add_video, _add_overwrite, _add_settings)
     p.set_defaults(run=cmd_video)
 
-    p = command("batch", "stitch many pairs on local worker processes or a Ray cluster", settings)
+    p = command("batch", "stitch many pairs on local worker processes or a Ray cluster, resumably")
     p.add_argument("jobs", metavar="JOBS",
                    help="folder of pair folders (a.* + b.* images, or left.* + right.* videos), or a .toml/.csv job list")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for the outputs, reports and summary")
@@ -251,31 +325,42 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ray", metavar="ADDRESS",
                    help="run the jobs as Ray tasks on this cluster ('auto', 'HOST:PORT', 'ray://HOST:PORT') or on a "
                         "Ray started here ('local'); needs the cluster extra: pip install 'sena-warp[cluster]'")
+    sections(p, _add_video, _add_overwrite, _add_settings)
     p.set_defaults(run=_lazy("batch", "cmd_batch"))
 
-    p = command("config", "print the settings (defaults, or as a --config file and options change them) as TOML",
-                settings)
+    p = command("match", "find and match features between two photos")
+    p.add_argument("image_a")
+    p.add_argument("image_b")
+    p.add_argument("-o", "--output", help="write a picture of the matches (.jpg/.png)")
+    sections(p, _add_overwrite, _add_settings)
+    p.set_defaults(run=cmd_match)
+
+    p = command("config", "print the settings (defaults, or as a --config file and options change them) as TOML")
+    sections(p, _add_settings)
     p.set_defaults(run=cmd_config)
 
-    p = command("bench", "frame-rate benchmark: transcode baseline vs stitch, per stage, kernel", overwrite)
+    p = command("eval", "quality evaluation: SENA vs global affine, homography, OpenCV's stitcher")
+    p.add_argument("data_dir", help="folder of pair folders, each holding a.* and b.* (or one pair folder)")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder for results.csv, summary.md and the sheets")
+    sections(p, _add_overwrite, _add_settings)
+    p.set_defaults(run=_lazy("evaluation.evaluate", "cmd_eval"))
+
+    p = command("bench", "frame-rate benchmark: transcode baseline vs stitch, per stage, compositing vs OpenCV")
     p.add_argument("--sizes", nargs="+", metavar="SIZE",
-                   help="clip sizes: 720p, 1080p, 4k or WIDTHxHEIGHT (default: 720p 1080p 4k)")
-    p.add_argument("--seconds", type=float, default=10.0, help="clip length in seconds (default: %(default)s)")
-    p.add_argument("--markdown", metavar="FILE", help="also write the table as Markdown")
+                   help="clip sizes: 720p, 1080p, 4k or WIDTHxHEIGHT, even sides from 16 up to 8K (default: 720p 1080p 4k)")
+    p.add_argument("--seconds", type=_clip_seconds, default=10.0,
+                   help=f"clip length in seconds, at most {MAX_BENCH_SECONDS:g} (default: %(default)s)")
+    p.add_argument("--markdown", metavar="FILE", help="also write the table with every column as Markdown")
     p.add_argument("--work", default="bench_work", help="folder for the clips and outputs (default: %(default)s)")
-    p.add_argument("--data", help="the shared data set holding pairs/rew_lawn_2160 (default: ../shared/data "
-                                  "beside the source tree)")
-    p.add_argument("--rss", type=float, nargs="*", default=[], metavar="S",
+    p.add_argument("--data", metavar="DIR",
+                   help="the shared data set holding pairs/rew_lawn_2160 (default: ../shared/data beside the source "
+                        "tree where it is there, else a pair the package ships)")
+    p.add_argument("--rss", type=_clip_seconds, nargs="*", default=[], metavar="S",
                    help="also measure the peak RSS of 1080p stitches of these lengths in seconds (e.g. 10 60)")
     p.add_argument("--device", choices=CHOICES["device"], default=Config.device,
                    help="where the Warp kernels run (default: %(default)s)")
+    sections(p, _add_overwrite)
     p.set_defaults(run=_lazy("evaluation.bench", "cmd_bench"))
-
-    p = command("eval", "quality evaluation: SENA vs global affine, homography, OpenCV's stitcher", settings,
-                overwrite)
-    p.add_argument("data_dir", help="folder of pair folders, each holding a.* and b.* (or one pair folder)")
-    p.add_argument("--out", required=True, metavar="DIR", help="folder for results.csv, summary.md and the sheets")
-    p.set_defaults(run=_lazy("evaluation.evaluate", "cmd_eval"))
     return parser
 
 
@@ -334,9 +419,12 @@ def main(argv: list[str] | None = None) -> int:
     except StitchError as exc:
         LOGGER.error(str(exc))
         return exc.exit_code
-    except MemoryError:  # a raised --max-megapixels, or a machine busy with other work
-        LOGGER.error("out of memory; lower --max-megapixels, downscale the inputs or free some memory")
-        return StitchError.exit_code
+    except Exception as exc:  # out of memory (a raised --max-megapixels, a busy machine) in numpy, Warp or onnxruntime
+        error = out_of_memory(exc)
+        if error is None:
+            raise
+        LOGGER.error(str(error))
+        return error.exit_code
     except KeyboardInterrupt as exc:
         signum = getattr(exc, "signum", signal.SIGINT)
         by = "" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"

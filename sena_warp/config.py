@@ -1,52 +1,66 @@
-"""Every tunable of the SENA pipeline, in one frozen dataclass.
+"""Every tunable of the SENA pipeline, in one frozen dataclass, with the range each may take.
 
-Each field carries the paper's symbol (``docs/paper/sena_paper.tex``, summarised in SENA.md) and a
-one-line meaning. Pixel quantities are in input-image pixels unless the name says otherwise.
-Defaults are the starting points of SENA.md; any change is recorded with its sweep in
-``docs/evaluation.md``.
+Fields are grouped by stage (features, warp, seam, exposure, video, sync, encoding, runtime); in each
+group the settings a user changes first come first, the fine tuning after them. Each field carries
+the paper's symbol (``docs/paper/sena_paper.tex``, summarised in SENA.md), its unit and a one-line
+meaning; pixel quantities are in input-image pixels unless the name says otherwise. ``RANGES`` below
+the class holds every number's range and ``CHOICES`` every text setting's values; a ``Config`` is
+checked against them (and the fields that bound each other against each other) when it is made, so
+``Config(video_crf=99)`` or ``Config(grid_x="8")`` raise InputError. Defaults are the starting points
+of SENA.md; each departure is measured in ``docs/evaluation.md``.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import math
+import numbers
+import types
+import typing
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import NamedTuple
+
+from .errors import InputError
 
 
 @dataclass(frozen=True)
 class Config:
-    # --- Inputs (no paper symbol) -------------------------------------------------------------
-    max_input_megapixels: float = 100.0  # refuse a larger input, from its header before decoding (memory; README)
-    alpha_margin_px: int = 8  # keypoints this close to a fully transparent pixel are dropped (no scene there)
-    scale_hint_ratio: float = 4.0  # inputs whose sizes differ more than this: a failed stitch names the ratio
-
-    # --- Step 0: features -------------------------------------------------------------------
+    # --- features: keypoints and matches (step 0) ---------------------------------------------
     features: str = "xfeat"  # detector: "xfeat" (ONNX backbone) or "sift"
     xfeat_max_side: int = 1024  # working resolution: long side in px (rounded down to /32)
+    xfeat_top_k: int = 4096  # keypoints kept per image, by score = prob x reliability
+    # --- features, fine tuning ----------------------------------------------------------------
     xfeat_detection_threshold: float = 0.05  # keypoint probability threshold after NMS
     xfeat_nms_size: int = 5  # NMS window in px (full working resolution)
-    xfeat_top_k: int = 4096  # keypoints kept per image, by score = prob x reliability
     min_cossim: float = 0.82  # mutual-NN matches need cosine similarity >= this
     sift_ratio: float = 0.75  # Lowe ratio for the SIFT alternative
     support_neighbours: int = 8  # a match is trusted where enough of this many nearest matches ...
     support_tol_px: float = 3.0  # ... move like it, within this (wrong matches on periodic patterns do not)
     support_min: int = 2  # ... at least this many
+    alpha_margin_px: int = 8  # keypoints this close to a fully transparent pixel are dropped (no scene there)
+    scale_hint_ratio: float = 4.0  # inputs whose sizes differ more than this: a failed stitch names the ratio
 
-    # --- Step 1: global affine A_glob ---------------------------------------------------------
+    # --- warp: global affine, overlap, local model, FFD, gate, warp map (steps 1-6) -----------
+    ffd_model: str = "fit"  # "fit": lattice fitted to the matches (ours, ffd.py); "blend": the paper's blend of T_j
+    gate_model: str = "none"  # "none": D as fitted (ours); "paper": G ramps D in from the source-only border
+    lattice_nodes: float = 30.0  # fit: lattice nodes are image diagonal / this apart over the canvas (sweep in evaluation.md)
+    min_inliers: int = 12  # fewer inliers than this: no stitch
     ransac_reproj_px: float = 3.0  # RANSAC inlier threshold
+    max_canvas_area_ratio: float = 4.0  # refuse a canvas larger than this x (area_src + area_tgt)
+    # --- warp, fine tuning: A_glob (step 1) ----------------------------------------------------
     ransac_confidence: float = 0.995  # RANSAC confidence
     ransac_max_iters: int = 2000  # RANSAC iterations (at least)
-    min_inliers: int = 12  # fewer inliers than this: no stitch
     global_model_choice: str = "support"  # "support": the model with more matches within fit_match_px; "inliers": more RANSAC inliers (paper)
     global_model_margin: float = 0.02  # support: supports closer than this fraction are a tie, and the inliers decide
-
-    # --- Step 2: overlap, canvas, cells c_j ---------------------------------------------------
-    max_canvas_area_ratio: float = 4.0  # refuse a canvas larger than this x (area_src + area_tgt)
+    min_overlap_correlation: float = 0.2  # no stitch when the views A_glob aligns correlate less where they overlap
+    # --- warp, fine tuning: overlap and cells c_j (step 2) ------------------------------------
     grid_x: int = 6  # G_x: cells across the overlap's bounding box (authors: 2; sweep in evaluation.md)
     grid_y: int = 6  # G_y: cells down the overlap's bounding box
     min_global_det: float = 0.05  # |det A_glob| below this (or det < 0, a flip): implausible model
     min_overlap_area_px: float = 64.0  # overlap polygon smaller than this (px^2): no overlap
-
-    # --- Step 3: local affines T_j ------------------------------------------------------------
+    # --- warp, fine tuning: local affines T_j (step 3) ----------------------------------------
     local_match_px: float = 25.0  # matches within this of A_glob feed steps 3-5 (A_glob itself: ransac_reproj_px)
     alpha: float = 0.35  # alpha: sigma_j = alpha * diag(c_j), Gaussian weight of matches
     lambda1: float = 0.005  # lambda_1: ridge pull of T_j toward A_glob (normalised coordinates)
@@ -64,44 +78,41 @@ class Config:
     w_det: float = 0.5  # omega_det
     tau_det: float = 0.1  # tau_det inside max(0, tau_det - |det|)
     w_delta: float = 0.002  # omega_delta
-
-    # --- Step 4: FFD field --------------------------------------------------------------------
-    ffd_model: str = "fit"  # "fit": lattice fitted to the matches (ours, ffd.py); "blend": the paper's blend of T_j
-    lattice_nodes: float = 30.0  # fit: lattice nodes are image diagonal / this apart over the canvas (sweep in evaluation.md)
+    # --- warp, fine tuning: FFD field (step 4) -------------------------------------------------
     lambda_bend: float = 1e-6  # lambda_b, fit: thin-plate bending energy against the match residuals (scale-free)
     fit_match_px: float = 50.0  # fit: matches within this of A_glob take part (the IRLS drops wrong ones)
     fit_tukey_px: float = 4.0  # fit: Tukey biweight scale of the iteratively reweighted fit
     fit_iterations: int = 4  # fit: reweighted least-squares solves
-    lattice_nx: int = 64  # N_x: FFD lattice nodes across the canvas
-    lattice_ny: int = 64  # N_y: FFD lattice nodes down the canvas
+    lattice_nx: int = 64  # N_x, blend: FFD lattice nodes across the canvas
+    lattice_ny: int = 64  # N_y, blend: FFD lattice nodes down the canvas
     alpha_f: float = 0.35  # alpha_f: sigma_f = alpha_f * mean cell diagonal
     d_max_px: float = 60.0  # d_max: displacement clip
     sigma_l_nodes: float = 0.6  # sigma_l: Gaussian blur on the lattice, in nodes
-
-    # --- Step 5: seam guard (gate G) ----------------------------------------------------------
-    gate_model: str = "none"  # "none": D as fitted (ours); "paper": G ramps D in from the source-only border
+    # --- warp, fine tuning: seam guard, gate G (step 5) ---------------------------------------
     ramp_min_px: float = 40.0  # b = max(ramp_min_px, ramp_diag_ratio * image diagonal)
     ramp_diag_ratio: float = 0.10  # b as a fraction of the larger image diagonal
     sigma_d_ratio: float = 24.0 / 512.0  # sigma_d: density blur, as a fraction of the image's long side
     gamma_p: float = 1.2  # gamma_p: ramp steepness exponent
     gamma_min: float = 0.9  # gamma_min: gate floor where matches are sparse (SENA.md: 0.30; sweep)
     sigma_g_px: float = 1.1  # sigma_g: blur of the guarded field
-
-    # --- Step 6: warp map ---------------------------------------------------------------------
+    # --- warp, fine tuning: warp map (step 6) -------------------------------------------------
     forward_tol_px: float = 0.01  # stop inverting M_s once |M_s(u) - s| is below this (source px)
-    forward_max_iters: int = 30  # iteration cap of the numeric inversion of M_s
+    forward_max_iters: int = 30  # iteration cap of the numeric inversion of M_s (0: its affine start alone)
 
-    # --- Step 7: adequate zone ----------------------------------------------------------------
+    # --- seam: adequate zone, keypoint chain, seam path, partition (steps 7-9) ----------------
+    seam_model: str = "path"  # "path": cheapest path through anchors (ours, seam_path.py); "paper": straight lines
+    transition_px: int = 8  # width of the linear alpha ramp across the seam (paper's code: 24; sweep in evaluation.md)
+    seam_blend_ratio: float = 0.08  # seam blend: low-frequency offsets fade over this x image diagonal (0: off)
+    border_blend: bool = True  # the seam blend along the target's borders beyond the seam's ends too
+    # --- seam, fine tuning: adequate zone and chain (steps 7-8) -------------------------------
     zone_classes: int = 20  # disparity classes of width W / zone_classes
     zone_jump_px: float = 2.0  # v: join a class to the cluster while |d_i - d_(i-1)| <= v
     zone_lambda: float = 1.0  # lambda: weight of |mu_c - mu_g| in w = C / (sigma + lambda dmu + eps)
     zone_eps: float = 1e-3  # epsilon in the cluster score
     flat_min_std: float = 4.0  # drop points whose local grey std is below this (flat regions)
     flat_patch_px: int = 7  # patch side for the flatness and brightness tests
-
-    # --- Step 8: keypoint chain and seam path ------------------------------------------------
     brightness_max_diff: float = 25.0  # max mean grey difference between warped-source and target patches
-    seam_model: str = "path"  # "path": cheapest path through anchors (ours, seam_path.py); "paper": straight lines
+    # --- seam, fine tuning: seam path (step 8) ------------------------------------------------
     seam_coarse_px: int = 700  # path: the first search runs on a canvas reduced to this long side
     seam_max_step_px: int = 2  # path: sideways step per canvas row at most (and of the anchor chain)
     seam_step_cost: float = 2.0  # path: cost per pixel of sideways step (grey levels): no near-horizontal runs
@@ -120,24 +131,20 @@ class Config:
     seam_anchor_spacing_px: float = 6.0  # path: anchors at least this far apart down the seam
     seam_refine_px: int = 3  # path: full-resolution band half-width beyond the reduction factor (2 f + this)
     correction_smooth: float = 50.0  # path: smoothing of the anchor residual curve (second differences of nodes 8 rows apart)
-
-    # --- Step 9: partition and reconstruction -------------------------------------------------
-    transition_px: int = 8  # width of the linear alpha ramp across the seam (paper's code: 24; sweep in evaluation.md)
+    # --- seam, fine tuning: partition and seam blend (step 9) ---------------------------------
     seam_smooth_sigma_px: float = 1.5  # light Gaussian smoothing inside the transition only
     seam_fade_px: float = 64.0  # distance beyond the transition over which the source's anchor correction fades to 0
-    seam_blend_ratio: float = 0.08  # seam blend: low-frequency offsets fade over this x image diagonal (0: off)
     seam_blend_strip_px: int = 12  # seam blend: the offsets are measured within this of the seam
     seam_blend_rows: int = 31  # seam blend: and averaged over this many rows
-    border_blend: bool = True  # the seam blend along the target's borders beyond the seam's ends too
     border_blend_mad_grey: float = 6.0  # seam and border blend: a row or block whose views differ by more (MAD) shows other content
     thin_strip_ratio: float = 0.02  # a view shown only in a strip thinner than this x image diagonal where the other
     # takes over (beyond the other's border) is left out: it shows nothing whole (0: kept, the earlier and the paper's)
     seam_blend_gain: bool = True  # seam and border blend: one grey value per line, applied as a relative gain
     # (no colour, no contrast change); False: per-channel grey levels added (the earlier version)
-
-    # --- Switch alignment (ours, switch_align.py; no step of the paper) -------------------------
+    # --- seam, switch alignment (ours, switch_align.py; no step of the paper) -------------------
     switch_align: bool = True  # align the source to the target at the seam and the borders, cut again (False: paper)
     switch_rounds: int = 2  # align and cut again this many times
+    # --- seam, switch alignment, fine tuning ----------------------------------------------------
     switch_flow_preset: int = 1  # DIS optical flow preset between the views: 0 ultrafast, 1 fast, 2 medium
     switch_band_px: float = 24.0  # the flow is followed this far from a switch, where both views are defined
     switch_sigma_px: float = 8.0  # and smoothed along the switches by a normalised Gaussian of this sigma
@@ -146,33 +153,36 @@ class Config:
     switch_max_slope: float = 0.25  # and further where it is large: it changes by at most this per px
     switch_cell_px: int = 4  # the correction field is worked out on cells this wide (it is smooth) and upsampled
 
-    # --- Exposure compensation (Brown & Lowe 2007; no step of the paper) ------------------------
+    # --- exposure: gains of each view (Brown & Lowe 2007; no step of the paper) ----------------
     gain_model: str = "channels"  # "channels": per-channel gains (gains.py); "opencv": cv2's ChannelsCompensator; "none"
-    gain_sigma_n: float = 10.0  # sigma_N: std of the intensity error (grey levels)
     gain_sigma_g: float = 0.5  # sigma_g: std of the gains' prior around 1 (Brown & Lowe, OpenCV: 0.1; sweep in evaluation.md)
+    # --- exposure, fine tuning ----------------------------------------------------------------
+    gain_sigma_n: float = 10.0  # sigma_N: std of the intensity error (grey levels)
     gain_outlier_fraction: float = 0.2  # the largest differences (misalignment, moving things) left out
     gain_dark_level: float = 5.0  # pixels at or below this in any channel left out (clipped)
     gain_bright_level: float = 250.0  # pixels at or above this left out (saturated)
     gain_knee_ratio: float = 0.9  # gains: above this x white a view's gain line runs straight to white (1: none)
     gain_stride: int = 2  # every this-th overlap pixel in each direction is used
     gain_min_pixels: int = 500  # fewer agreeing pixels: no compensation
+    video_gain_period_s: float = 0.2  # video: gains re-measured on the frames every this many seconds
+    video_gain_stride_px: int = 8  # video: the overlap sampled every this many canvas pixels
+    video_gain_settle_s: float = 0.3  # video: time constant with which gains follow the measurement
+    video_gain_step_grey: float = 0.5  # video: gains alone change the picture by at most this per frame
 
-    # --- Video I/O (no paper symbol: encoder and pipeline settings) ---------------------------
-    video_codec: str = "libx264"  # H.264 encoder: "libx264" or "h264_nvenc" (falls back to libx264)
-    video_crf: int = 20  # constant rate factor (libx264 crf, nvenc cq): lower = better, larger files
-    video_preset: str = "veryfast"  # libx264 speed/size preset
-    video_encoder_thread_type: str = "slice"  # libx264 threads: "slice" (parts of one frame) or "frame" (frames in flight)
-    video_queue_frames: int = 8  # decoded frames buffered per input between decoder thread and loop
-    video_audio: str = "left"  # audio copied into the output: "left", "right" or "none"
+    # --- video: the rig over time, estimates and the per-frame seam ---------------------------
+    video_rig: str = "static"  # "static": estimated once, moved with a drifting camera; "moving": every video_reestimate_s
+    video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
+    video_crop: bool = False  # crop the output to the largest rectangle the first estimate covers, for the whole video
+    video_start_s: float = 0.0  # the output starts at this time of the left input (s, after the offset); reached by seeking
+    video_end_s: float = 0.0  # the output ends before this time of the left input (s); 0: where the inputs end
+    video_max_width: int = 0  # the output at most this wide (px; aspect kept, even sides), made by the maps; 0: as stitched
     video_estimate_pairs: int = 5  # first frame pairs tried for the first estimate; most inliers wins
+    # --- video, fine tuning: estimates and drift ----------------------------------------------
     video_estimate_spacing: int = 5  # frame pairs between two of those tries
     video_screen_max_side: int = 640  # those tries are ranked by XFeat at this long side at most; the best is estimated at xfeat_max_side
     video_estimate_max_side: int = 1920  # an estimate runs on the frames made this small (long side) and is scaled up
-    video_rig: str = "static"  # "static": estimated once, moved with a drifting camera; "moving": every video_reestimate_s
-    video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
     video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's
     video_max_median_change_px: float = 40.0  # reject a re-estimate moving M_s by more (median over the overlap)
-    video_crop: bool = False  # crop the output to the largest rectangle the first estimate covers, for the whole video
     video_drift_check_s: float = 0.25  # static rig: how often each view is compared with its view at the estimate (0: never)
     video_drift_px: float = 2.0  # static rig: a view's move (input px) beyond this from what the maps follow moves them
     video_drift_speed_px: float = 0.5  # static rig: a drift move is blended in at this many px a frame (faster jolts)
@@ -180,36 +190,30 @@ class Config:
     video_seam_speed_px: float = 2.0  # the seam moves at most this (or one cell) per frame (a blend lasts long enough), but for jumps
     video_warp_follow: float = 0.65  # moving rig: an accepted estimate moves the maps this share of the way (causal
     # exponential smoothing of the warp across estimates: estimation noise averages out; 1: all the way)
-    video_estimate_workers: int = 1  # moving rig: re-estimates run on this many threads off the frame loop (0: on it)
     video_estimate_lookahead_s: float = 1.5  # moving rig, worker: a re-estimate starts on the frame this far ahead of
     # the one composited (those decoded frames are held), so it is ready when the loop reaches its frame; 0: none
-    video_estimate_lookahead_mib: int = 512  # ... holding at most this much of decoded frames (1080p: 45 pairs, 4K: 21);
-    # also the most the first estimate's pairs may hold for the loop (21 pairs; more: it decodes its own, as at 8K)
     seam_prior_weight: float = 0.5  # moving rig: cost per px (per row) of a new seam's distance from the current one
-    # --- Video over time: the per-frame seam and exposure (issue 14) ----------------------------
-    video_seam_band_ratio: float = 0.05  # per-frame seam: band half-width, x the canvas diagonal (room to go round an object)
-    video_seam_band_min_px: int = 8  # per-frame seam: band half-width at least this
-    video_seam_line_step: int = 2  # per-frame seam: solved on every this-th line (or every cell-th), interpolated between
-    video_seam_frame_cells: int = 360  # per-frame seam: the inputs' short side in cells; a cell is round(short side /
-    # this) px wide, at least 1 (inputs up to 640x480: 1 px; 720p: 2 px; 1080p: 3 px; 4K: 6 px): the work grows little
-    video_seam_noise: float = 6.0  # per-frame seam: differences below this (grey levels) are noise, not motion
-    video_seam_still_box_px: int = 5  # per-frame seam: a line is still where no box this wide changed by video_seam_noise
-    video_seam_stay_cost: float = 0.5  # per-frame seam: cost per px per line of leaving the last frame's seam
-    video_seam_home_cost: float = 0.5  # per-frame seam: cost per px per line of leaving the estimate's seam
-    video_seam_blocked_cost: float = 100.0  # per-frame seam: cost of a band cell outside the overlap
-    video_seam_margin: float = 1.0  # per-frame seam: a new path must be cheaper by this per line to replace the last
-    video_seam_jump_cost: float = 3.0  # per-frame seam: it jumps (faster than video_seam_speed_px) to save this per line
-    video_seam_motion_cost: float = 40.0  # per-frame seam, static rig: cost of a band cell where something is in front
-    # of the background (either view off the band's background model by 2 x video_seam_noise): the seam goes round it
-    video_seam_background_s: float = 2.0  # per-frame seam, static rig: time constant of the band's background model
-    video_gain_period_s: float = 0.2  # exposure: gains re-measured on the frames every this many seconds
-    video_gain_stride_px: int = 8  # exposure: the overlap sampled every this many canvas pixels
-    video_gain_settle_s: float = 0.3  # exposure: time constant with which gains follow the measurement
-    video_gain_step_grey: float = 0.5  # exposure: gains alone change the picture by at most this per frame
     video_blank_max_std: float = 2.0  # luma standard deviation below which a frame is blank (e.g. a black start)
+    # --- video, fine tuning: the per-frame seam -----------------------------------------------
+    video_seam_band_ratio: float = 0.05  # band half-width, x the canvas diagonal (room to go round an object)
+    video_seam_band_min_px: int = 8  # band half-width at least this
+    video_seam_line_step: int = 2  # solved on every this-th line (or every cell-th), interpolated between
+    video_seam_frame_cells: int = 360  # the inputs' short side in cells; a cell is round(short side / this) px
+    # wide, at least 1 (inputs up to 640x480: 1 px; 720p: 2 px; 1080p: 3 px; 4K: 6 px): the work grows little
+    video_seam_noise: float = 6.0  # differences below this (grey levels) are noise, not motion
+    video_seam_still_box_px: int = 5  # a line is still where no box this wide changed by video_seam_noise
+    video_seam_stay_cost: float = 0.5  # cost per px per line of leaving the last frame's seam
+    video_seam_home_cost: float = 0.5  # cost per px per line of leaving the estimate's seam
+    video_seam_blocked_cost: float = 100.0  # cost of a band cell outside the overlap
+    video_seam_margin: float = 1.0  # a new path must be cheaper by this per line to replace the last
+    video_seam_jump_cost: float = 3.0  # it jumps (faster than video_seam_speed_px) to save this per line
+    video_seam_motion_cost: float = 40.0  # static rig: cost of a band cell where something is in front of the
+    # background (either view off the band's background model by 2 x video_seam_noise): the seam goes round it
+    video_seam_background_s: float = 2.0  # static rig: time constant of the band's background model (seconds)
 
-    # --- Video sync, --offset auto (no paper symbol; video/sync.py) ---------------------------
+    # --- sync: --offset auto, from audio or motion (video/sync.py) ----------------------------
     sync_max_lag_s: float = 10.0  # largest offset searched, either sign (seconds)
+    # --- sync, fine tuning --------------------------------------------------------------------
     sync_min_overlap_s: float = 3.0  # offsets where the signals share less than this (seconds) are not searched
     sync_min_overlap: float = 0.5  # ... nor those where they share less than this x the shorter one
     sync_min_confidence: float = 0.4  # refuse a peak going less of the way from its runner-up to a perfect match
@@ -224,19 +228,47 @@ class Config:
     sync_motion_min_spread: float = 0.1  # robust std of that energy (grey levels) below this: a static scene, refused
     sync_motion_min_peak: float = 0.8  # refuse a lower energy correlation: the two views do not see the same motion
 
-    # --- Execution ----------------------------------------------------------------------------
+    # --- encoding: the output video ------------------------------------------------------------
+    video_codec: str = "libx264"  # encoder: H.264 "libx264" or "h264_nvenc", HEVC "libx265" or "hevc_nvenc" (NVENC falls back to software)
+    video_crf: int = 20  # constant rate factor (libx264/libx265 crf, nvenc cq): lower = better, larger files
+    video_bitrate_kbps: int = 0  # average bit rate (kbit/s) instead of the constant quality video_crf; 0: constant quality
+    video_maxrate_kbps: int = 0  # peak bit rate (kbit/s; a buffer of 2 s of it) capping either rate control; 0: none
+    video_preset: str = "veryfast"  # libx264 speed/size preset
+    video_audio: str = "left"  # audio copied into the output: "left", "right" or "none"
+    video_encoder_thread_type: str = "slice"  # libx264 threads: "slice" (parts of one frame) or "frame" (frames in flight)
+
+    # --- runtime: device, threads, memory ------------------------------------------------------
     device: str = "auto"  # Warp device: "auto", "cpu" or "cuda"
     cpu_threads: int = 0  # threads of the Warp CPU row bands, onnxruntime and the video codecs; 0 = one per core
+    max_input_megapixels: float = 100.0  # refuse a larger input, from its header before decoding (memory; README)
+    # --- runtime, fine tuning -----------------------------------------------------------------
+    video_queue_frames: int = 8  # decoded frames buffered per input between decoder thread and loop
+    video_estimate_workers: int = 1  # moving rig: re-estimates run on this many threads off the frame loop (0: on it)
+    video_estimate_lookahead_mib: int = 512  # the most a re-estimate's look-ahead holds of decoded frames (1080p: 45
+    # pairs, 4K: 21); also the most the first estimate's pairs may hold for the loop (more: it decodes its own)
+
+    def __post_init__(self) -> None:
+        for name, kind in field_types().items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or type(value) is kind:
+                continue
+            if kind is float and isinstance(value, numbers.Real):
+                object.__setattr__(self, name, float(value))  # Config(alpha=1) is alpha = 1.0; numpy numbers too
+            elif kind is int and isinstance(value, numbers.Integral):
+                object.__setattr__(self, name, int(value))
+        problem = config_problem(self)
+        if problem is not None:
+            raise InputError(f"Config: {problem}")
 
     def replace(self, **changes) -> "Config":
-        """A copy with some fields changed (unknown names raise TypeError)."""
+        """A copy with some fields changed (unknown names raise TypeError, bad values InputError)."""
         return dataclasses.replace(self, **changes)
 
 
 # The values a text setting may take; the CLI's choices and the settings-file checks read them here.
 CHOICES: dict[str, tuple[str, ...]] = {
     "features": ("xfeat", "sift"),
-    "video_codec": ("libx264", "h264_nvenc"),
+    "video_codec": ("libx264", "libx265", "h264_nvenc", "hevc_nvenc"),
     "video_preset": ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower",
                      "veryslow", "placebo"),
     "video_audio": ("left", "right", "none"),
@@ -250,3 +282,177 @@ CHOICES: dict[str, tuple[str, ...]] = {
     "device": ("auto", "cpu", "cuda"),
 }
 OFFSET_AUTO = "auto"  # --offset, or a batch job's offset, that is estimated from the inputs (video/sync.py)
+
+
+class Range(NamedTuple):
+    """The values a number setting may take: ``low`` to ``high``, both included unless ``above``
+    (then ``low`` itself is not). Upper bounds keep a run's memory and time bounded."""
+
+    low: float
+    high: float
+    above: bool = False
+
+    def holds(self, value: float) -> bool:
+        return (value > self.low if self.above else value >= self.low) and value <= self.high
+
+    def __str__(self) -> str:
+        return f"{'(' if self.above else '['}{_number(self.low)}, {_number(self.high)}]"  # ( : low itself is not allowed
+
+
+def _number(value: float) -> str:
+    """``value`` as a user typed it: whole numbers in full (1000000, not 1e+06)."""
+    return str(int(value)) if float(value).is_integer() else f"{value:g}"
+
+
+def _above(low: float, high: float) -> Range:
+    return Range(low, high, above=True)
+
+
+# Every number setting's range, grouped as the class is (a test checks that none is missing).
+RANGES: dict[str, Range] = {
+    # features
+    "xfeat_max_side": Range(32, 4096), "xfeat_top_k": Range(16, 16384), "xfeat_detection_threshold": Range(0, 1),
+    "xfeat_nms_size": Range(1, 63), "min_cossim": Range(0, 1), "sift_ratio": _above(0, 1),
+    "support_neighbours": Range(1, 64), "support_tol_px": _above(0, 1000), "support_min": Range(1, 64),
+    "alpha_margin_px": Range(0, 1000), "scale_hint_ratio": Range(1, 1000),
+    # warp
+    "lattice_nodes": Range(2, 200), "min_inliers": Range(3, 10000), "ransac_reproj_px": _above(0, 1000),
+    "max_canvas_area_ratio": Range(1, 100), "ransac_confidence": _above(0, 1), "ransac_max_iters": Range(1, 100000),
+    "global_model_margin": Range(0, 1), "min_overlap_correlation": Range(0, 1), "grid_x": Range(1, 64), "grid_y": Range(1, 64), "min_global_det": Range(0, 1),
+    "min_overlap_area_px": Range(0, 1e9), "local_match_px": _above(0, 10000), "alpha": _above(0, 100),
+    "lambda1": Range(0, 1e12), "lambda2": _above(0, 1e12), "beta": _above(0, 10000), "conf_min": _above(0, 100),
+    "conf_max": _above(0, 100), "unstable_min_points": Range(0, 10000), "unstable_rmse_px": _above(0, 10000),
+    "unstable_min_det": Range(0, 100), "unstable_max_cond": _above(0, 1e12), "unstable_max_disp_px": Range(0, 10000),
+    "instability_grid": Range(1, 64), "w_cond": Range(0, 1000), "w_det": Range(0, 1000), "tau_det": Range(0, 100),
+    "w_delta": Range(0, 1000), "lambda_bend": Range(0, 1000), "fit_match_px": _above(0, 10000),
+    "fit_tukey_px": _above(0, 1000), "fit_iterations": Range(1, 100), "lattice_nx": Range(2, 512),
+    "lattice_ny": Range(2, 512), "alpha_f": _above(0, 100), "d_max_px": _above(0, 10000), "sigma_l_nodes": Range(0, 16),
+    "ramp_min_px": Range(0, 10000), "ramp_diag_ratio": Range(0, 1), "sigma_d_ratio": _above(0, 1),
+    "gamma_p": _above(0, 100), "gamma_min": Range(0, 1), "sigma_g_px": Range(0, 64), "forward_tol_px": _above(0, 10),
+    "forward_max_iters": Range(0, 1000),
+    # seam
+    "transition_px": Range(1, 512), "seam_blend_ratio": Range(0, 1), "zone_classes": Range(1, 1000),
+    "zone_jump_px": Range(0, 10000), "zone_lambda": Range(0, 1000), "zone_eps": _above(0, 1000),
+    "flat_min_std": Range(0, 255), "flat_patch_px": Range(1, 64), "brightness_max_diff": Range(0, 255),
+    "seam_coarse_px": Range(64, 8192), "seam_max_step_px": Range(1, 64), "seam_step_cost": Range(0, 10000),
+    "seam_gradient_weight": Range(0, 1000), "seam_edge_weight": Range(0, 1000), "seam_separation_weight": Range(0, 1e6),
+    "seam_separation_rows": Range(1, 64), "seam_separation_min_px": _above(0, 10000),
+    "seam_separation_max_px": _above(0, 10000), "seam_unique_weight": Range(0, 1000),
+    "seam_unique_sigma_px": _above(0, 256), "seam_unique_diff": _above(0, 255), "seam_unique_norm": _above(0, 1),
+    "seam_zone_margin": Range(0, 100), "seam_anchor_px": _above(0, 1000), "seam_anchor_spacing_px": _above(0, 10000),
+    "seam_refine_px": Range(0, 256), "correction_smooth": Range(0, 1e9), "seam_smooth_sigma_px": Range(0, 64),
+    "seam_fade_px": Range(0, 10000), "seam_blend_strip_px": Range(1, 1024), "seam_blend_rows": Range(1, 1023),
+    "border_blend_mad_grey": _above(0, 255), "thin_strip_ratio": Range(0, 1), "switch_rounds": Range(0, 8),
+    "switch_flow_preset": Range(0, 2), "switch_band_px": _above(0, 1024), "switch_sigma_px": _above(0, 256),
+    "switch_max_px": _above(0, 10000), "switch_fade_px": Range(0, 10000), "switch_max_slope": _above(0, 10),
+    "switch_cell_px": Range(1, 64),
+    # exposure
+    "gain_sigma_g": _above(0, 100), "gain_sigma_n": _above(0, 255), "gain_outlier_fraction": Range(0, 0.99),
+    "gain_dark_level": Range(0, 254), "gain_bright_level": _above(0, 255), "gain_knee_ratio": _above(0, 1),
+    "gain_stride": Range(1, 64), "gain_min_pixels": Range(1, 10_000_000), "video_gain_period_s": _above(0, 3600),
+    "video_gain_stride_px": Range(1, 256), "video_gain_settle_s": Range(0, 3600), "video_gain_step_grey": _above(0, 255),
+    # video
+    "video_reestimate_s": _above(0, 3600), "video_estimate_pairs": Range(1, 100), "video_estimate_spacing": Range(1, 1000),
+    "video_screen_max_side": Range(32, 4096), "video_estimate_max_side": Range(64, 8192),
+    "video_min_inlier_ratio": Range(0, 1), "video_max_median_change_px": Range(0, 10000),
+    "video_drift_check_s": Range(0, 3600), "video_drift_px": _above(0, 10000), "video_drift_speed_px": _above(0, 10000),
+    "video_blend_frames": Range(0, 10000), "video_seam_speed_px": _above(0, 10000), "video_warp_follow": _above(0, 1),
+    "video_estimate_lookahead_s": Range(0, 60), "seam_prior_weight": Range(0, 1000), "video_blank_max_std": Range(0, 255),
+    "video_seam_band_ratio": _above(0, 1), "video_seam_band_min_px": Range(1, 4096), "video_seam_line_step": Range(1, 64),
+    "video_seam_frame_cells": Range(8, 8192), "video_seam_noise": Range(0, 255), "video_seam_still_box_px": Range(1, 64),
+    "video_seam_stay_cost": Range(0, 10000), "video_seam_home_cost": Range(0, 10000),
+    "video_seam_blocked_cost": _above(0, 1e6), "video_seam_margin": Range(0, 10000),
+    "video_seam_jump_cost": Range(0, 10000), "video_seam_motion_cost": Range(0, 1e6),
+    "video_seam_background_s": _above(0, 3600), "video_start_s": Range(0, 1e6), "video_end_s": Range(0, 1e6),
+    "video_max_width": Range(0, 16384),
+    # sync
+    "sync_max_lag_s": _above(0, 3600), "sync_min_overlap_s": _above(0, 3600), "sync_min_overlap": _above(0, 1),
+    "sync_min_confidence": Range(0, 1), "sync_audio_rate_hz": Range(100, 48000), "sync_audio_span_s": _above(0, 600),
+    "sync_audio_min_rms": Range(0, 1), "sync_audio_min_peak": Range(0, 1), "sync_audio_exclusion_s": Range(0, 10),
+    "sync_motion_span_s": _above(0, 600), "sync_motion_side_px": Range(16, 1024),
+    "sync_motion_median_frames": Range(1, 99), "sync_motion_min_spread": Range(0, 255),
+    "sync_motion_min_peak": Range(0, 1),
+    # encoding
+    "video_crf": Range(0, 51), "video_bitrate_kbps": Range(0, 1_000_000), "video_maxrate_kbps": Range(0, 1_000_000),
+    # runtime: more threads than cores only costs memory (a thread's stack; onnxruntime stalls under a memory limit)
+    "cpu_threads": Range(0, 256), "max_input_megapixels": _above(0, 10000), "video_queue_frames": Range(1, 64),
+    "video_estimate_workers": Range(0, 16), "video_estimate_lookahead_mib": Range(1, 65536),
+}
+
+# Fields that bound each other: (field, relation, other field, why), checked after each field's own range.
+BOUNDS_BETWEEN = (
+    ("conf_min", "<=", "conf_max", "k_min <= k_max"),
+    ("lambda1", "<", "lambda2", "the refit is stronger"),
+    ("support_min", "<=", "support_neighbours", "of that many neighbours"),
+    ("gain_dark_level", "<", "gain_bright_level", "some levels are left to measure"),
+    ("seam_separation_min_px", "<", "seam_separation_max_px", "some copies are far enough apart"),
+    ("sync_min_overlap_s", "<=", "sync_audio_span_s", "offsets are searched within the audio correlated"),
+    ("sync_min_overlap_s", "<=", "sync_motion_span_s", "offsets are searched within the video correlated"),
+)
+_RELATIONS = {"<": (lambda a, b: a < b), "<=": (lambda a, b: a <= b)}
+KIND_WORDS = {int: "a whole number", float: "a number", str: "text", bool: "true or false"}
+
+
+@functools.lru_cache(maxsize=1)
+def field_types() -> Mapping[str, type]:
+    """Field name -> its Python type (``int``, ``float``, ``str`` or ``bool``), read-only; worked out once
+    (a Config is checked each time one is made)."""
+    hints = typing.get_type_hints(Config)
+    return types.MappingProxyType({f.name: hints[f.name] for f in dataclasses.fields(Config)})
+
+
+def shown(value) -> str:
+    """``value`` as a settings file writes it (TOML): text quoted, true / false."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return repr(value) if isinstance(value, (int, float)) else f"{value!r} ({type(value).__name__})"
+
+
+def value_problem(name: str, value) -> str | None:
+    """What is wrong with ``value`` for the field ``name`` (type, choice, finite, range), or None.
+
+    An int is accepted for a float field (TOML ``2`` for ``2.0``); a bool is not a number."""
+    kind = field_types()[name]
+    is_int = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+    fits = (isinstance(value, bool) if kind is bool else isinstance(value, str) if kind is str
+            else is_int if kind is int else is_int or isinstance(value, numbers.Real) and not isinstance(value, bool))
+    if not fits:
+        return f"{name} = {shown(value)} is not {KIND_WORDS[kind]} (default: {shown(getattr(Config, name))})"
+    if kind is str:
+        allowed = CHOICES.get(name)
+        return None if allowed is None or value in allowed else f"{name} = {shown(value)} is not one of {', '.join(allowed)}"
+    if kind is bool:
+        return None
+    if not math.isfinite(value):
+        return f"{name} = {value} must be a finite number"
+    allowed_range = RANGES[name]
+    if not allowed_range.holds(value):
+        return f"{name} = {value} is out of range {allowed_range}"
+    return None
+
+
+def config_problem(cfg: Config) -> str | None:
+    """The first problem of ``cfg``: a field's (:func:`value_problem`), then two fields that disagree."""
+    for name in field_types():
+        problem = value_problem(name, getattr(cfg, name))
+        if problem is not None:
+            return problem
+    for name, relation, other, why in BOUNDS_BETWEEN:
+        value, bound = getattr(cfg, name), getattr(cfg, other)
+        if not _RELATIONS[relation](value, bound):
+            return f"{name} = {value} must be {relation} {other} = {bound} ({why})"
+    return None
+
+
+def require_config(cfg, where: str) -> Config:
+    """``cfg`` when it is a :class:`Config` (a public function's argument check), else InputError."""
+    if not isinstance(cfg, Config):
+        raise InputError(f"{where}: cfg must be a Config (sena_warp.config.Config(...)), got {type(cfg).__name__}")
+    return cfg
+
+
+def is_seconds(value) -> bool:
+    """Whether ``value`` is a finite real number (not a bool): a time in seconds such as an offset."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)

@@ -3,9 +3,9 @@
 A settings file is TOML with top-level ``name = value`` lines, one per :class:`Config` field to change;
 ``sena-warp config`` prints every field in that form (so its output is a valid settings file), with
 the paper's symbol, unit and meaning taken from the field's comment in ``config.py``: the comments
-there are the one place where a setting is described. Values are checked here, at the boundary, so a
-wrong type, an out-of-range number or a misspelt name stops the run before any work with one line
-saying what to change (exit code 2).
+there are the one place where a setting is described, ``config.RANGES`` and ``config.CHOICES`` the
+values it may take. Values are checked here, at the boundary, so a wrong type, an out-of-range number
+or a misspelt name stops the run before any work with one line saying what to change (exit code 2).
 """
 
 from __future__ import annotations
@@ -16,19 +16,14 @@ import difflib
 import functools
 import inspect
 import io
-import json
-import math
 import os
 import sys
 import tokenize
-import types
-import typing
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 from . import __version__, config
-from .config import CHOICES, Config
+from .config import RANGES, Config, config_problem, field_types, shown, value_problem
 from .errors import InputError
 
 if sys.version_info >= (3, 11):
@@ -36,31 +31,8 @@ if sys.version_info >= (3, 11):
 else:  # the standard library's tomllib, as a backport
     import tomli as tomllib
 
-# Numbers are finite and > 0, except those named here, which may also be 0 ...
-MAY_BE_ZERO = frozenset({
-    "xfeat_detection_threshold", "min_cossim", "min_global_det", "min_overlap_area_px", "lambda1",
-    "unstable_min_points", "unstable_min_det", "unstable_max_disp_px", "w_cond", "w_det", "tau_det", "w_delta",
-    "sigma_l_nodes", "ramp_min_px", "ramp_diag_ratio", "gamma_min", "sigma_g_px", "zone_jump_px", "zone_lambda",
-    "flat_min_std", "brightness_max_diff", "seam_smooth_sigma_px", "seam_fade_px", "video_crf",
-    "video_min_inlier_ratio", "video_max_median_change_px", "video_blend_frames", "cpu_threads", "alpha_margin_px",
-    "video_blank_max_std", "sync_min_confidence", "sync_audio_min_rms", "sync_audio_min_peak", "sync_audio_exclusion_s",
-    "sync_motion_min_spread", "sync_motion_min_peak", "lambda_bend", "seam_step_cost", "seam_gradient_weight",
-    "seam_edge_weight", "seam_separation_weight", "seam_unique_weight", "seam_zone_margin", "seam_refine_px",
-    "correction_smooth", "seam_blend_ratio", "gain_outlier_fraction", "gain_dark_level", "video_estimate_workers",
-    "seam_prior_weight", "global_model_margin", "video_seam_noise", "video_seam_stay_cost", "video_seam_home_cost", "video_seam_margin",
-    "video_seam_jump_cost", "video_seam_motion_cost", "video_gain_settle_s", "video_estimate_lookahead_s",
-    "video_drift_check_s",
-})
-# ... and those named here have an upper bound too (probabilities, ratios, correlations, x264's quality scale).
-AT_MOST = {
-    "xfeat_detection_threshold": 1.0, "min_cossim": 1.0, "sift_ratio": 1.0, "ransac_confidence": 1.0,
-    "gamma_min": 1.0, "video_min_inlier_ratio": 1.0, "video_crf": 51, "sync_min_overlap": 1.0,
-    "sync_min_confidence": 1.0, "sync_audio_min_peak": 1.0, "sync_motion_min_peak": 1.0,
-    "gain_outlier_fraction": 1.0, "gain_dark_level": 255.0, "gain_bright_level": 255.0,
-    "gain_knee_ratio": 1.0, "video_warp_follow": 1.0,
-}
-KIND_WORDS = {int: "a whole number", float: "a number", str: "text", bool: "true or false"}
 SECTION_MARK = "# ---"  # a comment line opening a group of fields in config.py
+CLOSEST = 3  # an unknown setting's error names at most this many close names
 
 
 @dataclass(frozen=True)
@@ -90,59 +62,41 @@ def field_docs() -> tuple[FieldDoc, ...]:
     return tuple(docs)
 
 
-@functools.lru_cache(maxsize=1)
-def field_types() -> Mapping[str, type]:
-    """Field name -> its Python type (``int``, ``float`` or ``str``), read-only; worked out once (checking
-    every field had taken 0.13 s of a video's set-up)."""
-    hints = typing.get_type_hints(Config)
-    return types.MappingProxyType({f.name: hints[f.name] for f in dataclasses.fields(Config)})
-
-
 def unknown_key_error(key: str, valid: list[str], where: str) -> InputError:
-    """The one-line error for a name that is not a setting: the closest valid name, then all of them."""
-    close = difflib.get_close_matches(key, valid, n=1)
-    hint = f"; did you mean {close[0]!r}?" if close else ""
-    return InputError(f"{where}: unknown setting {key!r}{hint} (valid: {', '.join(valid)})")
+    """The one-line error for a name that is not a setting: the closest few valid names, not all of them."""
+    close = difflib.get_close_matches(key, valid, n=CLOSEST)
+    hint = f"; did you mean {' or '.join(repr(name) for name in close)}?" if close else ""
+    return InputError(f"{where}: unknown setting {key!r}{hint} (all settings: sena-warp config)")
 
 
 def check_value(name: str, value, where: str):
-    """``value`` for the Config field ``name``, checked for type and range; InputError saying why not.
+    """``value`` for the Config field ``name``, checked for type and range (``config.RANGES``,
+    ``config.CHOICES``); InputError saying why not.
 
     An int is accepted for a float field (TOML ``2`` for ``2.0``) and returned as a float.
     """
-    kind = field_types()[name]
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
-        value = float(value)
-    if not isinstance(value, kind) or (isinstance(value, bool) and kind is not bool):
-        shown = json.dumps(value) if isinstance(value, (str, bool, int, float)) else repr(value)
-        raise InputError(f"{where}: {name} = {shown} is not {KIND_WORDS[kind]} (default: "
-                         f"{_toml_value(getattr(Config, name))})")
-    if kind is bool:
-        return value
-    if kind is str:
-        allowed = CHOICES.get(name)
-        if allowed is not None and value not in allowed:
-            raise InputError(f"{where}: {name} = {json.dumps(value)} is not one of {', '.join(allowed)}")
-        return value
-    if not math.isfinite(value):
-        raise InputError(f"{where}: {name} = {value} must be a finite number")
-    low_ok = value >= 0 if name in MAY_BE_ZERO else value > 0
-    if not low_ok:
-        raise InputError(f"{where}: {name} = {value} must be {'>= 0' if name in MAY_BE_ZERO else '> 0'}")
-    if name in AT_MOST and value > AT_MOST[name]:
-        raise InputError(f"{where}: {name} = {value} must be <= {AT_MOST[name]}")
-    return value
+    problem = value_problem(name, value)
+    if problem is not None:
+        raise InputError(f"{where}: {problem}")
+    return float(value) if field_types()[name] is float else value
 
 
 def check_config(cfg: Config, where: str) -> Config:
-    """``cfg`` when every field passes :func:`check_value` and the fields that bound each other agree."""
-    for f in dataclasses.fields(Config):
-        check_value(f.name, getattr(cfg, f.name), where)
-    if cfg.conf_min > cfg.conf_max:
-        raise InputError(f"{where}: conf_min = {cfg.conf_min} must be <= conf_max = {cfg.conf_max}")
-    if cfg.lambda2 <= cfg.lambda1:
-        raise InputError(f"{where}: lambda2 = {cfg.lambda2} must be > lambda1 = {cfg.lambda1} (the refit is stronger)")
+    """``cfg`` when every field passes :func:`check_value` and the fields that bound each other agree
+    (``config.BOUNDS_BETWEEN``); a Config checks itself when made, this names ``where`` it came from."""
+    problem = config_problem(cfg)
+    if problem is not None:
+        raise InputError(f"{where}: {problem}")
     return cfg
+
+
+def settings_config(settings: dict, where: str) -> Config:
+    """The defaults with ``settings`` (names and values already checked one by one), the fields that bound
+    each other checked together; InputError naming ``where`` the settings came from."""
+    try:
+        return Config().replace(**settings)
+    except InputError as exc:
+        raise InputError(f"{where}: {str(exc).removeprefix('Config: ')}") from None
 
 
 def check_settings(values: dict, where: str) -> dict:
@@ -185,26 +139,22 @@ def non_default(cfg: Config) -> dict:
             if getattr(cfg, f.name) != getattr(default, f.name)}
 
 
-def _toml_value(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return json.dumps(value)  # a JSON string is a valid TOML basic string
-    return repr(value)  # repr of a float always has a '.' or an exponent, as TOML wants
-
-
 def config_toml(cfg: Config) -> str:
-    """Every field of ``cfg`` as a settings file: grouped as in config.py, each with its comment;
-    a field that differs from the default says the default."""
+    """Every field of ``cfg`` as a settings file: grouped by stage as in config.py, each with its comment
+    and, for numbers, its range; a field that differs from the default says the default."""
     default = Config()
     out = [f"# sena-warp {__version__} settings. Save as FILE.toml, keep the lines you change and run with",
-           "# --config FILE.toml; options given on the command line win over the file."]
+           "# --config FILE.toml; options given on the command line win over the file. Grouped by stage",
+           "# (features, warp, seam, exposure, video, sync, encoding, runtime): in each group the settings",
+           "# changed most come first, the fine tuning after them. Numbers end with their range: [1, 64] from 1 to",
+           "# 64, (0, 1] above 0 up to 1."]
     section = None
     for doc in field_docs():
         if doc.section != section:
             section = doc.section
             out += ["", f"# --- {section}"]
         value, was = getattr(cfg, doc.name), getattr(default, doc.name)
-        changed = f" (default: {_toml_value(was)})" if value != was else ""
-        out.append(f"{doc.name} = {_toml_value(value)}  # {doc.comment}{changed}")
+        allowed = f" {RANGES[doc.name]}" if doc.name in RANGES else ""
+        changed = f" (default: {shown(was)})" if value != was else ""
+        out.append(f"{doc.name} = {shown(value)}  # {doc.comment}{allowed}{changed}")
     return "\n".join(out) + "\n"

@@ -6,6 +6,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from .imageio import check_image
+
 SEARCH_LONG_SIDE_PX = 400  # the rectangle is searched on a mask shrunk to this long side
 
 
@@ -37,7 +39,8 @@ def largest_inner_rectangle(coverage: np.ndarray) -> tuple[int, int, int, int]:
 
 def crop_to_covered(image_bgra: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]]:
     """A BGRA panorama (``Panorama.image``) cut to :func:`largest_inner_rectangle` of its alpha; and that
-    (x, y, w, h) in panorama pixels."""
+    (x, y, w, h) in panorama pixels. InputError for anything but a BGRA uint8 array."""
+    check_image(image_bgra, "crop_to_covered", channels=4)
     x, y, w, h = largest_inner_rectangle(image_bgra[:, :, 3])
     return image_bgra[y:y + h, x:x + w], (x, y, w, h)
 

@@ -74,7 +74,7 @@ def draw_overlap_cells(img_tgt: np.ndarray, warp) -> np.ndarray:
     cv2.polylines(pic, [poly], True, (0, 255, 255), 2, cv2.LINE_AA)
     offset = np.asarray(canvas.offset_tgt)
     cells = () if warp.local is None else zip(warp.local.centres_tgt, warp.local.conf, warp.local.affines_src_to_tgt)
-    for centre, conf, affine in cells:
+    for centre, conf, _ in cells:
         c = tuple(int(round(v)) for v in centre + offset)
         cv2.circle(pic, c, 6, (0, 0, 255), -1, cv2.LINE_AA)
         cv2.putText(pic, f"conf {conf:.2f}", (c[0] + 8, c[1]), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 255), 1,

@@ -49,6 +49,21 @@ class OutputError(StitchError):
     exit_code = 6
 
 
+OUT_OF_MEMORY = "out of memory; lower --max-megapixels, downscale the inputs or free some memory"
+# How the native libraries say an allocation failed: Warp ("Failed to allocate N bytes on device 'cpu'"),
+# onnxruntime's arena ("Failed to allocate memory for requested buffer", or a C++ bad_alloc), CUDA.
+_ALLOCATION_FAILED = ("Failed to allocate", "bad_alloc", "out of memory", "CUDA_ERROR_OUT_OF_MEMORY")
+
+
+def out_of_memory(exc: BaseException) -> StitchError | None:
+    """The one-line error (exit code 1) for an allocation that failed, in numpy (``MemoryError``), Warp or
+    onnxruntime (a RuntimeError or onnxruntime's own exception saying so); None for any other exception."""
+    native = isinstance(exc, RuntimeError) or type(exc).__module__.startswith("onnxruntime")
+    if isinstance(exc, MemoryError) or native and any(text in str(exc) for text in _ALLOCATION_FAILED):
+        return StitchError(OUT_OF_MEMORY)
+    return None
+
+
 def error_for_exit_code(code: int) -> type[StitchError]:
     """The error class that exits with ``code`` (StitchError itself for an unknown one), so a child
     process's failure can be raised again with its own code."""

@@ -1,12 +1,15 @@
 """What an image file's header says, read before decoding: its size and its EXIF orientation.
 
 Decoding a huge image can take gigabytes before anything can refuse it (a 3.6 MB PNG of zeros may
-claim 25000 x 25000 px), so the size is read from the header first: PNG ``IHDR``, JPEG ``SOFn``,
-TIFF ``ImageWidth`` / ``ImageLength``, WebP ``VP8`` / ``VP8L`` / ``VP8X``, BMP ``BITMAPINFOHEADER``.
-The EXIF orientation (tag 274) comes from PNG ``eXIf``, JPEG ``APP1 Exif``, WebP ``EXIF`` or the
-TIFF's own first directory. OpenCV's ``IMREAD_UNCHANGED`` (the only mode that keeps 16 bits and
-alpha) ignores it, so :func:`apply_orientation` turns the decoded pixels upright. Unknown formats
-and damaged headers give ``None`` fields: the decoder then has the last word.
+claim 25000 x 25000 px, a 19 KB BigTIFF 20000 x 20000 RGBA16), so the size is read from the header
+first, for every format OpenCV's decoder is given: PNG ``IHDR``, JPEG ``SOFn``, TIFF and BigTIFF
+``ImageWidth`` / ``ImageLength``, WebP ``VP8`` / ``VP8L`` / ``VP8X``, BMP ``BITMAPINFOHEADER``, GIF's
+logical screen, JPEG 2000 ``ihdr`` (JP2) or ``SIZ`` (codestream), PNM / PAM / PFM, Radiance HDR's
+resolution line and Sun raster. The EXIF orientation (tag 274) comes from PNG ``eXIf``, JPEG ``APP1
+Exif``, WebP ``EXIF`` or the TIFF's own first directory. OpenCV's ``IMREAD_UNCHANGED`` (the only mode
+that keeps 16 bits and alpha) ignores it, so :func:`apply_orientation` turns the decoded pixels
+upright. Other formats (AVIF, ...) and damaged headers give ``None`` sizes: the image is refused
+before the decoder sees it.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import numpy as np
 
 ORIENTATION_TAG = 274  # EXIF / TIFF Orientation
 WIDTH_TAG, HEIGHT_TAG = 256, 257  # TIFF ImageWidth, ImageLength
-_TIFF_SHORT, _TIFF_LONG = 3, 4
+_TIFF_INTEGERS = {3: "H", 4: "I", 16: "Q"}  # SHORT, LONG, LONG8 (BigTIFF): the types a size may have
 _JPEG_SOF = {0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7, 0xC9, 0xCA, 0xCB, 0xCD, 0xCE, 0xCF}
 _EXIF_PREFIX = b"Exif\x00\x00"
 
@@ -38,19 +41,25 @@ class ImageHeader:
 
 def tiff_tags(data: bytes | memoryview, wanted: tuple[int, ...]) -> dict[int, int]:
     """Integer values of the ``wanted`` tags in the first directory (IFD0) of TIFF-structured ``data``
-    (a TIFF file, or an EXIF block without its ``Exif\\0\\0`` prefix). Missing or damaged: left out."""
-    if bytes(data[:4]) not in (b"II*\x00", b"MM\x00*"):
+    (a TIFF or BigTIFF file, or an EXIF block without its ``Exif\\0\\0`` prefix). Missing or damaged:
+    left out."""
+    magic = bytes(data[:4])
+    if magic not in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
         return {}
-    order = "<" if bytes(data[:2]) == b"II" else ">"
+    order = "<" if magic[:2] == b"II" else ">"
+    # IFD offset, entry count, value count (formats), entry size, value position in an entry.
+    offset, entries_kind, n_kind, size, value_pos = ("Q", "Q", "Q", 20, 12) if magic[2:] in (b"+\x00", b"\x00+") \
+        else ("I", "H", "I", 12, 8)  # BigTIFF ("+"): 8-byte offsets and counts
     found: dict[int, int] = {}
     try:
-        (ifd,) = struct.unpack_from(order + "I", data, 4)
-        (count,) = struct.unpack_from(order + "H", data, ifd)
-        for i in range(count):
-            tag, kind, n = struct.unpack_from(order + "HHI", data, ifd + 2 + 12 * i)
-            if tag in wanted and n == 1 and kind in (_TIFF_SHORT, _TIFF_LONG):
-                fmt = order + ("H" if kind == _TIFF_SHORT else "I")
-                found[tag] = struct.unpack_from(fmt, data, ifd + 10 + 12 * i)[0]
+        (ifd,) = struct.unpack_from(order + offset, data, 8 if offset == "Q" else 4)
+        (entries,) = struct.unpack_from(order + entries_kind, data, ifd)
+        first = ifd + struct.calcsize(entries_kind)
+        for i in range(entries):
+            at = first + size * i
+            tag, kind, n = struct.unpack_from(order + "HH" + n_kind, data, at)
+            if tag in wanted and n == 1 and kind in _TIFF_INTEGERS:
+                found[tag] = struct.unpack_from(order + _TIFF_INTEGERS[kind], data, at + value_pos)[0]
     except struct.error:
         pass
     return found
@@ -126,10 +135,74 @@ def _bmp(data: memoryview) -> ImageHeader:
     return ImageHeader(abs(width), abs(height))  # a negative height means rows stored top-down
 
 
+def _gif(data: memoryview) -> ImageHeader:
+    return ImageHeader(*struct.unpack_from("<HH", data, 6))  # the logical screen: what the decoder allocates
+
+
+def _sun_raster(data: memoryview) -> ImageHeader:
+    return ImageHeader(*struct.unpack_from(">II", data, 4))
+
+
+def _jp2_boxes(data: memoryview, start: int, end: int):
+    """(type, body start, body end) of the JPEG 2000 boxes between ``start`` and ``end``."""
+    pos = start
+    while pos + 8 <= end:
+        length, kind = struct.unpack_from(">I4s", data, pos)
+        body = pos + 8
+        if length == 1:  # a 64-bit length follows the type
+            (length,) = struct.unpack_from(">Q", data, body)
+            body += 8
+        box_end = end if length == 0 else pos + length
+        if box_end <= pos:
+            return
+        yield kind, body, min(box_end, end)
+        pos = box_end
+
+
+def _jp2(data: memoryview) -> ImageHeader:
+    for kind, body, body_end in _jp2_boxes(data, 0, len(data)):
+        if kind == b"jp2h":
+            for inner, inner_body, _ in _jp2_boxes(data, body, body_end):
+                if inner == b"ihdr":
+                    height, width = struct.unpack_from(">II", data, inner_body)
+                    return ImageHeader(width, height)
+    return ImageHeader()
+
+
+def _j2k(data: memoryview) -> ImageHeader:
+    # SOC, then SIZ: marker, Lsiz, Rsiz, then Xsiz, Ysiz (the grid) and XOsiz, YOsiz (the image's offset on it).
+    x_end, y_end, x_origin, y_origin = struct.unpack_from(">IIII", data, 8)
+    return ImageHeader(x_end - x_origin, y_end - y_origin)
+
+
+def _text_tokens(data: memoryview, limit: int = 4096) -> list[bytes]:
+    """The whitespace-separated words of the first ``limit`` bytes, ``#`` comments dropped (PNM headers)."""
+    head = bytes(data[:limit])
+    return [word for line in head.split(b"\n") for word in line.split(b"#", 1)[0].split()]
+
+
+def _pnm(data: memoryview) -> ImageHeader:
+    words = _text_tokens(data)
+    if words[0] == b"P7":  # PAM: "WIDTH w", "HEIGHT h" lines up to ENDHDR
+        fields = dict(zip(words[1::2], words[2::2]))
+        return ImageHeader(int(fields[b"WIDTH"]), int(fields[b"HEIGHT"]))
+    return ImageHeader(int(words[1]), int(words[2]))  # P1-P6, PF, Pf: magic, width, height, ...
+
+
+def _radiance(data: memoryview) -> ImageHeader:
+    lines = bytes(data[:65536]).split(b"\n")
+    blank = lines.index(b"")  # the header ends with an empty line; the resolution line follows it
+    axes = lines[blank + 1].split()  # e.g. "-Y 480 +X 640": rows first
+    sizes = {axes[0][-1:]: int(axes[1]), axes[2][-1:]: int(axes[3])}
+    return ImageHeader(sizes[b"X"], sizes[b"Y"])
+
+
 def read_header(data: bytes | memoryview) -> ImageHeader:
     """The header of an image file given as its bytes (a memoryview avoids a copy of a large file)."""
     readers = ((b"\x89PNG\r\n\x1a\n", _png), (b"\xff\xd8", _jpeg), (b"II*\x00", _tiff), (b"MM\x00*", _tiff),
-               (b"BM", _bmp))
+               (b"II+\x00", _tiff), (b"MM\x00+", _tiff), (b"BM", _bmp), (b"GIF87a", _gif), (b"GIF89a", _gif),
+               (b"\x00\x00\x00\x0cjP  \r\n\x87\n", _jp2), (b"\xff\x4f\xff\x51", _j2k),
+               (b"\x59\xa6\x6a\x95", _sun_raster), (b"#?RADIANCE", _radiance), (b"#?RGBE", _radiance))
     try:
         head = bytes(data[:12])
         for magic, reader in readers:
@@ -137,7 +210,9 @@ def read_header(data: bytes | memoryview) -> ImageHeader:
                 return reader(data)
         if head[:4] == b"RIFF" and head[8:12] == b"WEBP":
             return _webp(data)
-    except struct.error:  # a header cut short: let the decoder say what is wrong
+        if head[:1] == b"P" and head[1:2] in b"1234567Ff" and head[2:3].isspace():
+            return _pnm(data)
+    except (struct.error, ValueError, IndexError, KeyError):  # a header cut short or garbled: no size
         pass
     return ImageHeader()
 

@@ -8,13 +8,12 @@ were fully transparent. Inputs are never modified; outputs go through ``sena_war
 from __future__ import annotations
 
 import os
-import sys
-import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from . import native_stderr
 from .errors import InputError, OutputError
 from .image_header import apply_orientation, read_header
 from .outputs import OutputPlan, atomic_output
@@ -49,6 +48,29 @@ def to_bgr8(img: np.ndarray, name: str = "image") -> np.ndarray:
     if img.ndim == 3 and img.shape[2] == 3:
         return np.ascontiguousarray(img)
     raise InputError(f"{name}: unsupported image shape {img.shape}")
+
+
+def described(value) -> str:
+    """What ``value`` is, for an error about an argument: an array's shape and type, else its type."""
+    if isinstance(value, np.ndarray):
+        return f"a {value.dtype} array of shape {value.shape}"
+    return "None" if value is None else f"a {type(value).__name__}"
+
+
+def check_image(img, name: str, channels: int = 3) -> np.ndarray:
+    """``img`` when it is a uint8 array of shape (H, W, ``channels``) with both sides at least
+    ``MIN_SIDE_PX`` (BGR for 3, BGRA for 4); else InputError saying what was expected (a public
+    function's argument check)."""
+    kind = {3: "BGR", 4: "BGRA"}[channels]
+    if not (isinstance(img, np.ndarray) and img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == channels):
+        how = ("read_image() reads a file as one; to_bgr8() converts grey, BGRA, 16-bit or float arrays"
+               if channels == 3 else "stitch_images() gives one as Panorama.image")
+        raise InputError(f"{name}: expected a {kind} uint8 array of shape (H, W, {channels}), got {described(img)}; "
+                         f"{how}")
+    if min(img.shape[:2]) < MIN_SIDE_PX:
+        raise InputError(f"{name}: image is {img.shape[1]}x{img.shape[0]} px; at least {MIN_SIDE_PX} px per side "
+                         f"is needed")
+    return img
 
 
 def _float_to_uint8(img: np.ndarray) -> np.ndarray:
@@ -98,8 +120,9 @@ def read_image_masked(path: str | os.PathLike, max_megapixels: float | None = No
     InputError saying what is wrong with it.
 
     Returns (BGR uint8 (H, W, 3), (H, W) bool transparent mask or None when no pixel is). The size
-    is checked against ``max_megapixels`` from the header, before decoding; the EXIF orientation
-    is applied (see ``image_header``).
+    is checked against ``max_megapixels`` from the header, before decoding; a file whose header gives
+    no size (a format ``image_header`` does not read, or a damaged header) is refused undecoded. The
+    EXIF orientation is applied (see ``image_header``).
     """
     path = existing_file(path)
     try:
@@ -107,15 +130,14 @@ def read_image_masked(path: str | os.PathLike, max_megapixels: float | None = No
     except OSError as exc:
         raise InputError(f"{path}: cannot read ({exc.strerror})") from exc
     header = read_header(memoryview(data))
-    if header.pixels is not None:
-        check_size(str(path), header.width, header.height, max_megapixels)
-    img, decoder_says = _decode_quietly(data) if data.size else (None, "")
+    if not header.pixels:  # no size to check: the decoder could allocate anything, so it is not asked
+        raise InputError(f"{path}: not a readable image (corrupt, truncated or unsupported format)")
+    check_size(str(path), header.width, header.height, max_megapixels)
+    img, decoder_says = _decode_quietly(data)
     if img is None:
         reason = f"; the decoder says: {decoder_says}" if decoder_says else ""
         raise InputError(f"{path}: not a readable image (corrupt, truncated or unsupported format{reason})")
     del data
-    if header.pixels is None:  # a format whose header we do not read: check what was decoded
-        check_size(str(path), img.shape[1], img.shape[0], max_megapixels)
     img = apply_orientation(img, header.orientation)
     transparent = transparent_mask(img)
     img = to_bgr8(img, str(path))
@@ -138,22 +160,13 @@ def _decode_quietly(data: np.ndarray) -> tuple[np.ndarray | None, str]:
     incomplete" for a truncated file), which would break the CLI's one-line error; the text is caught
     here so it can go into the InputError instead. Warnings on a file that still decodes are dropped.
     """
-    sys.stderr.flush()
-    saved_fd = os.dup(2)
-    with tempfile.TemporaryFile() as sink:
-        os.dup2(sink.fileno(), 2)
+    error = ""
+    with native_stderr.caught() as said:
         try:
             img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
         except cv2.error as exc:  # e.g. a size the decoder refuses to allocate
             img, error = None, exc.err
-        else:
-            error = ""
-        finally:
-            os.dup2(saved_fd, 2)
-            os.close(saved_fd)
-        sink.seek(0)
-        decoder_says = " ".join(f"{sink.read().decode(errors='replace')} {error}".split())
-    return img, decoder_says
+    return img, " ".join(f"{said.text} {error}".split())
 
 
 def encode_image(path: str | os.PathLike, img: np.ndarray, params: tuple[int, ...] = ()) -> np.ndarray:

@@ -14,16 +14,19 @@ from pathlib import Path
 
 from sena_warp.kernels.runtime import resolve_config
 
-from .config import OFFSET_AUTO, Config
-from .config_file import check_config
+from .config import OFFSET_AUTO, Config, is_seconds
+from .config_file import check_settings, settings_config
+from .errors import InputError
 from .imageio import IMAGE_SUFFIXES
-from .outputs import OutputPlan
+from .outputs import OVERWRITE_MODES, OutputPlan
 from .progress import LOGGER, stage
+from .rig import REFERENCES
 
 KINDS = ("image", "video")
 PAIR_STEMS = {"image": ("a", "b"), "video": ("left", "right")}  # file stems of a pair folder
 INPUT_SUFFIXES = {"image": IMAGE_SUFFIXES, "video": (".mp4", ".mov", ".mkv", ".m4v", ".avi", ".webm", ".ts")}
-OUTPUT_SUFFIXES = {"image": IMAGE_SUFFIXES, "video": (".mp4", ".mov", ".mkv")}  # the first: a batch job's default
+# The first: a batch job's default. A video job's .png or .jpg is a still of its first frame (``--ss``).
+OUTPUT_SUFFIXES = {"image": IMAGE_SUFFIXES, "video": (".mp4", ".mov", ".mkv", ".png", ".jpg", ".jpeg")}
 
 
 @dataclass(frozen=True)
@@ -35,7 +38,8 @@ class Job:
     whole video); ``offset_s`` (videos): seconds the right video started after the left one, or "auto"
     to estimate them; ``strict`` (videos): damaged or truncated inputs fail the job instead of a
     warning; ``figures`` (videos): measure the video over time into the report's ``figures``
-    (``evaluation.video_figures``); ``debug`` (images): folder for one picture per stage;
+    (``evaluation.video_figures``); ``debug``: folder for one picture per stage (a video's: of its first
+    estimate);
     ``overwrite``: what an existing output gets, one of ``outputs.OVERWRITE_MODES`` (the CLI's default
     refuses it, ``-y`` replaces it, ``-n`` skips the job).
     """
@@ -53,6 +57,25 @@ class Job:
     debug: str | None = None
     overwrite: str = "refuse"
 
+    def __post_init__(self) -> None:
+        """InputError for a field of the wrong kind, before anything runs (settings: names and values)."""
+        if self.kind not in KINDS:
+            raise InputError(f"Job: kind {self.kind!r} unknown; use one of {', '.join(KINDS)}")
+        paths = (*self.inputs, self.output) if isinstance(self.inputs, (tuple, list)) else ()
+        if len(paths) != 3 or not all(isinstance(p, (str, os.PathLike)) for p in paths):
+            raise InputError(f"Job: inputs must be two paths ({' and '.join(PAIR_STEMS[self.kind])}) and output one "
+                             f"path, got {self.inputs!r} and {self.output!r}")
+        if not isinstance(self.settings, dict):
+            raise InputError(f"Job: settings must be a dict of Config changes, got {type(self.settings).__name__}")
+        check_settings(self.settings, "Job settings")
+        if self.reference not in REFERENCES:
+            raise InputError(f"Job: reference must be one of {', '.join(REFERENCES)}, not {self.reference!r}")
+        if self.overwrite not in OVERWRITE_MODES:
+            raise InputError(f"Job: overwrite must be one of {', '.join(OVERWRITE_MODES)}, not {self.overwrite!r}")
+        if self.offset_s != OFFSET_AUTO and not is_seconds(self.offset_s):
+            raise InputError(f"offset {self.offset_s!r} s is not a time; give a finite number of seconds or "
+                             f"{OFFSET_AUTO!r} (--offset)")
+
 
 def job_config(settings: dict) -> Config:
     """The Config for ``settings`` (names and values already checked one by one), on this machine.
@@ -60,7 +83,7 @@ def job_config(settings: dict) -> Config:
     The Warp device is resolved here; the encoder is h264_nvenc where that device is CUDA and the
     settings chose no codec (the writer falls back to libx264, saying so, where NVENC cannot open).
     """
-    cfg = resolve_config(check_config(Config().replace(**settings), "settings"))
+    cfg = resolve_config(settings_config(settings, "settings"))
     codec = cfg.video_codec if "video_codec" in settings or cfg.device != "cuda" else "h264_nvenc"
     return cfg.replace(video_codec=codec)
 
@@ -165,7 +188,7 @@ def _video(job: Job, cfg: Config) -> dict | None:
         observer = VideoFigures(cfg)
     with plan:  # every output or none
         report = stitch_videos(*job.inputs, job.output, cfg, options, reference=job.reference, plan=plan,
-                               observer=observer)
+                               observer=observer, debug=job.debug)
         if observer is not None:
             report["figures"] = observer.figures()
         report["sync"] = (sync.as_dict() if sync is not None
@@ -184,15 +207,25 @@ def summary_line(kind: str, report: dict) -> str:
                 f"{report['anchors']['count']} anchors, overlap PSNR {m['overlap_psnr_db']} dB, "
                 f"{report['timing_s']['total']:.2f} s")
     out, st, timing = report["output"], report["stitch"], report["timing_s"]
+    if "still" in report:
+        return (f"{out['width']}x{out['height']} px, the frame at {report['still']['left_time_s']:.2f} s, "
+                f"source={st['rig']['source']}, {st['first_estimate']['inliers']} inliers, {timing['total']:.2f} s")
     after_estimate_s = timing["total"] - timing["compositor_setup"]
     steady = f", {report['frames_out'] / after_estimate_s:.1f} fps after the first estimate" if after_estimate_s > 0 else ""
     warnings = f", {len(report['warnings'])} warnings" if report["warnings"] else ""
     return (f"{out['width']}x{out['height']} px, {report['frames_out']} frames at {out['fps']:g} fps "
-            f"({out['encoder']['codec']}), source={st['rig']['source']}, {st['first_estimate']['inliers']} inliers, "
+            f"({_rate_control(out['encoder'])}), source={st['rig']['source']}, {st['first_estimate']['inliers']} inliers, "
             f"re-estimations {st['reestimations']['accepted']} accepted / {st['reestimations']['rejected']} rejected, "
             f"seam jitter {st['jitter']['seam_jitter_px_mean']} px, dropped {report['dropped']}, "
             f"repeated {report['repeated']}, damaged {sum(report['damaged'].values())}, "
             f"{report['output_fps']} fps overall{steady}{warnings}{_figures_summary(report.get('figures'))}")
+
+
+def _rate_control(encoder: dict) -> str:
+    """The encoder and its rate control as the report gives them, e.g. "libx265, crf 20"."""
+    rate = f"{encoder['bitrate_kbps']} kbit/s" if encoder["rate_control"] == "bitrate" else f"crf {encoder['crf']}"
+    peak = f", peak {encoder['maxrate_kbps']} kbit/s" if encoder["maxrate_kbps"] else ""
+    return f"{encoder['codec']}, {rate}{peak}"
 
 
 def _figures_summary(fig: dict | None) -> str:

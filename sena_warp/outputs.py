@@ -302,14 +302,15 @@ def _merge_folder(src: Path, dst: Path) -> None:
 
 @contextlib.contextmanager
 def staged(plan: OutputPlan | None, path: str | os.PathLike, inputs: Iterable[str | os.PathLike] = (),
-           folder: bool = False) -> Iterator[OutputPlan]:
+           folder: bool = False, overwrite: str = "overwrite") -> Iterator[OutputPlan]:
     """``plan`` itself (entered by its owner, who commits it) or, without one, an entered plan of the
-    single output ``path`` (a file, or a folder when ``folder``): checked now (replacing an existing
-    output, refusing one of the ``inputs``) and committed when the block succeeds."""
+    single output ``path`` (a file, or a folder when ``folder``): checked now (an existing output as
+    ``overwrite`` says, one of ``OVERWRITE_MODES``; one of the ``inputs`` refused) and committed when
+    the block succeeds."""
     if plan is not None:
         yield plan
         return
-    own = OutputPlan(inputs, overwrite="overwrite")
+    own = OutputPlan(inputs, overwrite=overwrite)
     own.add(path, "the output", folder=folder)
     own.check()
     with own:

@@ -88,7 +88,7 @@ class ConsoleHandler(logging.Handler):
         self._stage = ""  # "bar": what the line shows
         self._step = ""
         self._line = ""
-        self._shown: dict[int, float] = {}  # id(Count) -> when it was last shown
+        self._shown: dict[int, tuple[float, int]] = {}  # id(Count) -> when it was last shown, and its done then
 
     def emit(self, record: logging.LogRecord) -> None:
         try:
@@ -126,9 +126,12 @@ class ConsoleHandler(logging.Handler):
 
     def _count(self, count: Count, done: int, final: bool) -> None:
         now = time.perf_counter()
-        if not final and now - self._shown.get(id(count), -float("inf")) < REDRAW_INTERVAL_S[self.mode]:
+        shown_at, shown_done = self._shown.get(id(count), (-float("inf"), None))
+        if not final and now - shown_at < REDRAW_INTERVAL_S[self.mode]:
             return
-        self._shown[id(count)] = now
+        if final and done == shown_done and self.mode != "bar":  # the last update said it already: once is enough
+            return
+        self._shown[id(count)] = (now, done)
         fig = count.figures(done)
         if self.mode == "json":
             self._json("progress", name=count.name, rate_unit=count.rate_unit, **fig)

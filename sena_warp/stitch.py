@@ -28,13 +28,14 @@ import numpy as np
 
 from .cells import grid_cells
 from .composite import Compositor, SeamLayout
-from .config import CHOICES, Config
+from .config import CHOICES, Config, require_config
 from .errors import GeometryError, InputError, MatchError
 from .features import Matches, match_images, neighbour_supported
 from .ffd import LatticeFit, field_from_lattice, fitted_lattice, smoothed_blend_lattice
 from .gains import Gains, compensated_views, view_gains
 from .gate import gate_canvas, guard_field
-from .global_affine import GlobalAffine, fit_global_affine, near_model
+from .global_affine import GlobalAffine, check_views_alike, fit_global_affine, near_model
+from .imageio import check_image, described
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
 from .partition import (BorderOffsets, SeamMaps, SeamOffsets, border_offsets, seam_maps, seam_offsets,
@@ -149,6 +150,7 @@ def estimate_warp(img_src: np.ndarray, img_tgt: np.ndarray, pts_src: np.ndarray,
         raise InputError(f"ffd_model must be one of {CHOICES['ffd_model']} and gate_model one of {CHOICES['gate_model']}")
     with clock("global_affine"):
         glob = fit_global_affine(pts_src, pts_tgt, cfg)
+        check_views_alike(img_src, img_tgt, glob, cfg)
     affine = glob.affine_src_to_tgt
     near = near_model(affine, pts_src, pts_tgt, cfg.local_match_px)
     with clock("overlap"):
@@ -309,23 +311,36 @@ def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
 
     The Warp device of ``cfg`` ("auto", "cpu" or "cuda") is resolved here, once for the whole stitch.
     ``transparent``: per image, (H, W) bool pixels that are not content (an input's alpha 0) or None:
-    no keypoints there, and the canvas takes the other image there, or nothing (alpha 0).
+    no keypoints there, and the canvas takes the other image there, or nothing (alpha 0). Arguments
+    of another kind or shape raise InputError saying what was expected.
     """
-    cfg = runtime.resolve_config(cfg)
+    for name, img, mask in (("img_a", img_a, transparent[0]), ("img_b", img_b, transparent[1])):
+        check_image(img, f"stitch_images: {name}")
+        if mask is not None and not (isinstance(mask, np.ndarray) and mask.dtype == bool
+                                     and mask.shape == img.shape[:2]):
+            raise InputError(f"stitch_images: the transparent mask of {name} must be None or a bool array of shape "
+                             f"{img.shape[:2]}, got {described(mask)}")
+    cfg = runtime.resolve_config(require_config(cfg, "stitch_images"))
     clock = StageClock()
-    with clock("load_kernels"):  # a first run's compile gets its own time, not a stage's
-        runtime.prewarm(cfg.device)
+    with clock("load_kernels"):  # a first run's compile starts in the background (a launch waits for its module)
+        runtime.prewarm(cfg.device, channels=(3,), wait=False)  # BGR images: the 3-channel frame kernel
     stage("estimating maps")
     with naming_scale_ratio(img_a, img_b, cfg):
         maps = estimate_maps(img_a, img_b, cfg, reference, transparent=transparent)
     clock.seconds.update(maps.seconds)
-    img_src, img_tgt = maps.rig.pick(img_a, img_b)
     stage("compositing")
     with clock("composite"):
-        compositor = panorama_compositor(maps, cfg, transparent)
-        out = compositor.apply(img_src, img_tgt)
-        coverage = compositor.coverage(img_src.shape, img_tgt.shape)
-    return Panorama(np.dstack([out, coverage]), maps, clock.seconds)
+        image = panorama_image(img_a, img_b, maps, cfg, transparent)
+    return Panorama(image, maps, clock.seconds)
+
+
+def panorama_image(img_a: np.ndarray, img_b: np.ndarray, maps: StitchMaps, cfg: Config,
+                   transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> np.ndarray:
+    """The BGRA panorama of BGR images ``img_a``, ``img_b`` composited with ``maps`` (alpha 0 where
+    neither covers the canvas); ``transparent`` as :func:`stitch_images`'."""
+    img_src, img_tgt = maps.rig.pick(img_a, img_b)
+    compositor = panorama_compositor(maps, cfg, transparent)
+    return np.dstack([compositor.apply(img_src, img_tgt), compositor.coverage(img_src.shape, img_tgt.shape)])
 
 
 def _prior_on_canvas(prior_seam_tgt: np.ndarray | None, canvas) -> np.ndarray | None:

@@ -19,11 +19,14 @@ import os
 
 import cv2
 import numpy as np
-import onnxruntime as ort
 
+from . import native_stderr
 from .bilinear import sample_bilinear
 from .config import Config
 from .errors import InputError
+
+with native_stderr.caught():  # its import says on stderr when HOME cannot keep its telemetry identifier
+    import onnxruntime as ort
 
 MODEL_FILE = "xfeat.onnx"
 OUTPUT_NAMES = ("feats", "keypoint_logits", "reliability")
@@ -61,7 +64,9 @@ def xfeat_session(threads: int, spins: bool) -> ort.InferenceSession:
     if "CUDAExecutionProvider" in ort.get_available_providers():
         providers.insert(0, "CUDAExecutionProvider")
     options = ort.SessionOptions()
-    options.log_severity_level = 3  # errors only: the CUDA provider's fallbacks are not news
+    # Fatal only: its errors (the CUDA provider's fallbacks, a failed allocation) come back as exceptions,
+    # which the CLI says in one line; logged too, they were red lines on stderr before it.
+    options.log_severity_level = 4
     options.intra_op_num_threads = threads
     if not spins:
         options.add_session_config_entry("session.intra_op.allow_spinning", "0")

@@ -10,6 +10,7 @@ from fractions import Fraction
 from pathlib import Path
 
 import av
+import cv2
 import numpy as np
 
 from sena_warp.cli import main
@@ -139,3 +140,66 @@ def reencode_with_black_start(src, dst, black_frames: int) -> None:
                 writer.write(np.full_like(f.y, 16), np.full_like(f.u, 128), np.full_like(f.v, 128), pts=i)
             else:
                 writer.write(f.y, f.u, f.v, pts=i)
+
+
+def bigtiff(width: int, height: int, pixels: bytes = b"") -> bytes:
+    """A little-endian BigTIFF of 8-bit RGB ``width`` x ``height``, one uncompressed strip of ``pixels``
+    (row-major RGB bytes; missing rows read as absent data)."""
+    entries = [(256, 4, width), (257, 4, height), (258, 3, 8), (259, 3, 1), (262, 3, 2), (273, 16, None),
+               (277, 3, 3), (278, 4, height), (279, 16, len(pixels) or width * height * 3)]
+    data_at = 16 + 8 + 20 * len(entries) + 8
+    ifd = struct.pack("<Q", len(entries))
+    for tag, kind, value in entries:
+        value = data_at if tag == 273 else value
+        count = 3 if tag == 258 else 1
+        raw = struct.pack("<HHH", 8, 8, 8) if tag == 258 else struct.pack({3: "<H", 4: "<I", 16: "<Q"}[kind], value)
+        ifd += struct.pack("<HHQ", tag, kind, count) + raw.ljust(8, b"\0")
+    return b"II+\x00" + struct.pack("<HHQ", 8, 0, 16) + ifd + struct.pack("<Q", 0) + pixels
+
+
+def encoded(fmt: str, img: np.ndarray) -> bytes:
+    """``img`` (BGR uint8) as a file of format ``fmt``: an OpenCV extension, "bigtiff" or "j2k" (a bare
+    JPEG 2000 codestream: the JP2 file's ``jp2c`` box)."""
+    if fmt == "bigtiff":
+        return bigtiff(img.shape[1], img.shape[0], np.ascontiguousarray(img[:, :, ::-1]).tobytes())
+    if fmt == "j2k":
+        data = encoded(".jp2", img)
+        return data[data.find(b"jp2c") + 4:]
+    if fmt in (".hdr", ".pfm"):
+        img = img.astype(np.float32) / 255
+    elif fmt in (".pbm", ".pgm"):
+        img = img[:, :, 0]
+    return cv2.imencode(fmt, img)[1].tobytes()
+
+
+def ts_clip(frames, path, first_pts: int = 0, size: tuple[int, int] | None = None, pts_step: int = 3000) -> None:
+    """``frames`` (YuvFrame) encoded as an MPEG-TS file (90 kHz clock, H.264 without B-frames) whose frame
+    ``i`` has pts ``first_pts + i * pts_step`` (3000: 30 fps); ``size`` (width, height) rescales them.
+    TS files joined byte by byte play as one stream: what a camera's split recording or ``cat`` makes."""
+    height, width = frames[0].y.shape if size is None else size[::-1]
+    with av.open(str(path), "w", format="mpegts") as c:
+        stream = c.add_stream("libx264", rate=30, options={"bf": "0", "preset": "ultrafast"})
+        stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
+        for i, f in enumerate(frames):
+            frame = av.VideoFrame.from_ndarray(np.concatenate([f.y.ravel(), f.u.ravel(), f.v.ravel()]).reshape(
+                -1, f.y.shape[1]), format="yuv420p").reformat(width=width, height=height)
+            frame.pts, frame.time_base = first_pts + i * pts_step, Fraction(1, 90000)
+            c.mux(stream.encode(frame))
+        c.mux(stream.encode(None))
+
+
+def with_repeated_pts(src, dst, repeats: range) -> None:
+    """``src`` (a 30 fps TS file without B-frames, 90 kHz) remuxed with each packet in ``repeats`` given the
+    presentation time of the packet before it: duplicate pts. (Decoding times stay increasing, one frame
+    behind, as a muxer needs.)"""
+    with av.open(str(src)) as c_in, av.open(str(dst), "w", format="mpegts") as c_out:
+        stream_in = c_in.streams.video[0]
+        stream_out = c_out.add_stream_from_template(stream_in)
+        previous = None
+        for i, packet in enumerate(p for p in c_in.demux(stream_in) if p.size):
+            packet.dts = packet.pts - 3000
+            if i in repeats:
+                packet.pts, packet.dts = previous[0], previous[1] + 1
+            previous = packet.pts, packet.dts
+            packet.stream = stream_out
+            c_out.mux(packet)

@@ -69,6 +69,13 @@ def test_a_folder_of_pairs_runs_on_two_workers_records_the_failure_and_resumes(j
         f"sena-warp: warning: broken: failed: {jobs_dir / 'broken' / 'b.jpg'}: not a readable image (corrupt, "
         "truncated or unsupported format)"]
     assert sum(line.startswith("sena-warp: ") and ": ok (" in line for line in err) == 3
+    # Each job is said as it starts (before its result), and the jobs' count ends once on 4/4.
+    for name in ("broken", "graf_gt", "office", "udisd_test_000001"):
+        started = [i for i, line in enumerate(err) if line.startswith(f"sena-warp: {name}: started (")]
+        ended = [i for i, line in enumerate(err) if line.startswith((f"sena-warp: {name}: ok (",
+                                                                   f"sena-warp: warning: {name}: failed"))]
+        assert len(started) == len(ended) == 1 and started[0] < ended[0]
+    assert sum(line.startswith("sena-warp: 4/4 jobs") for line in err) == 1
     summary = json.loads((out / SUMMARY).read_text())
     status = {r["name"]: r["status"] for r in summary["results"]}
     assert status == {"broken": "failed", "graf_gt": "ok", "office": "ok", "udisd_test_000001": "ok"}
@@ -126,10 +133,10 @@ def test_a_csv_list_reads_each_cell_as_its_column_takes_it(bundled_dir, tmp_path
 
 
 @pytest.mark.parametrize("text, message", [
-    ('[[job]]\na = "x.jpg"\nb = "y.jpg"\ngrid_xx = 2\n', "unknown setting 'grid_xx'; did you mean 'grid_x'?"),
+    ('[[job]]\na = "x.jpg"\nb = "y.jpg"\ngrid_xx = 2\n', "unknown setting 'grid_xx'; did you mean 'grid_x' or 'grid_y'?"),
     ('[[job]]\na = "x.jpg"\n', "give the inputs as a and b (images) or left and right (videos)"),
-    ('[[job]]\nleft = "x.mp4"\nright = "y.mp4"\ncrop = true\n', "crop is for image jobs; this one is a video job"),
-    ('[[job]]\na = "x.jpg"\nb = "y.jpg"\ngrid_x = 0\n', "grid_x = 0 must be > 0"),
+    ('[[job]]\na = "x.jpg"\nb = "y.jpg"\noffset = 0.5\n', "offset is for video jobs; this one is a image job"),
+    ('[[job]]\na = "x.jpg"\nb = "y.jpg"\ngrid_x = 0\n', "grid_x = 0 is out of range \\[1, 64\\]"),
     ('[[job]]\na = "x.mp4"\nb = "y.jpg"\n', "a = 'x.mp4' is not a image file"),
     ('[[job]]\nname="n"\na = "x.jpg"\nb = "y.jpg"\n[[job]]\nname="n"\na = "x.jpg"\nb = "z.jpg"\n',
      "two jobs have the name n"),
@@ -149,14 +156,15 @@ def test_ray_tasks_give_the_local_run_s_results(jobs_dir, fast, tmp_path, capfd,
     results = {}
     for runner, argv in (("local", []), ("ray", ["--ray", "local", "--jobs", 2])):
         out = tmp_path / runner
-        rc, _, err = batch([jobs_dir, "--out", out, "--config", fast, "--threads", 1, "-q", *argv], capfd,
-                           warp_device)
+        rc, _, err = batch([jobs_dir, "--out", out, "--config", fast, "--threads", 1, *argv], capfd, warp_device)
         assert rc == 7, err  # the broken pair fails in both
+        assert sum(": started (image job: " in line for line in err) == 3
         summary = json.loads((out / SUMMARY).read_text())
         results[runner] = {r["name"]: (r["status"], r["exit_code"], r["error"]) for r in summary["results"]}
         results[runner, "reports"] = {name: stable(json.loads((out / REPORTS / f"{name}.json").read_text()))
                                       for name in PAIRS}
     assert summary["runner"] == "ray local"
+    assert err[0] == "sena-warp: starting Ray here with 2 CPUs"  # said before the seconds Ray takes to start
     assert results["ray"] == results["local"]
     for name in PAIRS:
         local, ray = results["local", "reports"][name], results["ray", "reports"][name]
@@ -192,3 +200,43 @@ def test_the_max_megapixels_option_reaches_every_job(bundled_dir, tmp_path, capf
     rc, _, _ = batch([bundled_dir / PAIRS[0], "--out", out, "--max-megapixels", "0.01", "-q"], capfd, warp_device)
     job = json.loads((out / REPORTS / f"{PAIRS[0]}.json").read_text())["job"]
     assert rc == 7 and job["exit_code"] == InputError.exit_code and "--max-megapixels" in job["error"]
+
+
+def test_a_folder_s_jobs_take_the_command_line_s_job_options(bundled_dir, tmp_path, capfd, warp_device):
+    root, out = tmp_path / "jobs", tmp_path / "out"
+    shutil.copytree(bundled_dir / PAIRS[0], root / "photos")
+    (root / "rooftop").mkdir()
+    for side in ("left", "right"):
+        shutil.copy(bundled_dir / "video" / f"rooftop_{side}.mp4", root / "rooftop" / f"{side}.mp4")
+    options = ["--crop", "--ss", "0.5", "--to", "1.5", "--codec", "libx265", "--offset", "0.05",
+               "--audio", "none", "-q"]
+    rc, _, err = batch([root, "--out", out, *options], capfd, warp_device)
+    assert rc == 0, err
+    video = json.loads((out / REPORTS / "rooftop.json").read_text())
+    assert video["frames_out"] == 30 and video["stitch"]["canvas"]["crop_xywh"] is not None
+    assert video["output"]["encoder"]["codec"] == "libx265" and video["sync"]["offset_ms"] == 50
+    photos = json.loads((out / REPORTS / "photos.json").read_text())
+    assert photos["canvas"]["crop_xywh"] is not None  # --crop for the image job too; --offset not for it
+
+    # -n: a job whose output exists is left alone, complete or not (its report lost: the default redoes it).
+    (out / REPORTS / "photos.json").unlink()
+    before = {name: (out / name).stat().st_mtime_ns for name in ("rooftop.mp4", "photos.png")}
+    rc, _, _ = batch([root, "--out", out, *options, "-n"], capfd, warp_device)
+    assert rc == 0 and json.loads((out / SUMMARY).read_text())["skipped"] == 2
+    assert {name: (out / name).stat().st_mtime_ns for name in before} == before
+    # -y: every job runs again.
+    rc, _, _ = batch([root, "--out", out, *options, "-y"], capfd, warp_device)
+    summary = json.loads((out / SUMMARY).read_text())
+    assert rc == 0 and (summary["ok"], summary["skipped"]) == (2, 0)
+    assert all((out / name).stat().st_mtime_ns != before[name] for name in before)
+
+
+def test_a_video_job_in_a_list_can_crop(bundled_dir, tmp_path):
+    clips = bundled_dir / "video"
+    jobs = tmp_path / "jobs.toml"
+    jobs.write_text(f'[[job]]\nleft = "{clips / "rooftop_left.mp4"}"\nright = "{clips / "rooftop_right.mp4"}"\n'
+                    f'crop = true\nvideo_start_s = 1.0\nvideo_max_width = 200\noutput = "check.png"\n')
+    (entry,) = read_jobs(jobs, tmp_path / "out", {}, {"crop": False, "offset": 0.25})
+    assert (entry.job.kind, entry.job.crop, entry.job.offset_s) == ("video", True, 0.25)
+    assert entry.job.settings == {"video_start_s": 1.0, "video_max_width": 200}
+    assert entry.job.output == str(tmp_path / "out" / "check.png")  # a still of the frame at 1 s

@@ -1,4 +1,5 @@
-"""Benchmark (issue 6): clip maker, a tiny bench run, and the fairness of the compositing comparison.
+"""Benchmark: clip maker, a tiny bench run (on the pair the package ships), and the fairness of the
+compositing comparison.
 
 The Warp compositor is checked against the OpenCV reference the benchmark times it with, on the same
 real images, maps, seam, gains and offsets.
@@ -12,7 +13,8 @@ import subprocess
 import numpy as np
 import pytest
 
-from sena_warp.evaluation.bench import COLUMNS, OpenCVReference, make_clip_pair, pan_window, parse_size, run_bench
+from sena_warp.evaluation.bench import (BUNDLED_PAIR, COLUMNS, BenchPair, OpenCVReference, bench_pair, format_table,
+                                       make_clip_pair, pan_window, parse_size, run_bench)
 from sena_warp.composite import Compositor
 from sena_warp.config import Config
 from sena_warp.errors import InputError
@@ -25,11 +27,11 @@ INTER_STEPS = 32  # cv2.remap's sub-pixel resolution (INTER_BITS = 5)
 
 
 @pytest.fixture(scope="module")
-def pair(shared_dir):
-    return tuple(shared_dir / "pairs" / "rew_lawn_2160" / name for name in ("a.jpg", "b.jpg"))
+def pair():
+    """The pair the package ships, which a bench without the shared data set makes its clips from."""
+    return BenchPair("bundled", (BUNDLED_PAIR / "a.jpg", BUNDLED_PAIR / "b.jpg"))
 
 
-@pytest.mark.shared
 def test_clip_maker_makes_decodable_panning_clips(pair, tmp_path):
     left, right = make_clip_pair(pair, tmp_path, (160, 96), 1.0)
     for path in (left, right):
@@ -56,13 +58,12 @@ def test_pan_window_stays_inside_and_moves():
     assert abs(w / h - 16 / 9) < 0.01
 
 
-@pytest.mark.shared
-def test_bench_tiny_run_fills_every_column(shared_dir, tmp_path):
-    rows = run_bench(["192x108"], 1.0, tmp_path, Config(device="cpu"), shared_dir)
+def test_bench_tiny_run_fills_every_column(pair, tmp_path):
+    rows = run_bench(["192x108"], 1.0, tmp_path, Config(device="cpu"), pair)
     assert len(rows) == 1
     row = rows[0]
     assert set(key for key, _, _ in COLUMNS) <= set(row)
-    assert row["frames"] == 30 and row["clip"] == "192x108" and row["canvas"] == "262x118"  # measured canvas
+    assert row["frames"] == 30 and row["clip"] == "192x108" and row["canvas"] == "250x114"  # measured canvas
     for key in ("baseline_fps", "stitch_fps", "warp_ms", "opencv_ms", "warp_cpu_ms", "rss_mib", "encode_ms"):
         assert math.isfinite(row[key]) and row[key] > 0, key
     # How the columns relate: the whole run also pays the one-time estimate, the compositing runs on
@@ -76,8 +77,12 @@ def test_bench_tiny_run_fills_every_column(shared_dir, tmp_path):
     assert row["kernel_ratio"] == pytest.approx(row["warp_ms"] / row["opencv_ms"])
     assert 100 < row["rss_mib"] < 1000  # measured 282 MiB: a child process stitching a tiny clip
     # Both compositors ran on the same planes and maps: real maps are not on cv2's 1/32 px grid, so a
-    # few edge pixels differ by more than 1 (docs/benchmarks.md: 3 at every size; measured 2 here).
+    # few edge pixels differ by more than 1 (docs/benchmarks.md: 3 at every size).
     assert row["max_diff"] <= 3
+    # The plain table fits a terminal; the Markdown one has every column.
+    plain, markdown = format_table(rows), format_table(rows, markdown=True)
+    assert max(len(line) for line in plain.splitlines()) <= 80 and "steady" in plain
+    assert markdown.splitlines()[0].count("|") == len(COLUMNS) + 1
 
 
 def test_bench_sizes_and_missing_data(tmp_path):
@@ -85,8 +90,8 @@ def test_bench_sizes_and_missing_data(tmp_path):
     assert parse_size("320x180") == ("320x180", (320, 180))
     with pytest.raises(InputError, match="size"):
         parse_size("321x180")
-    with pytest.raises(InputError, match="shared data"):
-        run_bench(["320x180"], 1.0, tmp_path, Config(device="cpu"), tmp_path / "nowhere")
+    with pytest.raises(InputError, match="benchmark pair not found"):
+        bench_pair(tmp_path / "nowhere")  # a data set named and missing is refused, not replaced
 
 
 @pytest.mark.parametrize("channels", [1, 2])
@@ -124,6 +129,26 @@ def test_bench_refuses_a_bad_size_before_making_its_work_folder(tmp_path, capfd)
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["--seconds", "nan"], ("--seconds", "nan s is not a clip length")),
+    (["--seconds", "inf"], ("--seconds", "inf s is not a clip length")),
+    (["--seconds=-5"], ("--seconds", "-5 s is not a clip length", "at most 3600")),
+    (["--seconds", "0"], ("--seconds", "0 s")),
+    (["--seconds", "ten"], ("--seconds", "'ten' is not a number of seconds")),
+    (["--rss", "10", "nan"], ("--rss", "nan s")),
+    (["--sizes", "100000x100000"], ("size '100000x100000'", "at most 8192 px a side")),
+    (["--sizes", "8192x8192"], ("size '8192x8192'", "33.2 MP (8K)")),
+])
+def test_bench_refuses_lengths_and_sizes_out_of_range_before_any_work(argv, words, tmp_path, capfd):
+    from sena_warp.cli import main
+
+    capfd.readouterr()
+    assert main(["bench", *argv, "--work", str(tmp_path / "w")]) == 2
+    err = capfd.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("sena-warp: error: ") and all(w in err[0] for w in words), err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_bench_keeps_the_stitch_child_s_exit_code_and_message(tmp_path, monkeypatch):
     from sena_warp.evaluation import bench
     from sena_warp.errors import MatchError
@@ -136,10 +161,18 @@ def test_bench_keeps_the_stitch_child_s_exit_code_and_message(tmp_path, monkeypa
                                 "images overlap"
 
 
-def test_bench_without_the_shared_pair_is_one_line_error(tmp_path, capsys):
+def test_bench_with_a_missing_data_set_is_one_line_error(tmp_path, capsys):
     from sena_warp.cli import main
 
     assert main(["bench", "--sizes", "192x108", "--data", str(tmp_path / "nowhere"), "--work", str(tmp_path / "w")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "benchmark pair not found" in err and "--data" in err
     assert not (tmp_path / "w").exists()
+
+
+def test_without_the_shared_data_set_the_bench_uses_the_pair_the_package_ships(monkeypatch, tmp_path):
+    from sena_warp.evaluation import bench
+
+    monkeypatch.setattr(bench, "DATA_DIR", tmp_path / "no_shared")
+    shipped = bench_pair()
+    assert shipped.name == "bundled_spw_13" and all(path.is_file() for path in shipped.paths)

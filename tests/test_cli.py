@@ -1,9 +1,11 @@
 import json
+import subprocess
+import sys
 
 import cv2
 import pytest
 
-from sena_warp.cli import main
+from sena_warp.cli import _rate_kbps, _seconds, main
 
 
 @pytest.fixture(scope="module")
@@ -79,3 +81,53 @@ def test_unknown_output_type_is_refused_before_work(pair, tmp_path, capsys):
     assert main(["image", *pair, "-o", str(tmp_path / "p.gif")]) == 2  # a bad option, like any other
     assert "unsupported output type" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_python_m_sena_warp_is_the_command(tmp_path):
+    # The same parser and messages as the installed script, under the script's name.
+    done = subprocess.run([sys.executable, "-m", "sena_warp", "config", "--threads", "3"], capture_output=True,
+                          text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 0 and "cpu_threads = 3" in done.stdout
+    done = subprocess.run([sys.executable, "-m", "sena_warp", "video", "left.mp4"], capture_output=True, text=True,
+                          timeout=120, cwd=tmp_path)
+    assert done.returncode == 2 and done.stderr.startswith("sena-warp: error: ") and "sena-warp video --help" in done.stderr
+
+
+@pytest.mark.parametrize("text, seconds", [("90", 90.0), ("90.5", 90.5), ("1:30.5", 90.5), ("01:00:02", 3602.0)])
+def test_times_are_read_as_ffmpeg_reads_them(text, seconds):
+    assert _seconds(text) == seconds
+
+
+@pytest.mark.parametrize("text, kbps", [("8M", 8000), ("8000k", 8000), ("2.5m", 2500), ("8000000", 8000)])
+def test_bit_rates_are_read_as_ffmpeg_reads_them(text, kbps):
+    assert _rate_kbps(text) == kbps
+
+
+def test_the_video_options_reach_the_report(bundled_dir, tmp_path, capsys, warp_device):
+    clips = bundled_dir / "video"
+    argv = ["video", str(clips / "rooftop_left.mp4"), str(clips / "rooftop_right.mp4"), "-o", str(tmp_path / "o.mkv"),
+            "--report", str(tmp_path / "r.json"), "--ss", "0:00.5", "-t", "0.5", "--codec", "libx265", "--bitrate",
+            "400k", "--maxrate", "600k", "--device", warp_device]
+    assert main(argv) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["span_s"] == {"start": 0.5, "end": 1.0} and report["frames_out"] == 15
+    encoder = report["output"]["encoder"]
+    assert (encoder["codec"], encoder["bitrate_kbps"], encoder["maxrate_kbps"]) == ("libx265", 400, 600)
+    assert report["run"]["settings"]["video_start_s"] == 0.5
+    assert "(libx265, 400 kbit/s, peak 600 kbit/s)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--to", "1", "-t", "1"], "--to and -t both end the span; give one of them"),
+    (["--crf", "18", "--bitrate", "1M"], "--crf and --bitrate are two ways to set the rate; give one of them"),
+    (["--ss", "1", "--to", "0.5"], "the span ends at 0.5 s, not after its start at 1 s"),
+    (["--ss", "soon"], "argument --ss: 'soon' is not a time"),
+    (["--bitrate", "fast"], "argument --bitrate: 'fast' is not a bit rate"),
+])
+def test_a_bad_span_or_rate_is_one_line_and_no_output(options, message, bundled_dir, tmp_path, capsys):
+    clips = bundled_dir / "video"
+    argv = ["video", str(clips / "rooftop_left.mp4"), str(clips / "rooftop_right.mp4"), "-o", str(tmp_path / "o.mp4"),
+            *options]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and not (tmp_path / "o.mp4").exists()

@@ -22,9 +22,9 @@ from test_kernels_maps import DEVICES
 from test_kernels_remap import remap_reference, scene  # noqa: F401  (scene is a fixture)
 
 
-def layout(scene, lines_are_rows=True, band_px=12.0, lf_px=40.0, wobble=15.0) -> SeamLayout:
+def layout(scene_arrays, lines_are_rows=True, band_px=12.0, lf_px=40.0, wobble=15.0) -> SeamLayout:
     """A wavy seam down the middle of the scene's canvas (per row, or per column)."""
-    _, _, map_src, _, _ = scene
+    _, _, map_src, _, _ = scene_arrays
     height, width = map_src.shape[:2]
     lines, across = (height, width) if lines_are_rows else (width, height)
     positions = 0.5 * across + wobble * np.sin(np.arange(lines) / 17.0)

@@ -10,7 +10,7 @@ from sena_warp.affine import apply_affine
 from sena_warp.config import Config
 from sena_warp.errors import MatchError
 from sena_warp.features import match_images
-from sena_warp.global_affine import fit_global_affine, near_model
+from sena_warp.global_affine import check_views_alike, fit_global_affine, near_model, overlap_correlation
 from helpers import read_pair
 
 CFG = Config()
@@ -137,3 +137,23 @@ def test_by_support_spw_2_keeps_the_model_most_of_the_scene_lies_near(shared_dir
     assert (by_inliers.model, by_support.model) == ("affine", "similarity")
     near = [int(near_model(g.affine_src_to_tgt, pts_src, pts_tgt, cfg.fit_match_px).sum()) for g in (by_inliers, by_support)]
     assert near[1] > 1.3 * near[0] and by_inliers.n_inliers > by_support.n_inliers
+
+
+def test_the_views_of_a_real_pair_correlate_where_a_glob_aligns_them_and_noise_does_not(bundled_dir):
+    """The bundled pairs align to an overlap correlation far above the 0.2 floor (every shared pair: 0.47 or
+    more, docs/evaluation.md); two noise images, whose 24-30 matches agree on an identity by chance, to 0."""
+    cfg = Config(device="cpu")
+    for name in ("udisd_test_000001", "graf_gt"):
+        img_a, img_b = read_pair(bundled_dir / name)
+        matches = match_images(img_a, img_b, cfg)
+        glob = fit_global_affine(matches.pts_a, matches.pts_b, cfg)
+        assert overlap_correlation(img_a, img_b, glob.affine_src_to_tgt) > 0.4
+        check_views_alike(img_a, img_b, glob, cfg)
+    noise_a, noise_b = (np.random.default_rng(seed).integers(0, 256, (512, 512, 3), dtype=np.uint8) for seed in (1, 2))
+    identity = fit_global_affine(np.array([[10.0, 10], [400, 30], [30, 400]]), np.array([[10.0, 10], [400, 30], [30, 400]]),
+                                 Config(min_inliers=3))
+    assert abs(overlap_correlation(noise_a, noise_b, identity.affine_src_to_tgt)) < 0.05
+    with pytest.raises(MatchError, match="align views that do not look alike .overlap correlation 0.0"):
+        check_views_alike(noise_a, noise_b, identity, cfg)
+    flat = np.full((512, 512, 3), 90, np.uint8)
+    assert overlap_correlation(flat, noise_b, identity.affine_src_to_tgt) is None  # nothing to compare: not refused

@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+import warp as wp
 
 from conftest import REPO
 from sena_warp.errors import InputError
@@ -51,9 +52,9 @@ def test_threaded_launch_equals_single_launch(udisd_pair, warp_device):
     assert valid_one.any()
 
 
-# Run in a fresh process, where nothing is loaded yet, with an empty kernel cache (a first run, whose
-# modules compile on a thread per core): prewarm, then an image stitch and the video compositor's Y
-# (1 channel) and UV (2 channels) passes; print what was loaded before and after.
+# Run in a fresh process, where nothing is loaded yet, with an empty kernel cache (a first run): prewarm,
+# then an image stitch and the video compositor's Y (1 channel) and UV (2 channels) passes; print what
+# was loaded before and after.
 PREWARM_PROBE = """
 import json, sys
 import numpy as np
@@ -77,11 +78,11 @@ print(json.dumps({"before": sorted(before), "warmed": sorted(warmed), "after": s
 """
 
 
-def test_prewarm_loads_every_kernel_module_and_all_that_a_stitch_launches(bundled_dir, tmp_path):
+def test_a_first_run_loads_the_shipped_builds_and_compiles_nothing(bundled_dir, tmp_path):
     probe = subprocess.run([sys.executable, "-c", PREWARM_PROBE, str(bundled_dir / "udisd_test_000001")],
                            capture_output=True, text=True, check=True,
                            env={**os.environ, "WARP_CACHE_PATH": str(tmp_path)})
-    assert len(list(tmp_path.glob("*/*"))) >= 13  # compiled here, not loaded from the user's cache
+    assert list(tmp_path.glob("*/*")) == []  # an empty kernel cache stays empty: nothing was compiled
     seen = json.loads(probe.stdout.strip().splitlines()[-1])
     kernel_files = {path.stem for path in (REPO / "kernels").glob("*.py")} - {"__init__"}
     assert {"composite", "ffd", "gate", "remap", "sampling", "seam"} <= kernel_files
@@ -90,8 +91,34 @@ def test_prewarm_loads_every_kernel_module_and_all_that_a_stitch_launches(bundle
     warmed_modules = {name for name, _ in seen["warmed"]}
     for name in kernel_files - {"runtime"}:
         assert any(module.startswith(f"sena_warp.kernels.{name}") for module in warmed_modules), name
-    # Nothing the stitch or the planes launched had to be loaded (compiled) after the prewarm.
+    # Nothing the stitch or the planes launched had to be loaded after the prewarm.
     assert seen["after"] == seen["warmed"]
+
+
+def test_the_shipped_builds_are_those_of_the_kernels_as_they_are():
+    """Every kernel module has its CPU object and its sm_75 PTX in ``kernels/built/``, under the name of its
+    code as it is now, and nothing else is there: after a change to ``kernels/``, run
+    ``.venv/bin/python tools/ship_kernels.py`` (a stale build is never loaded, but a first run compiles).
+    The builds are for one Warp version: with another one installed they are not used, and not checked."""
+    shipped = sorted(folder.name for folder in runtime.SHIPPED.iterdir())
+    if not runtime.BUILT.is_dir():
+        pytest.skip(f"the shipped builds are for Warp {', '.join(shipped)}, not the installed {wp.config.version}")
+    assert shipped == [runtime.BUILT.name], "builds of another Warp version: run tools/ship_kernels.py"
+    wanted = set()
+    for module in runtime.kernel_modules("cpu")["cpu"]:
+        assert runtime.shipped_build(module, "cpu") is not None, f"{module.name}: run tools/ship_kernels.py"
+        cuda_id = module.get_module_identifier(module.options["block_dim"])
+        ptx = runtime.BUILT / cuda_id / f"{cuda_id}.sm{runtime.SHIPPED_PTX_ARCH}.ptx"
+        assert ptx.is_file() and (runtime.BUILT / cuda_id / f"{cuda_id}.meta").is_file(), f"{module.name}: run " \
+                                                                                          "tools/ship_kernels.py"
+        wanted |= {module.get_module_identifier(1), cuda_id}
+    assert {folder.name for folder in runtime.BUILT.iterdir()} == wanted, "stale builds: run tools/ship_kernels.py"
+
+
+def test_kernels_are_built_for_any_cpu_of_their_kind():
+    """The shipped CPU objects must run on any x86-64 CPU: no -march=native (``kernels/__init__.py``)."""
+    for module in runtime.kernel_modules("cpu")["cpu"]:
+        assert module.options["cpu_compiler_flags"] == "", module.name
 
 
 def test_every_kernel_is_built_forward_only():
@@ -106,3 +133,24 @@ def test_every_kernel_is_built_forward_only():
     assert len(kernels) >= 20
     for kernel in kernels:
         assert kernel.module.options["enable_backward"] is False, kernel.key
+
+
+@pytest.mark.parametrize("unwritable", ["WARP_CACHE_PATH", "HOME"])
+def test_an_unwritable_kernel_cache_falls_back_to_a_temporary_one_with_one_warning(unwritable, bundled_dir, tmp_path):
+    """A WARP_CACHE_PATH that is a file, or a HOME that cannot hold a cache folder: the run goes on with a
+    temporary cache (one warning line, exit 0), removed when the process ends."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    env = {k: v for k, v in os.environ.items() if k not in ("WARP_CACHE_PATH", "XDG_CACHE_HOME")}
+    env.update({unwritable: str(blocker), "TMPDIR": str(tmp_path)})
+    pair = bundled_dir / "udisd_test_000001"
+    done = subprocess.run([sys.executable, "-m", "sena_warp.cli", "match", pair / "a.jpg", pair / "b.jpg",
+                           "--features", "sift", "-q"], capture_output=True, text=True, env=env, cwd=tmp_path,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("sena-warp: warning: kernel cache"), lines
+    assert "cannot be written" in lines[0] and "WARP_CACHE_PATH" in lines[0]
+    assert json.loads(done.stdout)["matches"] > 0
+    assert not list(tmp_path.glob("sena-warp-kernels-*"))  # the temporary cache is gone
+    assert blocker.read_text() == "not a folder"

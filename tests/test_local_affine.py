@@ -9,7 +9,7 @@ from test_global_affine import sift_matches
 
 from sena_warp.affine import apply_affine, invert_affine
 from sena_warp.cells import grid_cells
-from sena_warp.config import Config
+from sena_warp.config import RANGES, Config
 from sena_warp.global_affine import fit_global_affine
 from sena_warp.local_affine import confidence, fit_local_affines, sigma_f
 from sena_warp.overlap import plan_overlap
@@ -92,8 +92,8 @@ def test_huge_lambda_gives_the_global_affine():
     cells = _full_overlap_cells()
     pts_src, pts_tgt = _quadrant_matches(np.random.default_rng(6))
     affine_glob = np.array([[1.01, 0.005, -3.0], [-0.004, 0.995, 2.0]])
-    # Both lambdas huge: an unstable lambda_1 fit is refitted with lambda_2.
-    local = fit_local_affines(pts_src, pts_tgt, affine_glob, cells, CFG.replace(lambda1=1e9, lambda2=1e9))
+    # Both lambdas huge: an unstable lambda_1 fit is refitted with lambda_2 (the stronger, as a Config requires).
+    local = fit_local_affines(pts_src, pts_tgt, affine_glob, cells, CFG.replace(lambda1=1e9, lambda2=1e10))
     np.testing.assert_allclose(local.affines_src_to_tgt, np.stack([affine_glob] * len(cells)), atol=1e-6)
 
 
@@ -129,12 +129,13 @@ def test_three_point_cell_triggers_a_refit_and_keeps_the_lower_score(w_delta, re
     local = fit_local_affines(pts_src, pts_tgt, IDENTITY, cells, cfg)
     assert local.n_in_cell[0] == 3 < cfg.unstable_min_points and local.unstable[0]
     # Reference fits: lambda_1 alone (no stability test can fire) and lambda_2 alone.
-    never_unstable = cfg.replace(
-        unstable_min_points=0, unstable_rmse_px=np.inf, unstable_min_det=0.0,
-        unstable_max_cond=np.inf, unstable_max_disp_px=np.inf,
+    never_unstable = cfg.replace(  # each stability test at the end of its range
+        unstable_min_points=0, unstable_rmse_px=RANGES["unstable_rmse_px"].high, unstable_min_det=0.0,
+        unstable_max_cond=RANGES["unstable_max_cond"].high, unstable_max_disp_px=RANGES["unstable_max_disp_px"].high,
     )
     only_1 = fit_local_affines(pts_src, pts_tgt, IDENTITY, cells, never_unstable)
-    only_2 = fit_local_affines(pts_src, pts_tgt, IDENTITY, cells, never_unstable.replace(lambda1=cfg.lambda2))
+    only_2 = fit_local_affines(pts_src, pts_tgt, IDENTITY, cells,
+                               never_unstable.replace(lambda1=cfg.lambda2, lambda2=10 * cfg.lambda2))
     assert not only_1.unstable[0] and only_1.score[0] != only_2.score[0]
     assert local.refit[0] == refit_expected == (only_2.score[0] < only_1.score[0])
     kept = only_2 if refit_expected else only_1

@@ -25,11 +25,11 @@ def seam_step_per_row(pano, src, tgt, valid_src, valid_tgt, seam_x) -> tuple[flo
         strips = np.r_[left, right]
         if not (valid_src[y, strips].all() and valid_tgt[y, strips].all()):
             continue
-        across = lambda img: img[y, left].mean() - img[y, right].mean()  # noqa: E731
-        if abs(across(src) - across(tgt)) > nat.STEP_AGREE_GREY:
+        step_src, step_tgt, step_pano = (img[y, left].mean() - img[y, right].mean() for img in (src, tgt, pano))
+        if abs(step_src - step_tgt) > nat.STEP_AGREE_GREY:
             disagree += 1
             continue
-        steps[y] = across(pano) - 0.5 * (across(src) + across(tgt))
+        steps[y] = step_pano - 0.5 * (step_src + step_tgt)
     known = np.isfinite(steps)
     window = np.ones(nat.STEP_ROWS)
     total = np.convolve(np.where(known, steps, 0.0), window, "same")

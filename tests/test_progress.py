@@ -111,32 +111,27 @@ def test_every_subcommand_answers_version(capsys):
         assert main([command, "--version"]) == 0 and capsys.readouterr().out == "sena-warp 0.1.0\n"
 
 
-def test_compiling_kernels_is_said_once_and_only_when_warp_compiles(monkeypatch, caplog, warp_device):
+def test_compiling_kernels_is_said_once_and_counted_module_by_module(monkeypatch, caplog, warp_device):
     runtime.prewarm(warp_device)
-    # After a load every module is in Warp's kernel cache, under the name runtime looks for.
-    assert all(runtime._in_kernel_cache(k.module, warp_device) for k in _all_kernels())
     monkeypatch.setattr(runtime, "_loaded", set())
-    monkeypatch.setattr(runtime, "_compiling_said", False)
+    monkeypatch.setattr(runtime, "_loads", {})
+    monkeypatch.setattr(runtime, "_compile_count", None)
     with caplog.at_level(logging.DEBUG, logger="sena_warp"):
-        runtime.prewarm(warp_device)  # cached: nothing to say
-        assert not [r for r in caplog.records if hasattr(r, "stage")]
+        runtime.prewarm(warp_device)  # shipped or cached: nothing to say
+        assert not [r for r in caplog.records if hasattr(r, "stage") or hasattr(r, "count")]
+        # As a first run without the shipped builds sees it: every module is compiled, each one counted.
         monkeypatch.setattr(runtime, "_loaded", set())
+        monkeypatch.setattr(runtime, "_loads", {})
+        monkeypatch.setattr(runtime, "shipped_build", lambda module, device: None)
         monkeypatch.setattr(runtime, "_in_kernel_cache", lambda module, device: False)
-        runtime.prewarm(warp_device)
-        runtime.prewarm(warp_device)
-    assert [r.stage for r in caplog.records if hasattr(r, "stage")] == ["compiling kernels (first run only)"]
-
-
-def _all_kernels():
-    import importlib
-    import pkgutil
-
-    import warp as wp
-
-    package = importlib.import_module("sena_warp.kernels")
-    for info in pkgutil.iter_modules(package.__path__):
-        for obj in vars(importlib.import_module(f"sena_warp.kernels.{info.name}")).values():
-            yield from (k for k in (obj.values() if isinstance(obj, dict) else (obj,)) if isinstance(k, wp.Kernel))
+        runtime.prewarm(warp_device, channels=(1, 2))
+        runtime.prewarm(warp_device, channels=(1, 2))
+    stages = [r.stage for r in caplog.records if hasattr(r, "stage") and r.levelno == logging.INFO]
+    assert stages == ["compiling kernels (first run only)"]
+    modules = runtime.kernel_modules(warp_device, (1, 2))
+    counts = [r.done for r in caplog.records if hasattr(r, "count")]
+    assert sorted(counts) == list(range(1, sum(len(m) for m in modules.values()) + 1))
+    assert sum(r.getMessage().startswith("compiled ") for r in caplog.records if r.levelno == logging.DEBUG) == len(counts)
 
 
 def test_a_count_is_shown_at_most_once_per_interval_and_always_at_its_end(monkeypatch):
@@ -156,3 +151,23 @@ def test_a_count_is_shown_at_most_once_per_interval_and_always_at_its_end(monkey
     lines = stream.getvalue().splitlines()
     assert lines[0] == "sena-warp: stitching frames" and lines[-1] == "sena-warp: warning: a fallback"
     assert 2 <= len(lines) - 2 <= 3 and lines[-2].startswith("sena-warp: 1000/1000 frames")
+
+
+@pytest.mark.parametrize("mode", ["plain", "json"])
+def test_a_count_s_last_figure_is_said_once(mode, monkeypatch):
+    # Jobs take longer than the redraw interval: every update is shown, and the close must not repeat the last.
+    monkeypatch.setitem(progress.REDRAW_INTERVAL_S, mode, 0.0)
+    stream = io.StringIO()
+    handler = ConsoleHandler(stream, mode, verbose=False)
+    LOGGER.addHandler(handler)
+    monkeypatch.setattr(LOGGER, "level", logging.INFO)
+    try:
+        count = Count("jobs", 3, "jobs/s")
+        for done in (1, 2, 3):
+            count.update(done)
+        count.close(3)
+    finally:
+        LOGGER.removeHandler(handler)
+    lines = stream.getvalue().splitlines()
+    shown = [json.loads(line)["done"] for line in lines] if mode == "json" else [line.split()[1] for line in lines]
+    assert shown == ([1, 2, 3] if mode == "json" else ["1/3", "2/3", "3/3"])

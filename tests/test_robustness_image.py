@@ -344,3 +344,27 @@ def test_atomic_output_gives_the_file_the_umask_mode_not_mkstemps_0600(tmp_path,
         tmp.write_bytes(b"data")
     assert (tmp_path / "x.png").stat().st_mode & 0o777 == 0o640
 
+
+
+# --- unrelated noise is refused as unrelated photos are: too few matches agree on what they show ----------
+
+NOISE = {
+    "uniform colour": lambda rng: rng.integers(0, 256, (512, 512, 3), dtype=np.uint8),
+    "gaussian grey": lambda rng: np.repeat(np.clip(rng.normal(128, 40, (480, 640, 1)), 0, 255).astype(np.uint8), 3, 2),
+    "blurred colour": lambda rng: cv2.GaussianBlur(rng.integers(0, 256, (600, 400, 3), dtype=np.uint8), (0, 0), 1.5),
+}
+
+
+@pytest.mark.parametrize("kind", sorted(NOISE))
+def test_two_unrelated_noise_images_are_refused_like_unrelated_photos(kind, dirs, capfd, warp_device):
+    folder_in, folder_out = dirs
+    paths = []
+    for seed in (1, 2):
+        path = folder_in / f"noise{seed}.png"
+        cv2.imwrite(str(path), NOISE[kind](np.random.default_rng(seed)))
+        paths.append(path)
+    before = [p.read_bytes() for p in paths]
+    rc, err, _ = run_cli(["image", *paths, "-o", folder_out / "p.png"], capfd, warp_device)
+    assert rc == MatchError.exit_code
+    assert_one_line_error(err, "check that the images overlap")
+    assert list(folder_out.iterdir()) == [] and [p.read_bytes() for p in paths] == before

@@ -21,8 +21,8 @@ from sena_warp.features import match_images
 from sena_warp.image_header import read_header
 from sena_warp.imageio import read_image, read_image_masked
 from sena_warp.video.loop import VideoOptions, run_video
-from helpers import (assert_one_line_error, decoded_frames, png_claiming, reencode_with_black_start, run_cli,
-                     with_orientation)
+from helpers import (assert_one_line_error, bigtiff, decoded_frames, encoded, png_claiming, reencode_with_black_start,
+                     run_cli, with_orientation)
 from test_video_loop import SideBySide
 
 FAST_VIDEO = ["--audio", "none", "--crf", "35"]
@@ -81,6 +81,105 @@ def claiming(ext: str, width: int, height: int, img: np.ndarray) -> bytes:
     elif ext == ".bmp":
         struct.pack_into("<ii", data, 18, width, height)
     return bytes(data)
+
+
+def claiming_more(fmt: str, width: int, height: int, img: np.ndarray) -> bytes:
+    """A small real file of a format beyond ``claiming``'s, whose header claims width x height."""
+    if fmt == "bigtiff":
+        return bigtiff(width, height, bytes(1000))  # what the 19 KB BigTIFF bomb is: a size and a token of data
+    data = bytearray(encoded(fmt, img))
+    if fmt == ".gif":
+        struct.pack_into("<HH", data, 6, width, height)
+    elif fmt == ".ras":
+        struct.pack_into(">II", data, 4, width, height)
+    elif fmt in (".jp2", "j2k"):
+        if fmt == ".jp2":
+            at = data.find(b"ihdr")
+            struct.pack_into(">II", data, at + 4, height, width)
+        at = data.find(b"\xff\x4f\xff\x51")
+        struct.pack_into(">IIII", data, at + 8, width, height, 0, 0)
+    elif fmt == ".hdr":
+        blank = data.find(b"\n\n")
+        end = data.find(b"\n", blank + 2)
+        data[blank + 2:end] = b"-Y %d +X %d" % (height, width)
+    elif fmt == ".pam":
+        end = data.find(b"ENDHDR")
+        data[:end] = b"P7\nWIDTH %d\nHEIGHT %d\nDEPTH 3\nMAXVAL 255\nTUPLTYPE RGB\n" % (width, height)
+    else:  # PNM and PFM: "P6\n37 23\n..."
+        first, second = data.find(b"\n"), data.find(b"\n", data.find(b"\n") + 1)
+        data[first + 1:second] = b"%d %d" % (width, height)
+    return bytes(data)
+
+
+MORE_FORMATS = ["bigtiff", ".gif", ".jp2", "j2k", ".hdr", ".pfm", ".ppm", ".pgm", ".pbm", ".pam", ".ras"]
+
+
+@pytest.mark.parametrize("fmt", [".png", ".jpg", ".tif", ".webp", ".bmp", *MORE_FORMATS])
+def test_every_format_the_decoder_is_given_has_its_size_read_from_the_header(fmt, img_a):
+    """The size the header gives is the size the decoder makes, for every format that reaches it."""
+    data = encoded(fmt, img_a[:48, :70])
+    header = read_header(data)
+    decoded = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert (header.width, header.height) == (decoded.shape[1], decoded.shape[0]) == (70, 48)
+
+
+@pytest.mark.parametrize("fmt", MORE_FORMATS)
+def test_a_huge_image_of_any_other_format_is_refused_from_its_header_before_decoding(fmt, pair, img_a, dirs, capfd,
+                                                                                    warp_device, monkeypatch):
+    """The bombs: a 19 KB BigTIFF, a 300 KB GIF, JPEG 2000 and Radiance HDR files took gigabytes before
+    the refusal (docs/benchmarks.md has the peak RSS before and after)."""
+    folder_in, folder_out = dirs
+    huge = folder_in / "huge.img"  # the decoder goes by the content, not by the name
+    huge.write_bytes(claiming_more(fmt, 20000, 15000, img_a[:48, :70]))
+    assert (read_header(huge.read_bytes()).width, read_header(huge.read_bytes()).height) == (20000, 15000)
+    monkeypatch.setattr(imageio, "_decode_quietly", lambda data: pytest.fail("decoded a refused image"))
+    before = huge.read_bytes()
+    rc, err, _ = run_cli(["image", huge, pair[0], "-o", folder_out / "p.png"], capfd, warp_device)
+    assert rc == InputError.exit_code
+    assert_one_line_error(err, str(huge), "20000x15000 px (300 MP)", "above the limit of 100 MP per input")
+    assert list(folder_out.iterdir()) == [] and huge.read_bytes() == before
+
+
+@pytest.mark.parametrize("make", [
+    lambda img: encoded(".avif", img),  # a format whose size is not read here
+    lambda img: encoded(".gif", img)[:8],  # a header cut before its size
+    lambda img: b"P6\nwide tall\n255\n" + bytes(100),  # a garbled header
+], ids=["avif", "cut gif", "garbled ppm"])
+def test_an_image_whose_size_cannot_be_read_is_refused_without_decoding(make, pair, img_a, dirs, capfd, warp_device,
+                                                                        monkeypatch):
+    folder_in, folder_out = dirs
+    odd = folder_in / "odd.png"
+    odd.write_bytes(make(img_a[:48, :70]))
+    monkeypatch.setattr(imageio, "_decode_quietly", lambda data: pytest.fail("decoded an image of unknown size"))
+    rc, err, _ = run_cli(["image", odd, pair[0], "-o", folder_out / "p.png"], capfd, warp_device)
+    assert rc == InputError.exit_code
+    assert_one_line_error(err, str(odd), "not a readable image (corrupt, truncated or unsupported format)")
+    assert list(folder_out.iterdir()) == []
+
+
+def test_a_video_frame_too_large_is_refused_from_the_streams_coded_size_before_decoding(bundled_dir, dirs, capfd,
+                                                                                       warp_device, monkeypatch):
+    """A small file can hold one huge frame (a 1.5 MB .mov, one 16000x16000 MJPEG frame): the probe decoded
+    it for its display rotation before any limit was checked."""
+    from sena_warp.video import reader
+
+    folder_in, folder_out = dirs
+    big = folder_in / "big.mov"
+    with av.open(str(big), "w") as c:
+        stream = c.add_stream("mjpeg", rate=1)
+        stream.width, stream.height, stream.pix_fmt = 1280, 1024, "yuvj420p"
+        frame = av.VideoFrame(1280, 1024, "yuvj420p")
+        frame.pts, frame.time_base = 0, Fraction(1, 1)
+        c.mux(stream.encode(frame))
+        c.mux(stream.encode(None))
+    monkeypatch.setattr(reader, "_first_frame_rotation", lambda container: pytest.fail("decoded a refused frame"))
+    reader._probe_version.cache_clear()
+    for offset in ("0", "auto"):
+        rc, err, _ = run_cli(["video", big, bundled_dir / "video" / "rooftop_right.mp4", "-o", folder_out / "v.mp4",
+                              "--max-megapixels", "1", "--offset", offset], capfd, warp_device)
+        assert rc == InputError.exit_code
+        assert_one_line_error(err, str(big), "a frame is 1280x1024 px (1 MP), above the limit of 1 MP per input")
+    assert list(folder_out.iterdir()) == []
 
 
 @pytest.mark.parametrize("ext, size", [(".png", (25000, 25000)), (".jpg", (30000, 20000)), (".tif", (20000, 20000)),
@@ -347,3 +446,62 @@ def test_audio_the_muxer_refuses_is_reencoded_or_left_out_with_a_note(codec, lay
     assert len(left_out) == (1 if mode is None else 0)
     with av.open(str(out)) as c:
         assert len(c.streams.audio) == (0 if mode is None else 1)
+
+
+# --- the Python API checks its arguments: InputErrors that say what was expected ------------------------
+
+def _api_calls(img, pano_bgra):
+    from sena_warp.crop import crop_to_covered
+    from sena_warp.jobs import Job
+    from sena_warp.stitch import stitch_images
+
+    return {
+        "stitch_images None": (lambda: stitch_images(None, img, Config()), "img_a: expected a BGR uint8 array"),
+        "stitch_images grey": (lambda: stitch_images(img[:, :, 0], img, Config()), "of shape (512, 512); read_image"),
+        "stitch_images BGRA": (lambda: stitch_images(img, pano_bgra, Config()), "img_b: expected a BGR uint8 array of "
+                                                                               "shape (H, W, 3), got a uint8 array of "
+                                                                               "shape (40, 60, 4)"),
+        "stitch_images empty": (lambda: stitch_images(img[:0], img, Config()), "image is 512x0 px"),
+        "stitch_images float": (lambda: stitch_images(img.astype(np.float32), img, Config()), "got a float32 array"),
+        "stitch_images mask": (lambda: stitch_images(img, img, Config(), transparent=(np.zeros((3, 3), bool), None)),
+                               "the transparent mask of img_a must be None or a bool array of shape (512, 512)"),
+        "stitch_images cfg dict": (lambda: stitch_images(img, img, {"grid_x": 8}), "cfg must be a Config"),
+        "crop_to_covered BGR": (lambda: crop_to_covered(img), "crop_to_covered: expected a BGRA uint8 array"),
+        "Job bogus": (lambda: Job("bogus", ("a.jpg", "b.jpg"), "p.png"), "kind 'bogus' unknown; use one of image"),
+        "Job one input": (lambda: Job("image", "a.jpg", "p.png"), "inputs must be two paths (a and b)"),
+        "Job bad setting": (lambda: Job("image", ("a.jpg", "b.jpg"), "p.png", {"grid_x": "8"}),
+                            'grid_x = "8" is not a whole number'),
+        "Job offset": (lambda: Job("video", ("l.mp4", "r.mp4"), "v.mp4", offset_s="abc"), "offset 'abc' s is not a time"),
+        "Job overwrite": (lambda: Job("image", ("a.jpg", "b.jpg"), "p.png", overwrite=True), "overwrite must be one of"),
+        "VideoOptions offset": (lambda: VideoOptions(offset_s="abc"), "offset 'abc' s is not a time"),
+        "VideoOptions crf": (lambda: VideoOptions(crf=99), "video_crf = 99 is out of range [0, 51]"),
+    }
+
+
+@pytest.mark.parametrize("case", sorted(_api_calls(np.zeros((1, 1, 3), np.uint8), None)))
+def test_the_python_api_refuses_a_wrong_argument_with_an_input_error_saying_what_was_expected(case, img_a):
+    pano_bgra = np.zeros((40, 60, 4), np.uint8)
+    before = img_a.copy()
+    call, words = _api_calls(img_a, pano_bgra)[case]
+    with pytest.raises(InputError) as caught:
+        call()
+    assert words in str(caught.value) and "\n" not in str(caught.value)
+    assert np.array_equal(img_a, before)
+
+
+def test_stitch_videos_replaces_an_existing_output_only_when_asked(bundled_dir, tmp_path, warp_device):
+    from sena_warp.errors import OutputError
+    from sena_warp.video.stitch import stitch_videos
+
+    clips = bundled_dir / "video"
+    left, right = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4"
+    out = tmp_path / "v.mp4"
+    out.write_bytes(b"an earlier result")
+    cfg = Config(device=warp_device, video_audio="none", video_crf=35, video_estimate_pairs=1)
+    with pytest.raises(OutputError, match="exists"):
+        stitch_videos(left, right, out, cfg)  # options=None: taken from cfg
+    assert out.read_bytes() == b"an earlier result" and sorted(p.name for p in tmp_path.iterdir()) == ["v.mp4"]
+    with pytest.raises(InputError, match="options must be a VideoOptions or None, got dict"):
+        stitch_videos(left, right, out, cfg, {"offset_s": 0})
+    report = stitch_videos(left, right, out, cfg, overwrite=True)
+    assert report["frames_out"] > 0 and len(decoded_frames(out)) == report["frames_out"]

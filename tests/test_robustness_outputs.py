@@ -210,19 +210,21 @@ BAD_OPTIONS = [
     ("video", ["--offset", "nan"], ("offset nan s is not a time",)),
     ("video", ["--offset", "inf"], ("offset inf s is not a time",)),
     ("video", ["--offset=-inf"], ("offset -inf s",)),
-    ("video", ["--crf", "-1"], ("--crf: video_crf = -1 must be >= 0",)),
-    ("video", ["--crf", "52"], ("--crf: video_crf = 52 must be <= 51",)),
-    ("video", ["--crf", "99"], ("--crf: video_crf = 99 must be <= 51",)),
+    ("video", ["--crf", "-1"], ("--crf: video_crf = -1 is out of range [0, 51]",)),
+    ("video", ["--crf", "52"], ("--crf: video_crf = 52 is out of range [0, 51]",)),
+    ("video", ["--crf", "99"], ("--crf: video_crf = 99 is out of range [0, 51]",)),
     ("video", ["--crf", "abc"], ("argument --crf: invalid int value",)),
     ("video", ["--preset", "warp9"], ("argument --preset: invalid choice: 'warp9'", "veryfast")),
     ("video", ["--rig", "moving", "--reestimate", "nan"], ("--reestimate: video_reestimate_s = nan must be a finite",)),
-    ("video", ["--rig", "moving", "--reestimate", "0"], ("--reestimate: video_reestimate_s = 0.0 must be > 0",)),
+    ("video", ["--rig", "moving", "--reestimate", "0"], ("--reestimate: video_reestimate_s = 0.0 is out of range (0, 3600]",)),
     ("video", ["--rig", "moving", "--reestimate", "inf"], ("--reestimate: video_reestimate_s = inf must be a finite",)),
     ("video", ["--reestimate", "2"], ("add --rig moving",)),
-    ("video", ["--max-megapixels", "0"], ("--max-megapixels: max_input_megapixels = 0.0 must be > 0",)),
+    ("video", ["--max-megapixels", "0"], ("--max-megapixels: max_input_megapixels = 0.0 is out of range (0, 10000]",)),
     ("image", ["--max-megapixels", "nan"], ("--max-megapixels: max_input_megapixels = nan",)),
     ("image", ["--reference", "c"], ("argument --reference: invalid choice",)),
     ("eval", ["--max-megapixels", "-3"], ("--max-megapixels: max_input_megapixels = -3.0",)),
+    ("video", ["--threads", "999"], ("--threads: cpu_threads = 999 is out of range [0, 256]",)),
+    ("image", ["--max-megapixels", "1e9"], ("--max-megapixels: max_input_megapixels = 1000000000.0 is out of range",)),
 ]
 
 
@@ -235,7 +237,7 @@ def test_bad_option_values_exit_2_before_any_work(command, extra, words, inputs,
 
 
 @pytest.mark.parametrize("command, name", [("image", "pano.gif"), ("image", "pano"), ("video", "pano.avi"),
-                                           ("video", "pano.png"), ("match", "m.txt")])
+                                           ("video", "pano.gif"), ("match", "m.txt")])
 def test_an_unsupported_output_type_is_a_bad_option_exit_2(command, name, inputs, dirs, capfd, warp_device, no_work):
     _, folder_out = dirs
     outs = default_outputs(command, folder_out)
@@ -285,17 +287,52 @@ def test_a_report_that_fails_after_the_main_output_leaves_neither(command, input
                 f"{outs['--report']}: cannot write it (No space left on device)")
 
 
-def test_running_out_of_memory_is_one_line_and_leaves_nothing(inputs, dirs, capfd, warp_device, monkeypatch):
-    """What a 20000x20000 pair allowed by a raised --max-megapixels ends in on a machine without the memory."""
-    import sena_warp.stitch as stitch
+def _onnxruntime_out_of_memory():
+    from onnxruntime.capi.onnxruntime_pybind11_state import Fail
+
+    return Fail("[ONNXRuntimeError] : 1 : FAIL : Non-zero status code returned while running InstanceNormalization "
+                "node. Status Message: bfc_arena.cc:360 Failed to allocate memory for requested buffer of size 671088640")
+
+
+# Where a stitch runs out of memory, and how each library says so (measured under ulimit -v: docs/benchmarks.md).
+OUT_OF_MEMORY = {
+    "numpy": ("sena_warp.stitch", "stitch_images", lambda: MemoryError("Unable to allocate 12.5 GiB for an array")),
+    "warp": ("sena_warp.stitch", "source_map_canvas",
+             lambda: RuntimeError("Failed to allocate 166831664 bytes on device 'cpu'")),
+    "onnxruntime": ("sena_warp.features", "detect_xfeat", _onnxruntime_out_of_memory),
+}
+
+
+@pytest.mark.parametrize("where", sorted(OUT_OF_MEMORY))
+def test_running_out_of_memory_is_one_line_and_leaves_nothing(where, inputs, dirs, capfd, warp_device, monkeypatch):
+    """What a 20000x20000 pair allowed by a raised --max-megapixels ends in on a machine without the memory,
+    in numpy, in a Warp allocation or in onnxruntime's arena: exit 1, one line, nothing left."""
+    import importlib
+
+    module, name, error = OUT_OF_MEMORY[where]
 
     def no_memory(*args, **kwargs):
-        raise MemoryError("Unable to allocate 12.5 GiB for an array")
+        raise error()
 
-    monkeypatch.setattr(stitch, "stitch_images", no_memory)
+    monkeypatch.setattr(importlib.import_module(module), name, no_memory)
     _, folder_out = dirs
     run_refused("image", default_outputs("image", folder_out), inputs["image"], folder_out, capfd, warp_device, 1,
                 "out of memory; lower --max-megapixels")
+
+
+def test_only_a_failed_allocation_reads_as_out_of_memory_and_a_batch_job_records_it(tmp_path, monkeypatch):
+    from sena_warp import batch
+    from sena_warp.errors import out_of_memory
+    from sena_warp.jobs import Job
+
+    assert out_of_memory(RuntimeError("index 3 is out of bounds")) is None  # a bug stays a bug, with its traceback
+    assert out_of_memory(ValueError("Failed to allocate")) is None
+    assert out_of_memory(_onnxruntime_out_of_memory()).exit_code == 1
+    monkeypatch.setattr(batch, "run_job", lambda job: (_ for _ in ()).throw(RuntimeError("Failed to allocate 8 bytes")))
+    entry = batch.Entry("pair", Job("image", ("a.jpg", "b.jpg"), str(tmp_path / "p.png")), str(tmp_path / "r.json"))
+    result = batch.run_entry(entry)
+    assert (result["error"], result["exit_code"]) == ("out of memory; lower --max-megapixels, downscale the inputs or "
+                                                      "free some memory", 1)
 
 
 # --- 3. SIGTERM, SIGHUP and SIGINT like Ctrl-C; SIGKILL's leftovers cleaned by the next run --------------

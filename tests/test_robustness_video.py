@@ -23,13 +23,15 @@ import threading
 from fractions import Fraction
 
 import av
+import cv2
 import numpy as np
 import pytest
 
 from sena_warp.errors import InputError, OutputError, VideoError
 from sena_warp.video import reader as video_reader
 from sena_warp.video.writer import VideoWriter
-from helpers import assert_one_line_error, damage_the_middle, index_first, run_cli, top_level_box, truncated
+from helpers import (assert_one_line_error, damage_the_middle, decoded_frames, index_first, run_cli, top_level_box,
+                     truncated, ts_clip, with_repeated_pts)
 
 CLIP_FRAMES = {"rooftop_left": 60, "rooftop_right": 63}  # 2.0 s and 2.1 s at 30 fps (see test_video_reader)
 FAST = ["--audio", "none", "--crf", "35"]  # the cases are about failures and counts, not quality
@@ -307,3 +309,69 @@ def test_bad_output_path_is_refused_before_decoding(case, clips, dirs, capfd, wa
     assert_one_line_error(err, *words)
     assert sorted(p.name for p in folder_out.iterdir()) == before  # no video, no temp file
     assert [p.read_bytes() for p in clips] == inputs_before
+
+
+# --- time stamps that go back or repeat, a resolution that changes: said, never squeezed --------------------
+
+@pytest.fixture(scope="module")
+def joined(clips, tmp_path_factory):
+    """TS files made from the bundled clips (60 frames, 30 fps): the left clip joined to itself (its time
+    stamps go back to 0 at 2 s), with four repeated pts, and joined to itself at twice the size with
+    times going on; the right clip joined to itself with times going on (4 s, to pair with the latter)."""
+    folder = tmp_path_factory.mktemp("joined")
+    left, right = (decoded_frames(clip) for clip in clips)
+    ts_clip(left, folder / "left.ts")
+    ts_clip(left, folder / "left_2x.ts", first_pts=3000 * len(left), size=(540, 960))
+    ts_clip(right[:60], folder / "right_a.ts")
+    ts_clip(right[:60], folder / "right_b.ts", first_pts=3000 * 60)
+    (folder / "back.ts").write_bytes((folder / "left.ts").read_bytes() * 2)
+    (folder / "resized.ts").write_bytes((folder / "left.ts").read_bytes() + (folder / "left_2x.ts").read_bytes())
+    (folder / "right_4s.ts").write_bytes((folder / "right_a.ts").read_bytes() + (folder / "right_b.ts").read_bytes())
+    with_repeated_pts(folder / "left.ts", folder / "repeated.ts", range(10, 14))
+    return folder
+
+
+def output_times_s(path) -> list[float]:
+    with av.open(str(path)) as c:
+        stream = c.streams.video[0]
+        return sorted(float(p.pts * stream.time_base) for p in c.demux(stream) if p.pts is not None)
+
+
+@pytest.mark.parametrize("case, dropped, first", [("back", 60, "0.000 s after 1.967 s"),
+                                                   ("repeated", 4, "0.300 s after 0.300 s")])
+def test_time_stamps_that_go_back_or_repeat_are_dropped_and_said_never_squeezed(case, dropped, first, joined, clips,
+                                                                                  dirs, capfd, warp_device):
+    _, folder_out = dirs
+    bad = joined / f"{case}.ts"
+    before = bad.read_bytes()
+    report, out = stitch_ok([bad, clips[1]], folder_out, capfd, warp_device, f"left input has {dropped} frames whose "
+                            f"time stamps go back or repeat (the first: {first})", "dropped", "--strict")
+    assert report["inputs"]["left"]["time_stamps_dropped"] == dropped
+    assert report["frames_in"]["left"] == {"back": 60, "repeated": 56}[case]
+    times = output_times_s(out)
+    assert len(times) == report["frames_out"] and np.diff(times).min() > 1 / 30 - 1e-3  # no frame squeezed in
+    assert bad.read_bytes() == before
+    rc, err, _ = run_cli(["video", bad, clips[1], "-o", folder_out / "strict.mp4", "--strict", *FAST], capfd,
+                         warp_device)
+    assert rc == VideoError.exit_code
+    assert_one_line_error(err, str(bad), "frame time stamps", "(--strict)")
+    assert sorted(p.name for p in folder_out.iterdir()) == ["pano.mp4", "report.json"]
+
+
+def test_a_resolution_change_mid_stream_is_rescaled_to_the_first_size_and_said(joined, dirs, capfd, warp_device):
+    _, folder_out = dirs
+    resized, right = joined / "resized.ts", joined / "right_4s.ts"
+    report, out = stitch_ok([resized, right], folder_out, capfd, warp_device,
+                            "left input changes resolution from 270x480 to 540x960 at 2.00 s",
+                            "60 frames were rescaled to 270x480", "--strict")
+    assert report["inputs"]["left"]["rescaled"] == 60 and report["frames_out"] == 120
+    frames = decoded_frames(out)
+    # The second half is the first one's content at twice the size: rescaled, it stitches as the first half did
+    # (before: a magnified corner of the frame from 2 s on).
+    psnr = [cv2.PSNR(frames[i].y, frames[i + 60].y) for i in range(0, 60, 6)]
+    assert min(psnr) > 28, psnr
+    rc, err, _ = run_cli(["video", resized, right, "-o", folder_out / "strict.mp4", "--strict", *FAST], capfd,
+                         warp_device)
+    assert rc == VideoError.exit_code
+    assert_one_line_error(err, "the resolution changes from 270x480 to 540x960 at 2.00 s (--strict)")
+    assert sorted(p.name for p in folder_out.iterdir()) == ["pano.mp4", "report.json"]

@@ -1,4 +1,4 @@
-"""Every setting given at the top of a run reaches the stage that uses it (issue 12).
+"""Every setting given at the top of a run reaches the stage that uses it.
 
 A stage that fell back to ``Config()`` would run on the defaults whatever the caller asked for: with
 ``forward_max_iters=0`` the step-7 inputs would come out as with the default 30 iterations, and the

@@ -4,6 +4,8 @@ the camera that moved, a fixed rig's do not move."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -155,3 +157,15 @@ def test_a_fixed_rig_keeps_its_maps(bundled_dir, tmp_path):
     drift = report["stitch"]["drift"]
     assert drift["checks"] >= 5 and drift["applied"] == [] and drift["unclear"] == 0
     assert report["stitch"]["jitter"]["seam_jitter_px_max"] == 0.0
+
+
+def test_on_an_output_scaled_from_the_canvas_a_drift_moves_the_maps_by_the_scaled_move():
+    # The output at half the canvas: output (x, y) samples the source at canvas (2x + 0.5, 2y + 0.5) + (20, 5).
+    ys, xs = np.mgrid[0:20, 0:30].astype(np.float32)
+    maps = shifted_by_20_5((20, 30))
+    maps = replace(maps, map_src_luma=np.stack([2 * xs + 20.5, 2 * ys + 5.5], axis=-1))
+    # The target's content moved (4, 2) input px: 2 and 1 output px; the source's own move is in its px.
+    moved = drifted_maps(maps, np.array([-1.0, 4.0]), np.array([4.0, 2.0]), (0.5, 0.5))
+    np.testing.assert_allclose(moved.map_src_luma[10, 10], [2 * 8 + 20.5 - 1, 2 * 9 + 5.5 + 4])
+    part = drifted_maps(maps, np.zeros(2), np.array([0.4, 0.0]), (0.5, 0.5))  # 0.2 output px: on the positions
+    np.testing.assert_allclose(part.map_src_luma[10, 10], [2 * 10 + 20.5 - 0.4, 2 * 10 + 5.5])

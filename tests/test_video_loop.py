@@ -22,7 +22,7 @@ from sena_warp.errors import InputError, VideoError
 from sena_warp.report import write_json
 from sena_warp.video.loop import VideoOptions, run_video
 from sena_warp.video.pairing import pair_times
-from sena_warp.video.reader import YuvFrame, probe_video
+from sena_warp.video.reader import FrameReader, YuvFrame, probe_video
 from sena_warp.video.writer import VideoWriter, choose_codec
 from helpers import decoded_frames, stream_spans
 
@@ -369,3 +369,46 @@ def test_variable_frame_rate_keeps_the_input_frame_times(clips, tmp_path):
     assert np.abs(np.array(out_ms) - (np.array(in_ms) - in_ms[0])).max() < 0.5
     assert report["dropped"] == report["repeated"] == 0
     assert any("variable frame rate" in note and "20 to 50 ms" in note for note in report["notes"])
+
+
+def test_a_trimmed_span_keeps_its_frames_their_pairs_and_its_audio(clips, tmp_path):
+    left, right, out = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "out.mp4"
+    report = run_video(left, right, out, SideBySide, VideoOptions(start_s=0.5, end_s=1.5))
+    assert report["frames_out"] == 30 and report["span_s"] == {"start": 0.5, "end": 1.5}
+    assert report["inputs"]["left"]["frames_decoded"] == 30 and report["dropped"] == report["repeated"] == 0
+    spans = stream_spans(out)
+    n_video, t_video, end_video = spans["video"]
+    assert n_video == 30 and t_video[0] == 0 and set(np.diff(t_video)) == {Fraction(1, 30)}
+    n_audio, t_audio, end_audio = spans["audio"]
+    assert abs(float(end_audio - t_audio[0]) - float(end_video)) < 0.1  # the audio of the span, not of the start
+    # The first output frame is the left input's frame at 0.5 s, paired with the right one at that time.
+    out_frames, in_l, in_r = decoded_frames(out), decoded_frames(left), decoded_frames(right)
+    half_l, half_r = out_frames[0].y[:, :270], out_frames[0].y[:, 270:]
+    assert mean_abs_diff(half_l, in_l[15].y) < 3.0 < min(mean_abs_diff(half_l, in_l[k].y) for k in (13, 17))
+    assert mean_abs_diff(half_r, in_r[15].y) < min(mean_abs_diff(half_r, in_r[k].y) for k in (14, 16))
+
+
+@pytest.fixture(scope="module")
+def keyed_clip(clips, tmp_path_factory) -> Path:
+    """rooftop_left re-encoded with a key frame every 10 frames (the bundled clips have one key frame)."""
+    path = tmp_path_factory.mktemp("keyed") / "keyed.mp4"
+    with av.open(str(path), "w") as out:
+        stream = out.add_stream("libx264", rate=30, options={"g": "10", "x264-params": "keyint=10:min-keyint=10:scenecut=0"})
+        stream.width, stream.height, stream.pix_fmt = 270, 480, "yuv420p"
+        for k, frame in enumerate(decoded_frames(clips / "rooftop_left.mp4")):
+            picture = av.VideoFrame(270, 480, "yuv420p")
+            for plane, values in zip(picture.planes, (frame.y, frame.u, frame.v)):
+                rows = np.frombuffer(plane, np.uint8).reshape(plane.height, plane.line_size)
+                rows[:, : plane.width] = values
+            picture.pts = k
+            out.mux(stream.encode(picture))
+        out.mux(stream.encode(None))
+    return path
+
+
+def test_a_span_s_start_is_reached_by_seeking_and_its_end_stops_decoding(keyed_clip):
+    with FrameReader(keyed_clip, span_s=(Fraction(6, 5), Fraction(3, 2))) as reader:
+        frames = list(reader)
+    # Frames 36-44: the seek lands on the key frame of frame 30, so only 30-35 are decoded before the span.
+    assert [f.time_s for f in frames] == [Fraction(k, 30) for k in range(36, 45)]
+    assert reader.skipped == 6 and reader.stopped_at_end and reader.decoded == 9

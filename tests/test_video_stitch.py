@@ -14,6 +14,7 @@ from dataclasses import replace
 from fractions import Fraction
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -24,8 +25,9 @@ from sena_warp.errors import GeometryError
 from sena_warp.video import estimate
 from sena_warp.video.estimate import best_first_estimate, first_pairs, rejection_reason
 from sena_warp.composite import SeamLayout
-from sena_warp.video.maps import (ArrayLerp, MapsBlend, PlaneMaps, chroma_positions, chroma_seam, lerp_maps,
-                                 map_change_px, seam_change_px, seam_per_target_line, target_map)
+from sena_warp.video.maps import (ArrayLerp, MapsBlend, PlaneMaps, canvas_scale, chroma_positions, chroma_seam,
+                                 lerp_maps, map_change_px, output_shape, scaled_plane_maps, seam_change_px,
+                                 seam_on_canvas_lines, seam_per_target_line, target_map)
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import FrameReader, YuvFrame
 from sena_warp.video.stitch import SenaFrameCompositor, stitch_videos
@@ -517,3 +519,75 @@ def test_looked_ahead_pairs_keep_their_order_and_are_seen_that_many_pairs_early(
         assert seen[-1] == min(pair[0] + 3, 6)  # the newest pair seen is 3 ahead (or the last)
     assert out == list(range(7)) and seen == list(range(7))
     assert [p[0] for p in looked_ahead(((i, i) for i in range(4)), lambda a, b: None, 0)] == [0, 1, 2, 3]
+
+
+def test_a_picture_output_is_the_frame_a_video_from_there_starts_with(clips, tmp_path):
+    left, right = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4"
+    cfg = FAST.replace(video_start_s=1.0, video_audio="none")
+    still = stitch_videos(left, right, tmp_path / "at1.png", cfg, VideoOptions.from_config(cfg))
+    video = stitch_videos(left, right, tmp_path / "from1.mp4", cfg.replace(video_end_s=1.2),
+                          VideoOptions.from_config(cfg.replace(video_end_s=1.2)))
+    assert still["still"]["left_time_s"] == 1.0 and "frames_out" not in still and video["frames_out"] == 6
+    picture = cv2.imread(str(tmp_path / "at1.png"))
+    first = decoded_frames(tmp_path / "from1.mp4")[0].to_bgr()
+    assert picture.shape == first.shape == (video["output"]["height"], video["output"]["width"], 3)
+    assert float(np.mean(cv2.absdiff(picture, first))) < 2.0  # the same stitch of the same frame, less the encoding
+
+
+def test_scaled_maps_sample_where_the_canvas_does_and_carry_the_seam_along():
+    maps = synthetic_maps(0.0, 300, shape=(40, 60))
+    border = ((9.5, 30.5), np.arange(120, dtype=np.float32).reshape(2, 60, 1), np.zeros((2, 60, 1), np.float32))
+    maps = replace(maps, border_luma=border)
+    half = scaled_plane_maps(maps, output_shape(maps.shape, 30))
+    assert half.shape == (20, 30) and output_shape((40, 61), 30) == (20, 30) and output_shape((40, 60), 100) == (40, 60)
+    # Output (x, y) covers canvas (2x + 0.5, 2y + 0.5): the maps there (they are linear, so exactly).
+    np.testing.assert_allclose(half.map_src_luma[7, 11], maps.map_src_luma[14, 22] + 0.5)
+    np.testing.assert_allclose(half.map_tgt_luma[7, 11], maps.map_tgt_luma[14, 22] + 0.5)
+    np.testing.assert_allclose(half.map_src_chroma, chroma_positions(half.map_src_luma))
+    # The seam at canvas x 30 is at output x 14.75 on every row, its widths halved; the border's rows and
+    # its offsets along them likewise.
+    np.testing.assert_allclose(half.seam_luma.positions, 14.75)
+    assert (half.seam_luma.band_px, half.seam_luma.transition_px) == (5.0, 4.0)
+    assert half.border_luma[0] == (4.5, 15.0)
+    np.testing.assert_allclose(half.border_luma[1][0, :3, 0], [0.5, 2.5, 4.5])
+    # What works on the canvas gets the seam back per canvas line.
+    np.testing.assert_allclose(seam_on_canvas_lines(half.seam_luma.positions, 40, canvas_scale((40, 60), (20, 30)),
+                                                    True), 30.0)
+
+
+def test_a_narrower_output_is_the_stitch_made_smaller_by_its_maps(clips, tmp_path):
+    left, right = clips / "rooftop_left.mp4", clips / "rooftop_right.mp4"
+    cfg = FAST.replace(video_audio="none")
+    full = stitch_videos(left, right, tmp_path / "full.mp4", cfg, VideoOptions.from_config(cfg))
+    small_cfg = cfg.replace(video_max_width=166)
+    small = stitch_videos(left, right, tmp_path / "small.mp4", small_cfg, VideoOptions.from_config(small_cfg))
+    width, height = small["output"]["width"], small["output"]["height"]
+    canvas = small["stitch"]["canvas"]
+    assert (canvas["stitched_width"], canvas["stitched_height"]) == (full["output"]["width"], full["output"]["height"])
+    assert width == 166 and height % 2 == 0 and abs(height / width - canvas["stitched_height"] / canvas["stitched_width"]) < 0.01
+    for k in (0, 40):  # each frame: what the full-size stitch shows, made smaller (a 2x2 box at this half size)
+        frame_full, frame_small = decoded_frames(tmp_path / "full.mp4")[k], decoded_frames(tmp_path / "small.mp4")[k]
+        made_small = cv2.resize(frame_full.y, (width, height), interpolation=cv2.INTER_AREA)
+        assert float(np.mean(cv2.absdiff(made_small, frame_small.y))) < 2.5
+    # A moving rig's re-estimates work on the canvas and land on the smaller output.
+    moving = small_cfg.replace(video_rig="moving", video_reestimate_s=0.5, video_estimate_workers=0)
+    report = stitch_videos(left, right, tmp_path / "moving.mp4", moving, VideoOptions.from_config(moving))
+    assert report["stitch"]["reestimations"]["accepted"] == 3 and report["output"]["width"] == 166
+
+
+@pytest.mark.parametrize("max_side", [1920, 256])  # the frames as they are, and made smaller for the estimate
+def test_debug_writes_the_first_estimate_s_stage_pictures(clips, tmp_path, max_side):
+    cfg = FAST.replace(video_audio="none", video_estimate_max_side=max_side, video_end_s=0.5)
+    report = stitch_videos(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", tmp_path / "o.mp4", cfg,
+                           VideoOptions.from_config(cfg), debug=tmp_path / "debug")
+    names = sorted(p.name for p in (tmp_path / "debug").iterdir())
+    assert names == ["01_matches.jpg", "02_overlap_cells.jpg", "03_ffd_field.jpg", "05_warped_over_target.jpg",
+                     "06_zone_chain_seam.jpg", "07_alpha.jpg"]
+    seam = cv2.imread(str(tmp_path / "debug" / "06_zone_chain_seam.jpg"))
+    canvas = report["stitch"]["canvas"]
+    # The panorama the seam is drawn on: the video's canvas (up to its even crop), or the estimate's smaller one.
+    scale = max(480 / max_side, 1.0)
+    assert abs(seam.shape[1] * scale - canvas["stitched_width"]) <= 2 * scale
+    assert abs(seam.shape[0] * scale - canvas["stitched_height"]) <= 2 * scale
+    matches = cv2.imread(str(tmp_path / "debug" / "01_matches.jpg"))
+    assert matches.shape[1] == round(2 * 270 / scale)  # the pair side by side, as the estimate saw it

@@ -16,7 +16,8 @@ from sena_warp.features import match_images
 from sena_warp.kernels.runtime import resolve_config
 from sena_warp.video.estimate import estimate_pair
 from sena_warp.video.reader import FrameReader
-from sena_warp.video.working import at_positions, prior_to_small, to_full, to_small, working_scale
+from sena_warp.video.maps import at_positions
+from sena_warp.video.working import prior_to_small, to_full, to_small, working_scale
 
 CFG = resolve_config(Config(device="cpu"))
 

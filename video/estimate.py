@@ -23,7 +23,7 @@ from ..stitch import StitchMaps, estimate_maps
 from ..xfeat import working_size
 from .maps import PlaneMaps, map_change_px
 from .pairing import pair_by_time
-from .reader import FrameReader, YuvFrame, probe_video
+from .reader import FrameReader, YuvFrame, probe_video, span_of
 from .working import prior_to_small, scaled_up, shrunk_pair, small_matches, working_scale
 
 MEDIAN_PERCENTILE = 50.0  # the rejection test compares the median map change
@@ -61,11 +61,13 @@ def spaced_pairs(pairs: Iterable[tuple[YuvFrame, YuvFrame]], cfg: Config) -> Ite
 @contextmanager
 def paired_frames(left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config
                   ) -> Iterator[Iterator[tuple[YuvFrame, YuvFrame]]]:
-    """Two videos' frames, decoded and paired by time exactly as the main loop pairs them, on decoders
-    of their own (closed on leaving)."""
+    """Two videos' frames, decoded and paired by time exactly as the main loop pairs them (over the span
+    ``cfg.video_start_s`` to ``video_end_s``), on decoders of their own (closed on leaving)."""
     right_period_s = 1 / probe_video(right).fps
-    with FrameReader(left, Fraction(0), cfg.video_queue_frames, cfg.cpu_threads) as reader_l, \
-            FrameReader(right, Fraction(str(offset_s)), cfg.video_queue_frames, cfg.cpu_threads) as reader_r:
+    with FrameReader(left, Fraction(0), cfg.video_queue_frames, cfg.cpu_threads,
+                     span_s=span_of(cfg.video_start_s, cfg.video_end_s)) as reader_l, \
+            FrameReader(right, Fraction(str(offset_s)), cfg.video_queue_frames, cfg.cpu_threads,
+                        span_s=span_of(cfg.video_start_s, cfg.video_end_s, right_period_s)) as reader_r:
         yield pair_by_time(reader_l, reader_r, right_period_s, attrgetter("time_s"))
 
 

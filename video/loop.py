@@ -8,13 +8,13 @@ every pair on YUV 4:2:0 planes, so frames never go through RGB on the hot path.
 
 from __future__ import annotations
 
-import math
 import os
 import queue
 import threading
 import time
 from collections import deque
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from fractions import Fraction
@@ -24,14 +24,13 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from ..config import Config
+from ..config import Config, is_seconds
 from ..config_file import check_value
 from ..errors import InputError, VideoError
-from ..imageio import check_size
 from ..outputs import OutputPlan, staged
 from ..progress import LOGGER, Count, stage
 from .pairing import PairingStats, pair_by_time
-from .reader import FrameReader, VideoInfo, YuvFrame, probe_video
+from .reader import FrameReader, VideoInfo, YuvFrame, probe_video, span_of
 from .writer import VideoWriter
 
 VFR_SPREAD = Fraction(3, 2)  # longest / shortest frame interval above this: a variable frame rate (noted)
@@ -71,8 +70,11 @@ class VideoOptions:
     """Settings of one video run.
 
     ``offset_s`` shifts the right (second) input's clock: its frame at time t is paired as if it
-    were at t + offset_s (+0.5: the right camera started 0.5 s after the left one). ``audio``: whose
-    audio to copy. ``threads``: decoder and encoder threads (0: FFmpeg chooses); ``thread_type``: how
+    were at t + offset_s (+0.5: the right camera started 0.5 s after the left one). ``start_s`` /
+    ``end_s``: the span of the left input's time (after the offset) that is stitched, [start, end);
+    ``end_s`` 0: to the end. ``audio``: whose audio to copy. ``crf`` (constant quality) or
+    ``bitrate_kbps`` (an average rate), either capped at ``maxrate_kbps`` (0: no cap).
+    ``threads``: decoder and encoder threads (0: FFmpeg chooses); ``thread_type``: how
     libx264 uses its threads (``Config.video_encoder_thread_type``). ``strict``: a
     damaged frame, a truncated input or audio left out fails the run (VideoError) instead of a
     warning. ``max_megapixels``: larger frames are refused. Values are checked here (InputError),
@@ -80,9 +82,13 @@ class VideoOptions:
     """
 
     offset_s: float = 0.0
+    start_s: float = Config.video_start_s
+    end_s: float = Config.video_end_s
     audio: str = Config.video_audio
     codec: str = Config.video_codec
     crf: int = Config.video_crf
+    bitrate_kbps: int = Config.video_bitrate_kbps
+    maxrate_kbps: int = Config.video_maxrate_kbps
     preset: str = Config.video_preset
     thread_type: str = Config.video_encoder_thread_type
     queue_frames: int = Config.video_queue_frames
@@ -91,20 +97,28 @@ class VideoOptions:
     max_megapixels: float = Config.max_input_megapixels
 
     def __post_init__(self) -> None:
-        if not math.isfinite(self.offset_s):
-            raise InputError(f"offset {self.offset_s} s is not a time; give a finite number of seconds (--offset)")
-        # The encoder settings take the values of their Config fields, checked by the same rule.
+        if not is_seconds(self.offset_s):
+            raise InputError(f"offset {self.offset_s!r} s is not a time; give a finite number of seconds (--offset)")
+        # The encoder and span settings take the values of their Config fields, checked by the same rule.
         for name, value in (("video_audio", self.audio), ("video_crf", self.crf), ("video_preset", self.preset),
-                            ("video_encoder_thread_type", self.thread_type)):
+                            ("video_encoder_thread_type", self.thread_type), ("video_codec", self.codec),
+                            ("video_bitrate_kbps", self.bitrate_kbps), ("video_maxrate_kbps", self.maxrate_kbps),
+                            ("video_start_s", self.start_s), ("video_end_s", self.end_s)):
             check_value(name, value, "video options")
+        if self.end_s and self.end_s <= self.start_s:
+            raise InputError(f"the span ends at {self.end_s:g} s, not after its start at {self.start_s:g} s; "
+                             f"give --to after --ss (or a positive -t)")
 
     @classmethod
     def from_config(cls, cfg: Config, **changes) -> "VideoOptions":
-        """Options taking their encoder, queue and thread settings from ``cfg``."""
-        base = dict(audio=cfg.video_audio, codec=cfg.video_codec, crf=cfg.video_crf, preset=cfg.video_preset,
-                    thread_type=cfg.video_encoder_thread_type, queue_frames=cfg.video_queue_frames,
-                    threads=cfg.cpu_threads, max_megapixels=cfg.max_input_megapixels)
+        """Options taking their span, encoder, queue and thread settings from ``cfg``."""
+        base = dict(start_s=cfg.video_start_s, end_s=cfg.video_end_s, audio=cfg.video_audio, codec=cfg.video_codec,
+                    crf=cfg.video_crf, bitrate_kbps=cfg.video_bitrate_kbps, maxrate_kbps=cfg.video_maxrate_kbps,
+                    preset=cfg.video_preset, thread_type=cfg.video_encoder_thread_type,
+                    queue_frames=cfg.video_queue_frames, threads=cfg.cpu_threads,
+                    max_megapixels=cfg.max_input_megapixels)
         return cls(**{**base, **changes})
+
 
 
 def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
@@ -112,8 +126,10 @@ def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
     return {
         "path": str(info.path), "width": info.width, "height": info.height, "fps": float(info.fps),
         "rotation_deg": info.rotation_deg, "pix_fmt": info.pix_fmt, "converted_from": reader.converted_from,
-        "offset_s": float(reader.offset_s), "frames_decoded": reader.decoded, "damaged": reader.damaged,
+        "offset_s": float(reader.offset_s), "frames_decoded": reader.decoded, "frames_skipped": reader.skipped,
+        "damaged": reader.damaged,
         "damaged_span_s": None if span is None else [round(float(t), 4) for t in span],
+        "time_stamps_dropped": reader.out_of_order, "rescaled": reader.rescaled,
         "decode_wait_s": round(reader.wait_s, 4), "decode_s": round(reader.decode_s, 4),
         "decoder_threads": reader.decoder_threads,
     }
@@ -130,27 +146,96 @@ def run_video(
     """Stitch two videos frame pair by frame pair into ``output``; return the run's report.
 
     Output frames follow the left input's frames (its times, exactly: also a variable frame rate);
-    each is paired with the right frame nearest in time (see ``pairing.py``). The output appears
+    each is paired with the right frame nearest in time (see ``pairing.py``). Only the frames of
+    ``options``' span are decoded (a start is reached by seeking). The output appears
     under its name only once complete (with ``plan``: when the plan commits). Report keys:
     ``frames_in``, ``frames_out``, ``dropped``, ``repeated``, ``damaged`` (per input), ``pairing``
-    (all counts), ``started`` (when the run began, ISO 8601 UTC), ``timing_s`` (decode_wait,
-    compositor_setup, first_frame, composite, encode, total; maps_update
-    when the compositor has ``update``), ``output_fps``, ``inputs``, ``output``, ``notes``, and
-    ``warnings``: what a user must hear about (damaged frames, a truncated input, audio left out),
-    one sentence each; with ``options.strict`` those raise VideoError instead.
+    (all counts), ``span_s`` (the trimmed span asked for: start, end or None), ``started`` (when the
+    run began, ISO 8601 UTC), ``timing_s`` (decode_wait, compositor_setup, first_frame, composite,
+    encode, total; maps_update when the compositor has ``update``), ``output_fps``, ``inputs``,
+    ``output``, ``notes``, and ``warnings``: what a user must hear about (damaged frames, a truncated
+    input, audio left out), one sentence each; with ``options.strict`` those raise VideoError instead.
     """
     with staged(plan, output, (left, right)) as plan:  # the output is checked before any input is opened
         return _run(left, right, output, compositor_factory, options, plan)
+
+
+def run_still(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike,
+              compositor_factory: CompositorFactory, options: VideoOptions, plan: OutputPlan | None = None) -> dict:
+    """Write the stitched frame at ``options.start_s`` (the first pair of the span) as the image ``output``
+    (.png or .jpg, by its suffix) and stop: a look at the rig in about the time of the estimate. The
+    compositor is built as :func:`run_video` builds it, so the frame is the one a video from there
+    would start with. Report keys: ``still`` (the left and right frames' times), ``started``,
+    ``span_s``, ``timing_s`` (compositor_setup, composite, total), ``inputs``, ``output`` (path,
+    width, height), ``notes``, ``warnings``.
+    """
+    from ..imageio import write_image
+
+    with staged(plan, output, (left, right)) as plan:
+        t_run = time.perf_counter()
+        started = datetime.now(timezone.utc)
+        infos = _probed(left, right, options)
+        stats = PairingStats()
+        with _paired(left, right, infos, options, stats) as (readers, first, pairs):
+            t0 = time.perf_counter()
+            stage("estimating maps")
+            compositor = compositor_factory(chain([first], pairs))  # the pairs it takes are not shown
+            t1 = time.perf_counter()
+            update = getattr(compositor, "update", None)
+            if update is not None:
+                update(*first)
+            y, u, v = compositor.composite_yuv(first[0].y, first[0].u, first[0].v, first[1].y, first[1].u, first[1].v)
+            image = YuvFrame(first[0].time_s, 0, y, u, v).to_bgr()
+            t2 = time.perf_counter()
+        stage("writing outputs")
+        write_image(output, image, plan=plan)
+        timing = {"compositor_setup": t1 - t0, "composite": t2 - t1, "total": time.perf_counter() - t_run}
+        return {"started": started.isoformat(timespec="microseconds"),
+                "still": {"left_time_s": float(first[0].time_s), "right_time_s": float(first[1].time_s)},
+                "span_s": _span_report(options), "timing_s": {k: round(v, 4) for k, v in timing.items()},
+                "inputs": {side: _input_summary(infos[side], reader) for side, reader in zip(SIDES, readers)},
+                "output": {"path": str(output), "width": int(image.shape[1]), "height": int(image.shape[0])},
+                "notes": [], "warnings": []}
+
+
+SIDES = ("left", "right")
+
+
+def _probed(left, right, options: VideoOptions) -> dict[str, VideoInfo]:
+    """Both inputs probed ("left", "right"), their frames checked against ``options.max_megapixels``."""
+    stage("opening videos")
+    return {"left": probe_video(left, options.max_megapixels), "right": probe_video(right, options.max_megapixels)}
+
+
+@contextmanager
+def _paired(left, right, infos: dict[str, VideoInfo], options: VideoOptions, stats: PairingStats):
+    """Both inputs decoding over ``options``' span and paired by time: ((left reader, right reader), the
+    first pair, an iterator of the pairs after it). The right input's span is a frame wider each side,
+    so the left frames at its ends have their nearest right frame."""
+    period_r = 1 / infos["right"].fps
+    with FrameReader(left, Fraction(0), options.queue_frames, options.threads, options.strict,
+                     span_of(options.start_s, options.end_s)) as reader_l, \
+            FrameReader(right, Fraction(str(options.offset_s)), options.queue_frames, options.threads,
+                        options.strict, span_of(options.start_s, options.end_s, period_r)) as reader_r:
+        pairs = pair_by_time(reader_l, reader_r, period_r, attrgetter("time_s"), stats)
+        first = next(pairs, None)
+        if first is None:
+            trimmed = f" between --ss {options.start_s:g} s and --to {options.end_s:g} s" if options.end_s else (
+                f" from --ss {options.start_s:g} s on" if options.start_s else "")
+            raise VideoError(f"{left} and {right}: no frames overlap in time{trimmed} with offset "
+                             f"{options.offset_s} s; check --offset{', --ss and --to' if trimmed else ''}")
+        yield (reader_l, reader_r), first, pairs
+
+
+def _span_report(options: VideoOptions) -> dict:
+    return {"start": options.start_s or None, "end": options.end_s or None}
 
 
 def _run(left, right, output, compositor_factory: CompositorFactory, options: VideoOptions,
          plan: OutputPlan) -> dict:
     t_run = time.perf_counter()
     started = datetime.now(timezone.utc)
-    stage("opening videos")
-    infos = {"left": probe_video(left), "right": probe_video(right)}
-    for info in infos.values():
-        check_size(str(info.path), info.width, info.height, options.max_megapixels, "a frame")
+    infos = _probed(left, right, options)
     offsets = {"left": Fraction(0), "right": Fraction(str(options.offset_s))}
     notes: list[str] = []
     audio_side = None if options.audio == "none" else options.audio
@@ -161,14 +246,7 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
     stats = PairingStats()
     timing = {"compositor_setup": 0.0, "composite": 0.0, "encode": 0.0}
 
-    with FrameReader(left, offsets["left"], options.queue_frames, options.threads, options.strict) as reader_l, \
-            FrameReader(right, offsets["right"], options.queue_frames, options.threads, options.strict) as reader_r:
-        pairs = pair_by_time(reader_l, reader_r, 1 / infos["right"].fps, attrgetter("time_s"), stats)
-        first = next(pairs, None)
-        if first is None:
-            raise VideoError(
-                f"{left} and {right}: no frames overlap in time with offset {options.offset_s} s; check --offset"
-            )
+    with _paired(left, right, infos, options, stats) as ((reader_l, reader_r), first, pairs):
         t0 = time.perf_counter()
         stage("estimating maps")
         held: deque[tuple[YuvFrame, YuvFrame]] = deque([first])
@@ -178,7 +256,8 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
         # The output clock is the left input's own time base, so every frame keeps its input time.
         with plan.writing(output) as tmp, VideoWriter(tmp, width, height, rate, options.codec, options.crf,
                                                       options.preset, options.threads,
-                                                      infos["left"].time_base, options.thread_type) as writer:
+                                                      infos["left"].time_base, options.thread_type,
+                                                      options.bitrate_kbps, options.maxrate_kbps) as writer:
             problems = []  # (what is the matter, what was done about it): warnings, or errors with --strict
             if audio_side is not None:
                 # Audio time in its file -> output clock: the same shift as that input's video frames.
@@ -189,9 +268,9 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
             for note in writer.notes:
                 _note(notes, note)
             stage("stitching frames")
-            expected = round(min(infos["left"].duration_s, infos["right"].duration_s) * rate)
-            _encode_pairs(chain(_drained(held), pairs), compositor, writer, Count("frames", expected, "fps"), timing,
-                          options.queue_frames, t_run)
+            _encode_pairs(chain(_drained(held), pairs), compositor, writer,
+                          Count("frames", _expected_frames(infos, options), "fps"), timing, options.queue_frames,
+                          t_run)
             readers = {"left": reader_l, "right": reader_r}
             problems += _input_problems(infos, readers)
             if problems and options.strict:
@@ -203,8 +282,16 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
     timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
     for note in _input_notes(infos, readers, stats):
         _note(notes, note)
-    return {"started": started.isoformat(timespec="microseconds"),
+    return {"started": started.isoformat(timespec="microseconds"), "span_s": _span_report(options),
             **_report(infos, (reader_l, reader_r), writer, stats, timing, notes, warnings, output, audio_side)}
+
+
+def _expected_frames(infos: dict[str, VideoInfo], options: VideoOptions) -> int:
+    """Output frames to expect: the left frames of the time both inputs cover, within the span."""
+    end = min(infos["left"].duration_s, infos["right"].duration_s)
+    if options.end_s:
+        end = min(end, options.end_s)
+    return max(round((end - options.start_s) * infos["left"].fps), 0)
 
 
 def _held_as_taken(pairs: Iterator[tuple[YuvFrame, YuvFrame]], held: deque[tuple[YuvFrame, YuvFrame]]
@@ -248,7 +335,8 @@ def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], s
 
 
 def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]) -> list[tuple[str, str]]:
-    """Damaged frames and truncated inputs: (what is the matter, what was done), see ``reader.py``."""
+    """Damaged frames, time stamps that go back, a resolution that changes and truncated inputs: (what is
+    the matter, what was done), see ``reader.py``."""
     problems = []
     for side, reader in readers.items():
         if reader.damaged:
@@ -256,8 +344,21 @@ def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]
             where = f" between {float(span[0]):.2f} s and {float(span[1]):.2f} s" if span is not None else ""
             problems.append((f"{side} input has {reader.damaged} damaged frames{where}",
                              "each replaced by the last good frame (--strict fails instead)"))
+        if reader.out_of_order:
+            last_s, time_s = reader.out_of_order_at
+            problems.append((f"{side} input has {reader.out_of_order} frames whose time stamps go back or repeat "
+                             f"(the first: {float(time_s):.3f} s after {float(last_s):.3f} s)",
+                             "they were dropped (--strict fails instead)"))
+        if reader.rescaled:
+            (width, height), time_s = reader.rescaled_from
+            problems.append((f"{side} input changes resolution from {reader.size[0]}x{reader.size[1]} to "
+                             f"{width}x{height} at {float(time_s):.2f} s",
+                             f"{reader.rescaled} frames were rescaled to {reader.size[0]}x{reader.size[1]} "
+                             f"(--strict fails instead)"))
         declared = infos[side].frame_count
-        if declared and reader.decoded + reader.damaged < declared:
+        # Counted only over a whole file: a trimmed input was not decoded from its start or to its end.
+        whole = reader.span_s[0] is None and not reader.stopped_at_end
+        if whole and declared and reader.decoded + reader.damaged < declared:
             problems.append((f"{side} input ended after {reader.decoded + reader.damaged} of the {declared} frames "
                              f"its header declares (truncated?)", "stitched up to where it ends"))
     return problems

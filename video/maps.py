@@ -203,7 +203,90 @@ def seam_per_target_line(positions: np.ndarray, offset_working: np.ndarray) -> n
     return seam[max(first, 0):] - ox
 
 
-def drifted_maps(maps: PlaneMaps, shift_src: np.ndarray, shift_tgt: np.ndarray) -> PlaneMaps:
+def output_shape(canvas_shape: tuple[int, int], max_width: int) -> tuple[int, int]:
+    """(H, W) of the output for a canvas of ``canvas_shape`` (H, W) at most ``max_width`` wide (0: no
+    limit): the aspect kept, both sides even (yuv420p), at least 2."""
+    height, width = canvas_shape
+    if not max_width or width <= max_width:
+        return canvas_shape
+    out_w = max(2, max_width - max_width % 2)
+    out_h = max(2, int(round(height * out_w / width / 2)) * 2)
+    return out_h, out_w
+
+
+def canvas_scale(canvas_shape: tuple[int, int], shape_out: tuple[int, int]) -> np.ndarray:
+    """(sx, sy): output pixels per canvas pixel along x and y."""
+    return np.array([shape_out[1] / canvas_shape[1], shape_out[0] / canvas_shape[0]], np.float64)
+
+
+def canvas_positions(count_out: int, scale: float) -> np.ndarray:
+    """Canvas position of each of ``count_out`` output pixels along an axis scaled by ``scale``
+    (pixel centres at whole coordinates on both: output p is canvas ``(p + 0.5) / scale - 0.5``)."""
+    return (np.arange(count_out, dtype=np.float64) + 0.5) / scale - 0.5
+
+
+def on_output(field: np.ndarray, shape_out: tuple[int, int]) -> np.ndarray:
+    """(H, W[, C]) float ``field`` on the canvas sampled bilinearly at each output pixel of ``shape_out``;
+    NaN where a tap that counts is NaN (a map's "nothing to sample" stays so), float32."""
+    scale = canvas_scale(field.shape[:2], shape_out)
+    rows = at_positions(field, canvas_positions(shape_out[0], scale[1]), axis=0)
+    return at_positions(rows, canvas_positions(shape_out[1], scale[0]), axis=1).astype(np.float32)
+
+
+def at_positions(values: np.ndarray, positions: np.ndarray, axis: int = 0) -> np.ndarray:
+    """``values`` sampled linearly along ``axis`` at fractional ``positions`` (clamped to its ends); NaN
+    where a tap that counts is NaN."""
+    last = values.shape[axis] - 1
+    p = np.clip(np.asarray(positions, np.float64), 0, last)
+    i0 = np.floor(p).astype(np.int64)
+    i1 = np.minimum(i0 + 1, last)
+    shape = [1] * values.ndim
+    shape[axis] = len(p)
+    f = (p - i0).reshape(shape)
+    low, high = np.take(values, i0, axis=axis), np.take(values, i1, axis=axis)
+    return np.where(f == 0.0, low, low * (1.0 - f) + high * f)
+
+
+def scaled_plane_maps(maps: PlaneMaps, shape_out: tuple[int, int]) -> PlaneMaps:
+    """``maps`` (on the fixed canvas) for an output of ``shape_out`` (even H, W), the canvas scaled to it:
+    every output pixel samples the inputs where the canvas position it covers does (the maps are
+    smooth: bilinear between canvas pixels), the seam, its widths and the border blend scaled along.
+    ``seam_x_working`` and ``inliers`` stay the estimate's (canvas pixels: what the report measures)."""
+    if shape_out == maps.shape:
+        return maps
+    sx, sy = canvas_scale(maps.shape, shape_out)
+    rows = maps.seam_luma.lines_are_rows
+    along, across = (sy, sx) if rows else (sx, sy)  # lines run along one axis, the seam's positions the other
+    count = shape_out[0] if rows else shape_out[1]
+    positions = (at_positions(maps.seam_luma.positions, canvas_positions(count, along)) + 0.5) * across - 0.5
+    seam = SeamLayout(positions=positions.astype(np.float32), lines_are_rows=rows,
+                      band_px=maps.seam_luma.band_px * across, transition_px=maps.seam_luma.transition_px * across,
+                      smooth_sigma_px=maps.seam_luma.smooth_sigma_px * across, lf_px=maps.seam_luma.lf_px * across)
+    border = maps.border_luma
+    if border is not None:
+        lines, offsets_src, offsets_tgt = border
+        spots = canvas_positions(shape_out[1] if rows else shape_out[0], across)
+        border = (tuple(float((line + 0.5) * along - 0.5) for line in lines),
+                  at_positions(offsets_src, spots, axis=1).astype(np.float32),
+                  at_positions(offsets_tgt, spots, axis=1).astype(np.float32))
+    map_src, map_tgt, alpha = (on_output(field, shape_out)
+                               for field in (maps.map_src_luma, maps.map_tgt_luma, maps.alpha_luma))
+    return replace(maps, map_src_luma=map_src, map_tgt_luma=map_tgt, alpha_luma=alpha,
+                   map_src_chroma=chroma_positions(map_src), map_tgt_chroma=chroma_positions(map_tgt),
+                   alpha_chroma=block_mean(alpha).astype(np.float32), seam_luma=seam, seam_chroma=chroma_seam(seam),
+                   border_luma=border)
+
+
+def seam_on_canvas_lines(positions_out: np.ndarray, lines: int, scale: np.ndarray, lines_are_rows: bool) -> np.ndarray:
+    """An output seam (L_out,) as canvas positions per canvas line (``lines`` of them): the inverse of
+    :func:`scaled_plane_maps`' seam, for what works on the canvas (a re-estimate's prior seam)."""
+    along, across = (scale[1], scale[0]) if lines_are_rows else (scale[0], scale[1])
+    at_lines = at_positions(np.asarray(positions_out, np.float64), (np.arange(lines) + 0.5) * along - 0.5)
+    return ((at_lines + 0.5) / across - 0.5).astype(np.float32)
+
+
+def drifted_maps(maps: PlaneMaps, shift_src: np.ndarray, shift_tgt: np.ndarray,
+                 scale: tuple[float, float] = (1.0, 1.0)) -> PlaneMaps:
     """``maps`` after the source camera's content moved by ``shift_src`` (x, y) in its Y plane and the
     target's by ``shift_tgt`` (``drift.py``): the target is never warped, so its content moves by
     ``shift_tgt`` on the canvas, and what canvas pixel q shows came from ``q - shift_tgt`` before, whose
@@ -211,10 +294,14 @@ def drifted_maps(maps: PlaneMaps, shift_src: np.ndarray, shift_tgt: np.ndarray) 
     canvas shift is taken in whole pixels and its fraction added to the positions (the source map's
     scale is about 1 px per px). The seam stays where it is on the canvas (inside the overlap, which
     the fixed target frame bounds; the per-frame seam finds its way in its band), and so do the
-    target map and the border blend."""
-    whole = np.round(shift_tgt)
+    target map and the border blend. On an output scaled from the canvas (``scale``: output pixels per
+    canvas pixel, x and y) the target's content moves ``shift_tgt * scale`` output pixels, and a
+    position's fraction of an output pixel is ``1 / scale`` input pixels."""
+    scale = np.asarray(scale, np.float64)
+    moved = np.asarray(shift_tgt, np.float64) * scale
+    whole = np.round(moved)
     map_src = (shift_onto(maps.map_src_luma, -whole, maps.shape, np.nan)
-               + (np.asarray(shift_src) - (shift_tgt - whole)).astype(np.float32)).astype(np.float32)
+               + (np.asarray(shift_src) - (moved - whole) / scale).astype(np.float32)).astype(np.float32)
     return replace(maps, map_src_luma=map_src, map_src_chroma=chroma_positions(map_src))
 
 

@@ -16,10 +16,16 @@ nominal frame rate). Each damaged frame is replaced by the last good frame at th
 own time, so the timing holds; damage before the first good frame is dropped. The reader counts
 them and their time span; the loop turns that into a warning, or with ``strict`` the first one
 stops the run.
+
+Time stamps that go back (two recordings joined) or repeat: such a frame is dropped, never given a
+time of its own squeezed in after the last one, and counted; a frame of another size than the first
+(the resolution changes mid-stream) is rescaled to the first size and counted. Both are warnings, or
+with ``strict`` errors, as damage is.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import os
@@ -36,7 +42,7 @@ import cv2
 import numpy as np
 
 from ..errors import InputError, VideoError
-from ..imageio import existing_file
+from ..imageio import check_size, existing_file
 
 PIX_FMT = "yuv420p"
 _POLL_S = 0.1  # how often a blocked decoder thread re-checks whether it was asked to stop
@@ -106,30 +112,33 @@ def open_input(path: str | os.PathLike) -> av.container.InputContainer:
     return container
 
 
-def probe_video(path: str | os.PathLike) -> VideoInfo:
+def probe_video(path: str | os.PathLike, max_megapixels: float | None = None) -> VideoInfo:
     """Size, rate, start, duration and audio presence of a video input.
 
-    Probed once per version of the file (inode, size, modification time): the loop, the first estimate
-    and the compositor each ask, and a probe decodes a frame (about 30 ms at 1080p).
+    A probe decodes the first frame (for its display rotation, about 30 ms at 1080p), so the stream's
+    coded size is checked against ``max_megapixels`` first (InputError; None: no limit of ours): a
+    small file can hold one huge frame. Probed once per version of the file (inode, size,
+    modification time) and limit: the loop, the first estimate and the compositor each ask.
     """
     path = Path(path)
     try:
         stat = path.stat()
     except OSError:
-        return _probe(path)  # open_input says what is wrong
+        return _probe(path, max_megapixels)  # open_input says what is wrong
     version = (stat.st_ino, stat.st_size, stat.st_mtime_ns)
-    return dataclasses.replace(_probe_version(path.resolve(), version), path=path)
+    return dataclasses.replace(_probe_version(path.resolve(), version, max_megapixels), path=path)
 
 
 @functools.lru_cache(maxsize=16)
-def _probe_version(path: Path, version: tuple[int, int, int]) -> VideoInfo:
-    return _probe(path)
+def _probe_version(path: Path, version: tuple[int, int, int], max_megapixels: float | None) -> VideoInfo:
+    return _probe(path, max_megapixels)
 
 
-def _probe(path: Path) -> VideoInfo:
+def _probe(path: Path, max_megapixels: float | None) -> VideoInfo:
     with open_input(path) as container:
         stream = container.streams.video[0]
         ctx = stream.codec_context
+        check_size(str(path), ctx.width, ctx.height, max_megapixels, "a frame")
         rate = stream.average_rate or stream.guessed_rate
         if not rate:
             raise VideoError(f"{path}: the video stream declares no frame rate")
@@ -175,6 +184,13 @@ def _quarter_turns(rotation_deg: float) -> int:
     return round(rotation_deg / 90) % 4
 
 
+def span_of(start_s: float, end_s: float, margin_s: Fraction = Fraction(0)) -> tuple[Fraction | None, Fraction | None]:
+    """A :class:`FrameReader`'s ``span_s`` for the trim [``start_s``, ``end_s``) (``Config.video_start_s`` /
+    ``video_end_s``; 0: not trimmed there), widened by ``margin_s`` at both ends."""
+    return (Fraction(str(start_s)) - margin_s if start_s else None,
+            Fraction(str(end_s)) + margin_s if end_s else None)
+
+
 def plane_array(plane: av.video.plane.VideoPlane) -> np.ndarray:
     """A contiguous ``(height, width)`` uint8 copy of one frame plane, dropping the line padding."""
     rows = np.frombuffer(plane, dtype=np.uint8, count=plane.height * plane.line_size)
@@ -189,17 +205,27 @@ class FrameReader:
     module says and counted in ``damaged`` (``damaged_span_s``: the first and last damaged time on
     the shared clock); with ``strict`` the first one raises VideoError instead. Any other failure is
     re-raised in the iterating thread. ``decoded`` counts the good frames; ``interval_range_s`` is
-    the (shortest, longest) time between two of them (a variable frame rate when they differ).
+    the (shortest, longest) time between two of them (a variable frame rate when they differ; not across
+    a dropped frame).
     ``wait_s`` accumulates the time the consumer spent blocked waiting for frames; ``decode_s`` the
     decoder thread's time decoding and copying planes out (not its waits on a full queue).
     ``threads``: FFmpeg decoder threads (``Config.cpu_threads``; 0 lets FFmpeg choose); once decoding
     has started, ``decoder_threads`` is the count the decoder was opened with.
+
+    ``span_s`` = (start, end) on the shared clock: only frames with start <= time < end come out (None:
+    from the beginning, to the end of the file). A start inside the file is reached by seeking to the
+    key frame before it, so only the frames from there on are decoded (``skipped``: those before the
+    start); decoding stops at the first frame at or past the end (``stopped_at_end``).
     """
 
     def __init__(self, path: str | os.PathLike, offset_s: Fraction = Fraction(0), queue_frames: int = 8,
-                 threads: int = 0, strict: bool = False):
+                 threads: int = 0, strict: bool = False,
+                 span_s: tuple[Fraction | None, Fraction | None] = (None, None)):
         self.path = Path(path)
         self.offset_s = Fraction(offset_s)
+        self.span_s = span_s
+        self.stopped_at_end = False  # decoding stopped at the span's end, before the end of the file
+        self.skipped = 0  # frames decoded before the span's start (from the key frame a seek lands on)
         self.threads = threads
         self.decoder_threads: int | None = None
         self.strict = strict
@@ -208,6 +234,11 @@ class FrameReader:
         self.damaged_span_s: tuple[Fraction, Fraction] | None = None
         self.interval_range_s: tuple[Fraction, Fraction] | None = None
         self.converted_from: str | None = None  # source pixel format when it was not yuv420p
+        self.out_of_order = 0  # frames dropped because their time stamp went back or repeated
+        self.out_of_order_at: tuple[Fraction, Fraction] | None = None  # the first: (last time kept, its time)
+        self.size: tuple[int, int] | None = None  # (width, height) of the first frame, as stored (before rotation)
+        self.rescaled = 0  # frames of another size, rescaled to ``size``
+        self.rescaled_from: tuple[tuple[int, int], Fraction] | None = None  # the first: its size and time
         self.wait_s = 0.0
         self.decode_s = 0.0
         self._container = open_input(self.path)
@@ -215,6 +246,7 @@ class FrameReader:
         self._stop = threading.Event()
         self._ended = False  # the end marker (or an error) was taken: iterating again yields nothing
         self._last_good: YuvFrame | None = None  # the last frame queued, repeated in place of damaged ones
+        self._dropped_since_last = False  # a frame was dropped (its time stamp) since the last one queued
         self._done = threading.Event()  # the decoder thread has finished
         self._thread = threading.Thread(target=self._run, name=f"decode:{self.path.name}", daemon=True)
 
@@ -276,6 +308,9 @@ class FrameReader:
         rate = Fraction(stream.average_rate or stream.guessed_rate)
         period_pts = 1 / (rate * time_base)
         last_pts = None
+        first_s, end_s = self.span_s
+        if first_s is not None and first_s - self.offset_s > 0:
+            self._seek(stream, start_pts + (first_s - self.offset_s) / time_base)
         # After damage, up to the next key frame: frames are predicted from it, and frames the decoder
         # lost leave gaps in time. (With frame threads its error comes a few packets late: the packet
         # that raises is not the damaged one, so the gaps, not the packets, say what is missing.)
@@ -286,7 +321,7 @@ class FrameReader:
                 frames = packet.decode()
             except av.error.InvalidDataError:
                 if self.strict:
-                    raise self._damage_error(self._last_good.time_s if self._last_good else Fraction(0))
+                    raise self._damage_error(self._last_good.time_s if self._last_good else Fraction(0)) from None
                 tainted = True
                 continue
             finally:
@@ -300,6 +335,15 @@ class FrameReader:
                     pts = start_pts if last_pts is None else last_pts + period_pts
                 last_pts = pts
                 time_s = (pts - start_pts) * time_base + self.offset_s
+                if self._last_good is not None and time_s <= self._last_good.time_s:
+                    self._count_out_of_order(time_s)
+                    continue
+                if first_s is not None and time_s < first_s:  # between the key frame a seek lands on and the span's start
+                    self.skipped += 1
+                    continue
+                if end_s is not None and time_s >= end_s:
+                    self.stopped_at_end = True
+                    return
                 if (was_tainted or tainted) and not self._fill_gap(time_s, 1 / rate):
                     return
                 if tainted:
@@ -312,9 +356,25 @@ class FrameReader:
                 if not self._put(yuv):
                     return
 
+    def _seek(self, stream, pts: Fraction) -> None:
+        """Move to the key frame at or before ``pts`` (the stream's time base); where the file cannot seek,
+        decoding starts at its beginning and the frames before the span are passed over all the same."""
+        with contextlib.suppress(av.error.FFmpegError):
+            self._container.seek(int(pts), stream=stream, backward=True, any_frame=False)
+
     def _damage_error(self, time_s: Fraction) -> VideoError:
         return VideoError(f"{self.path}: damaged frame at {float(time_s):.2f} s after {self.decoded} good frames "
                           f"(--strict)")
+
+    def _count_out_of_order(self, time_s: Fraction) -> None:
+        """Count a frame whose time is not after the last one kept (it is dropped); VideoError with strict."""
+        last_s = self._last_good.time_s
+        if self.strict:
+            how = "repeat" if time_s == last_s else f"go back to {float(time_s):.3f} s"
+            raise VideoError(f"{self.path}: frame time stamps {how} after {float(last_s):.3f} s (--strict)")
+        self.out_of_order += 1
+        self.out_of_order_at = self.out_of_order_at or (last_s, time_s)
+        self._dropped_since_last = True
 
     def _count_damage(self, time_s: Fraction) -> None:
         if self.strict:
@@ -345,6 +405,15 @@ class FrameReader:
         return self._put(self._last_good)
 
     def _to_yuv(self, frame: av.VideoFrame, time_s: Fraction) -> YuvFrame:
+        size = (frame.width, frame.height)
+        self.size = self.size or size
+        if size != self.size:  # the maps are made for the first size: a later one is brought to it
+            if self.strict:
+                raise VideoError(f"{self.path}: the resolution changes from {self.size[0]}x{self.size[1]} to "
+                                 f"{size[0]}x{size[1]} at {float(time_s):.2f} s (--strict)")
+            self.rescaled += 1
+            self.rescaled_from = self.rescaled_from or (size, time_s)
+            frame = frame.reformat(width=self.size[0], height=self.size[1], format=PIX_FMT)
         if frame.format.name != PIX_FMT:
             # Only non-4:2:0 sources (e.g. yuv422p webcams) pay for a conversion.
             self.converted_from = frame.format.name
@@ -352,10 +421,11 @@ class FrameReader:
         turns = _quarter_turns(frame.rotation)
         y, u, v = (np.ascontiguousarray(np.rot90(plane_array(p), turns)) if turns else plane_array(p)
                    for p in frame.planes[:3])
-        if self._last_good is not None:
+        if self._last_good is not None and not self._dropped_since_last:  # a drop's gap is said as the drop
             step = time_s - self._last_good.time_s
             low, high = self.interval_range_s or (step, step)
             self.interval_range_s = (min(low, step), max(high, step))
         self.decoded += 1
         self._last_good = YuvFrame(time_s=time_s, index=self.decoded - 1, y=y, u=u, v=v)
+        self._dropped_since_last = False
         return self._last_good

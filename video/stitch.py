@@ -24,32 +24,37 @@ from collections import deque
 from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from ..composite import Compositor
-from ..config import CHOICES, Config
+from ..config import CHOICES, Config, require_config
 from ..crop import largest_inner_rectangle
 from ..errors import InputError, StitchError, VideoError
 from ..outputs import OutputPlan
 from ..report import run_info
 from ..stitch import StitchMaps
 from sena_warp.kernels.runtime import prewarm, resolve_config
+from .debug import dump_first_estimate
 from .drift import DriftWatch, overlap_boxes
 from .estimate import (Attempt, best_first_estimate, estimate_pair, paired_frames, rejection_reason, spaced_pairs,
                        spaced_span)
 from .exposure import ExposureTracker
 from .frame_seam import FrameSeam, band_half_width, cell_px
-from .loop import VideoOptions, run_video
-from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, MapsBlend, PlaneMaps, chroma_lines, drifted_maps, lerp_maps,
-                   map_change_px, plane_maps, sampled_mask, seam_change_px, seam_per_target_line, target_offset)
+from .loop import VideoOptions, run_still, run_video
+from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, MapsBlend, PlaneMaps, canvas_scale, chroma_lines, drifted_maps,
+                   lerp_maps, map_change_px, output_shape, plane_maps, sampled_mask, scaled_plane_maps,
+                   seam_change_px, seam_on_canvas_lines, seam_per_target_line, target_offset)
 from .reader import YuvFrame, probe_video
 from .writer import even_size
 
 RIGS = CHOICES["video_rig"]
+STILL_SUFFIXES = (".png", ".jpg", ".jpeg")  # an output of these types is the one stitched frame at the span's start
 JITTER_PERCENTILE = 99.0  # "largest map change" = this percentile of |delta M_s| per frame (robust to edge pixels)
 JITTER_STRIDE = 4  # ... over every this-th canvas row and column (a 1080p frame's full maps took 0.1 s)
+PLANE_CHANNELS = (1, 2)  # the frame kernels' channel counts: the Y pass, and U and V stacked
 LUMA_FILL = (BLACK_Y,)  # output Y where no input is sampled
 CHROMA_FILL = (BLACK_UV, BLACK_UV)  # output U, V likewise
 
@@ -133,6 +138,9 @@ class CompositedFrame:
     weights: Callable[[], tuple[np.ndarray, np.ndarray]]
 
 
+FirstEstimateHook = Callable[[StitchMaps, YuvFrame, YuvFrame], None]
+"""Shown the first estimate and the (left, right) frames it was made on (``video --debug``)."""
+
 FrameObserver = Callable[[CompositedFrame], None]
 """Called once per composited frame, on the loop's thread, before the frame is encoded; its time is
 reported as the stitch's ``timing_s.observer``."""
@@ -168,19 +176,23 @@ class SenaFrameCompositor:
         # A static rig's views are checked for drift this often (``drift.py``); None: not checked.
         self._drift_s = cfg.video_drift_check_s if cfg.video_rig == "static" and cfg.video_drift_check_s > 0 else None
         x0, y0, width, height = fixed_canvas(first, self._rig.pick(*frame_shapes), cfg.video_crop)
-        shape = (height, width)
         self.crop_xywh = (x0, y0, width, height) if cfg.video_crop else None
+        # The output is the fixed canvas, or that canvas made at most video_max_width wide by the maps
+        # themselves (``maps.scaled_plane_maps``): each output pixel samples the inputs once.
+        self._canvas_shape = (height, width)
+        shape = self._shape_out = output_shape(self._canvas_shape, cfg.video_max_width)
+        self._scale = canvas_scale(self._canvas_shape, shape)
         self._band = band_half_width(shape, cfg)
         self._offset_tgt = target_offset(first.map_tgt_input) - np.array([x0, y0], np.float64)
-        self._maps = self._on_canvas(first, shape)
+        self._maps = self._on_canvas(first)
         self.output_size = (shape[1], shape[0])
         self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.seam_luma, cfg, WHITE_Y)
         self._chroma = Compositor(self._maps.map_src_chroma, self._maps.map_tgt_chroma, self._maps.seam_chroma, cfg,
                                   None)
         self._border_set = None  # the border offsets last uploaded
         self._set_border()
-        self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, cell_px(frame_shapes, cfg),
-                               self._reestimate_s is None, fps, cfg)
+        cell = max(1, round(cell_px(frame_shapes, cfg) * float(self._scale.min())))
+        self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, cell, self._reestimate_s is None, fps, cfg)
         self._fps = fps
         self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
         self._plane_shapes: tuple[tuple[int, int], tuple[int, int]] | None = None
@@ -224,30 +236,43 @@ class SenaFrameCompositor:
             self._luma.set_border_offsets(*border)
             self._border_set = border
 
-    def _on_canvas(self, maps: StitchMaps, shape: tuple[int, int]) -> PlaneMaps:
-        """An estimate on the fixed canvas, its plan band wide enough for the per-frame seam."""
-        plane = plane_maps(maps, shape, self._offset_tgt)
+    def _on_canvas(self, maps: StitchMaps) -> PlaneMaps:
+        """An estimate on the fixed canvas, scaled to the output, its plan band wide enough for the
+        per-frame seam."""
+        plane = scaled_plane_maps(plane_maps(maps, self._canvas_shape, self._offset_tgt), self._shape_out)
         reach = self._band + plane.seam_luma.band_px
         return replace(plane, seam_luma=replace(plane.seam_luma, band_px=reach),
                        seam_chroma=replace(plane.seam_chroma, band_px=0.5 * reach))
 
     @classmethod
     def from_pairs(cls, pairs: Iterator[tuple[YuvFrame, YuvFrame]], left: str | os.PathLike,
-                   right: str | os.PathLike, cfg: Config, reference: str,
-                   observer: FrameObserver | None = None) -> "SenaFrameCompositor":
+                   right: str | os.PathLike, cfg: Config, reference: str, observer: FrameObserver | None = None,
+                   on_first: FirstEstimateHook | None = None) -> "SenaFrameCompositor":
         """The compositor of two videos ``left`` and ``right``: maps from the best of their first frame
         ``pairs`` (``estimate.best_first_estimate``; it takes pairs up to the last it tries);
-        ``reference`` as ``stitch_videos``; ``cfg.device`` resolved."""
-        maps, pair, attempts = best_first_estimate(spaced_pairs(pairs, cfg), cfg, reference)
+        ``reference`` as ``stitch_videos``; ``cfg.device`` resolved. ``on_first``: shown the first
+        estimate and the pair it was made on."""
+        tried: dict[int, tuple[YuvFrame, YuvFrame]] = {}
+
+        def remembered(spaced: Iterator[tuple[int, YuvFrame, YuvFrame]]) -> Iterator[tuple[int, YuvFrame, YuvFrame]]:
+            for index, frame_l, frame_r in spaced:
+                if on_first is not None:
+                    tried[index] = (frame_l, frame_r)
+                yield index, frame_l, frame_r
+
+        maps, pair, attempts = best_first_estimate(remembered(spaced_pairs(pairs, cfg)), cfg, reference)
+        if on_first is not None:
+            on_first(maps, *tried[pair])
         return cls(maps, attempts, pair, float(probe_video(left).fps), video_shapes(left, right), cfg, observer)
 
     @classmethod
     def from_videos(cls, left: str | os.PathLike, right: str | os.PathLike, offset_s: float, cfg: Config,
-                    reference: str, observer: FrameObserver | None = None) -> "SenaFrameCompositor":
+                    reference: str, observer: FrameObserver | None = None,
+                    on_first: FirstEstimateHook | None = None) -> "SenaFrameCompositor":
         """:meth:`from_pairs` on decoders of its own (``offset_s`` as ``VideoOptions.offset_s``), for a
         compositor made apart from a frame loop."""
         with paired_frames(left, right, offset_s, cfg) as pairs:
-            return cls.from_pairs(pairs, left, right, cfg, reference, observer)
+            return cls.from_pairs(pairs, left, right, cfg, reference, observer, on_first)
 
     def source_target(self, item_left, item_right) -> tuple:
         """A (left, right) pair of per-input things (frames, planes, shapes) as (source, target)."""
@@ -327,13 +352,15 @@ class SenaFrameCompositor:
         self._drift_log["applied"].append({"time_s": round(time_s, 4), "source_px": np.round(shifts[0], 2).tolist(),
                                            "target_px": np.round(shifts[1], 2).tolist()})
         frames = int(np.ceil(change / self._cfg.video_drift_speed_px))
-        return drifted_maps(self._drift_base, *shifts), frames
+        return drifted_maps(self._drift_base, *shifts, self._scale), frames
 
     def _prior_seam_tgt(self) -> np.ndarray:
         """The current seam per working-frame target row, in target pixels: where a re-estimate's seam
         should stay (``stitch.estimate_maps``'s ``prior_seam_tgt``)."""
         offset = self._offset_tgt[::-1] if self._rig.vertical else self._offset_tgt
-        return seam_per_target_line(self._seam.positions, offset)
+        lines = self._canvas_shape[1] if self._rig.vertical else self._canvas_shape[0]
+        seam = seam_on_canvas_lines(self._seam.positions, lines, self._scale, not self._rig.vertical)
+        return seam_per_target_line(seam, offset)
 
     def _submit(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
         self._last_estimate_s = float(frame_l.time_s)
@@ -354,7 +381,7 @@ class SenaFrameCompositor:
             estimate = estimate_pair(frame_l, frame_r, self._cfg, self._rig.target, prior_seam_tgt=prior)
             if estimate.rig.vertical != self._rig.vertical:
                 return None, "rig orientation changed"
-            candidate = self._on_canvas(estimate, self._maps.shape)
+            candidate = self._on_canvas(estimate)
             reason = rejection_reason(candidate, self._maps, self._first_inliers, shape_src, shape_tgt, self._cfg)
             return (candidate, None) if reason is None else (None, reason)
         except StitchError as exc:
@@ -470,6 +497,7 @@ class SenaFrameCompositor:
                     "vertical": self._rig.vertical, "reestimate_s": self._reestimate_s},
             "first_estimate": self._first_info,
             "canvas": {"width": self.output_size[0], "height": self.output_size[1],
+                       "stitched_width": self._canvas_shape[1], "stitched_height": self._canvas_shape[0],
                        "crop_xywh": None if self.crop_xywh is None else list(self.crop_xywh),
                        "offset_tgt": [float(v) for v in self._offset_tgt],
                        "seam_x_working": [None if np.isnan(x) else round(float(x), 2)
@@ -528,34 +556,70 @@ def check_rig_settings(cfg: Config) -> None:
 
 
 def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str | os.PathLike, cfg: Config,
-                  options: VideoOptions, reference: str = "auto", plan: OutputPlan | None = None,
-                  observer: FrameObserver | None = None) -> dict:
+                  options: VideoOptions | None = None, reference: str = "auto", plan: OutputPlan | None = None,
+                  observer: FrameObserver | None = None, debug: str | os.PathLike | None = None,
+                  overwrite: bool = False) -> dict:
     """Stitch two videos into ``output`` with SENA maps; return the run's report.
 
+    An ``output`` of a ``STILL_SUFFIXES`` type gets the stitched frame at the span's start and nothing
+    more (:func:`loop.run_still`), a video file every frame of the span (:func:`loop.run_video`).
     ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
+    ``options``: offset, encoder and limits (None: ``VideoOptions.from_config(cfg)``).
     ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
-    ``plan``: commit the video with that plan's other outputs (see ``sena_warp.outputs``).
+    An existing ``output`` is refused (OutputError, before any work) unless ``overwrite`` is True, as
+    the CLI's ``-y``; the output appears only once complete. ``plan``: commit the video with that
+    plan's other outputs (see ``sena_warp.outputs``), under that plan's rule for existing outputs.
     The report is :func:`loop.run_video`'s plus ``run`` (tool, device, settings) and ``stitch`` (see
     :meth:`SenaFrameCompositor.report`), its times in one ``timing_s`` block (``docs/report.md``).
-    ``observer``: called with every composited frame (:class:`CompositedFrame`).
+    ``observer``: called with every composited frame (:class:`CompositedFrame`). ``debug``: a folder for
+    the first estimate's stage pictures (``debug.py``), written with ``plan``'s outputs.
     The Warp device of ``cfg`` is resolved here, once for the whole video.
     """
+    options = VideoOptions.from_config(require_config(cfg, "stitch_videos")) if options is None else options
+    if not isinstance(options, VideoOptions):
+        raise InputError(f"stitch_videos: options must be a VideoOptions or None, got {type(options).__name__}")
+    if plan is not None:
+        return _stitch_videos(left, right, output, cfg, options, reference, plan, observer, debug)
+    own = OutputPlan((left, right), overwrite="overwrite" if overwrite else "refuse")
+    own.add(output, "the output")
+    if debug is not None:
+        own.add(debug, "debug", folder=True)
+    own.check()
+    with own:
+        return _stitch_videos(left, right, output, cfg, options, reference, own, observer, debug)
+
+
+def _stitch_videos(left, right, output, cfg: Config, options: VideoOptions, reference: str, plan: OutputPlan,
+                   observer: FrameObserver | None, debug: str | os.PathLike | None) -> dict:
     check_rig_settings(cfg)
     cfg = resolve_config(cfg)
     t0 = time.perf_counter()
-    prewarm(cfg.device)  # before the run's clock: a first run's kernel compile is not frame time
+    # Shipped builds load at once; what must be compiled is, in the background, the estimate's modules
+    # first: a launch waits for its own module only. The planes are composited with 1 (Y) and 2 (UV) channels.
+    prewarm(cfg.device, channels=PLANE_CHANNELS, wait=False)
     load_kernels_s = time.perf_counter() - t0
     built: list[SenaFrameCompositor] = []
+    first: list[tuple[StitchMaps, YuvFrame, YuvFrame]] = []  # kept for the debug pictures
+
+    def keep_first(maps: StitchMaps, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
+        first.append((maps, frame_l, frame_r))
+
+    hook = keep_first if debug is not None else None
 
     def factory(pairs: Iterator[tuple[YuvFrame, YuvFrame]]) -> SenaFrameCompositor:
         if spaced_span(cfg) * pair_mib(video_shapes(left, right)) <= cfg.video_estimate_lookahead_mib:
-            built.append(SenaFrameCompositor.from_pairs(pairs, left, right, cfg, reference, observer))
+            built.append(SenaFrameCompositor.from_pairs(pairs, left, right, cfg, reference, observer, hook))
         else:  # too large to hold that many pairs for the loop: the estimate decodes its own
-            built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference, observer))
+            built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference, observer,
+                                                         hook))
         return built[0]
 
+    run = run_still if Path(output).suffix.lower() in STILL_SUFFIXES else run_video
     try:
-        report = run_video(left, right, output, factory, options, plan)
+        report = run(left, right, output, factory, options, plan)
+        if debug is not None:
+            with plan.writing(debug) as folder:
+                dump_first_estimate(folder, *first[0], cfg)
     finally:
         for compositor in built:
             compositor.close()

@@ -39,7 +39,6 @@ import numpy as np
 
 from ..config import Config
 from ..errors import SyncError, VideoError
-from ..imageio import check_size
 from .reader import open_input, probe_video
 
 METHODS = ("audio", "motion")
@@ -116,9 +115,7 @@ def estimate_offset(left: str | os.PathLike, right: str | os.PathLike, cfg: Conf
     InputError, before anything is decoded, for frames above ``cfg.max_input_megapixels`` (as the
     stitch refuses them).
     """
-    infos = probe_video(left), probe_video(right)
-    for info in infos:
-        check_size(str(info.path), info.width, info.height, cfg.max_input_megapixels, "a frame")
+    infos = probe_video(left, cfg.max_input_megapixels), probe_video(right, cfg.max_input_megapixels)
     both_audio = infos[0].has_audio and infos[1].has_audio
     refusals = [] if both_audio else ["audio: not both inputs have a track"]
     for method in METHODS if both_audio else METHODS[1:]:

@@ -34,7 +34,7 @@ from ..features import Matches
 from ..partition import BorderOffsets, SeamMaps, SeamOffsets
 from ..rig import map_from_working
 from ..stitch import StitchMaps
-from .maps import target_map
+from .maps import at_positions, target_map
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import seam_weights_kernel
 
@@ -81,20 +81,6 @@ def small_matches(matches: Matches | None, scale_a: np.ndarray, scale_b: np.ndar
     if matches is None:
         return None
     return replace(matches, pts_a=to_small(matches.pts_a, scale_a), pts_b=to_small(matches.pts_b, scale_b))
-
-
-def at_positions(values: np.ndarray, positions: np.ndarray, axis: int = 0) -> np.ndarray:
-    """``values`` sampled linearly along ``axis`` at fractional ``positions`` (clamped to its ends); NaN
-    where a tap that counts is NaN."""
-    last = values.shape[axis] - 1
-    p = np.clip(np.asarray(positions, np.float64), 0, last)
-    i0 = np.floor(p).astype(np.int64)
-    i1 = np.minimum(i0 + 1, last)
-    shape = [1] * values.ndim
-    shape[axis] = len(p)
-    f = (p - i0).reshape(shape)
-    low, high = np.take(values, i0, axis=axis), np.take(values, i1, axis=axis)
-    return np.where(f == 0.0, low, low * (1.0 - f) + high * f)
 
 
 def prior_to_small(prior_seam_tgt: np.ndarray | None, scale: float) -> np.ndarray | None:

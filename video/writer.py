@@ -1,7 +1,8 @@
 """Encoding the stitched frames with PyAV, and copying one input's audio alongside.
 
 The caller writes into a temporary path (``sena_warp.outputs``) so a failed or interrupted run
-never leaves a partial file under the final name. Video is H.264 in yuv420p, at the input's frame
+never leaves a partial file under the final name. Video is H.264 or HEVC in yuv420p, at a constant
+quality or an average bit rate (optionally capped), at the input's frame
 rate; the stitch gives the encoder the left input's own time base and each frame's pts from that
 input's presentation time, so timing (a variable frame rate too) is carried through, not recounted. Audio is remuxed
 (packets copied, no re-encoding) when the output container accepts its codec, else re-encoded to AAC;
@@ -10,6 +11,7 @@ either way it is trimmed to the span of the video that was written.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import os
 from fractions import Fraction
@@ -23,35 +25,56 @@ from ..errors import OutputError, VideoError
 from .reader import PIX_FMT, open_input
 
 FALLBACK_CODEC = "libx264"  # always in PyAV's wheels
+# A hardware encoder that cannot open falls back to the software encoder of its format (and that to libx264).
+SOFTWARE_CODEC = {"h264_nvenc": "libx264", "hevc_nvenc": "libx265", "libx265": FALLBACK_CODEC}
+NVENC = ("h264_nvenc", "hevc_nvenc")
+X26X = ("libx264", "libx265")  # software encoders with x264's presets and constant rate factor
+MP4_TAGS = {"libx265": "hvc1", "hevc_nvenc": "hvc1"}  # HEVC in MP4/MOV as hvc1: the tag Apple's players need
+VBV_SECONDS = 2  # --maxrate: the rate buffer holds this many seconds at the peak rate
+AUDIO_SEEK_MARGIN_S = 1  # a trimmed video's audio is sought this long before its start (packets before it are dropped)
 _AAC_FRAME_SAMPLES = 1024  # AAC-LC encodes audio in frames of exactly this many samples
 _DEFAULT_LAYOUTS = {1: "mono", 2: "stereo"}  # for sources whose channel order is unspecified
 
 
 def choose_codec(requested: str, width: int, height: int, rate: Fraction) -> tuple[str, str | None]:
-    """The encoder to use for ``requested`` and a note when it had to fall back to libx264.
+    """The encoder to use for ``requested`` and a note when it had to fall back (NVENC to the software
+    encoder of its format, libx265 to libx264: ``SOFTWARE_CODEC``).
 
     A hardware encoder can be compiled in yet unusable (no GPU, no driver), so it is opened once
-    with the real frame size to find out.
+    with the real frame size to find out; a software encoder only needs to be in the build.
     """
     if requested == FALLBACK_CODEC:
         return requested, None
+    fallback = SOFTWARE_CODEC.get(requested, FALLBACK_CODEC)
     if requested not in av.codecs_available:
-        return FALLBACK_CODEC, f"encoder {requested} is not in this FFmpeg build; used {FALLBACK_CODEC}"
+        used, note = choose_codec(fallback, width, height, rate)
+        return used, f"encoder {requested} is not in this FFmpeg build; used {used}" + (f" ({note})" if note else "")
+    if requested not in NVENC:
+        return requested, None
     try:
         ctx = av.CodecContext.create(requested, "w")
         ctx.width, ctx.height, ctx.pix_fmt, ctx.time_base = width, height, PIX_FMT, 1 / Fraction(rate)
         ctx.open()  # released when garbage-collected; PyAV has no explicit close
     except (av.error.FFmpegError, ValueError) as exc:
         reason = getattr(exc, "strerror", None) or exc
-        return FALLBACK_CODEC, f"encoder {requested} cannot be opened ({reason}); used {FALLBACK_CODEC}"
+        used, note = choose_codec(fallback, width, height, rate)
+        return used, f"encoder {requested} cannot be opened ({reason}); used {used}" + (f" ({note})" if note else "")
     return requested, None
 
 
-def encoder_options(codec: str, crf: int, preset: str) -> dict[str, str]:
-    """FFmpeg private options for constant-quality H.264 with ``codec``."""
-    if codec == "h264_nvenc":
-        return {"rc": "vbr", "cq": str(crf)}
-    return {"crf": str(crf), "preset": preset}
+def encoder_options(codec: str, crf: int, preset: str, bitrate_kbps: int = 0, maxrate_kbps: int = 0) -> dict[str, str]:
+    """FFmpeg options for ``codec``: constant quality ``crf`` (NVENC: its ``cq``), or an average bit rate
+    when ``bitrate_kbps`` is set; a peak rate ``maxrate_kbps`` caps either (a buffer of ``VBV_SECONDS``)."""
+    options = {"rc": "vbr"} if codec in NVENC else {"preset": preset}
+    if bitrate_kbps:
+        options["b"] = f"{bitrate_kbps}k"
+    else:
+        options["cq" if codec in NVENC else "crf"] = str(crf)
+    if maxrate_kbps:
+        options.update(maxrate=f"{maxrate_kbps}k", bufsize=f"{VBV_SECONDS * maxrate_kbps}k")
+    if codec == "libx265":
+        options["x265-params"] = "log-level=error"  # x265 prints its settings on stderr otherwise
+    return options
 
 
 def even_size(width: int, height: int) -> tuple[int, int]:
@@ -130,6 +153,10 @@ class AudioCopier:
                 format="fltp", layout=layout, rate=ctx.sample_rate, frame_size=_AAC_FRAME_SAMPLES
             )
             self._next_pts: int | None = None
+        if shift_s > AUDIO_SEEK_MARGIN_S:  # a trimmed video: skip the audio before it instead of reading through it
+            with contextlib.suppress(av.error.FFmpegError):
+                self._input.seek(int((shift_s - AUDIO_SEEK_MARGIN_S) / self._time_base), stream=self._in_stream,
+                                 backward=True)
         self._packets = self._input.demux(self._in_stream)
         self._pending: av.Packet | None = None
         self.packets = 0
@@ -191,13 +218,15 @@ class AudioCopier:
 
 
 class VideoWriter:
-    """H.264/yuv420p encoder into ``path`` at ``rate`` frames per second (optionally with audio).
+    """H.264 or HEVC (``codec``) yuv420p encoder into ``path`` at ``rate`` frames per second (optionally with audio).
 
     ``width``/``height`` are cropped to even values (see :func:`even_size`); :meth:`write` takes
     planes at least that large. Frame pts are in units of ``time_base`` (default ``1 / rate``; a
     finer one such as the input's keeps a variable frame rate's times) and must increase.
     Use as a context manager: a clean exit flushes the encoder; an exception just closes the file.
     ``threads``: encoder threads (``Config.cpu_threads``; 0 lets the encoder choose, x264: 1.5 per core).
+    ``crf`` (constant quality) unless ``bitrate_kbps`` asks for an average rate; ``maxrate_kbps`` caps
+    either (:func:`encoder_options`).
     ``thread_type``: "slice" or "frame" (``Config.video_encoder_thread_type``); PyAV asks for slice
     threads unless told, and FFmpeg's libx264 wrapper turns x264's frame threads on for anything else.
     """
@@ -214,6 +243,8 @@ class VideoWriter:
         threads: int = Config.cpu_threads,
         time_base: Fraction | None = None,
         thread_type: str = Config.video_encoder_thread_type,
+        bitrate_kbps: int = Config.video_bitrate_kbps,
+        maxrate_kbps: int = Config.video_maxrate_kbps,
     ):
         self.path = Path(path)
         self.width, self.height = even_size(width, height)
@@ -225,8 +256,9 @@ class VideoWriter:
         self.codec, note = choose_codec(codec, self.width, self.height, self.rate)
         self.notes = [note] if note else []  # fallbacks the report should mention
         self.audio_refusal: str | None = None  # why the audio was left out (see add_audio)
-        self._options = encoder_options(self.codec, crf, preset)
+        self._options = encoder_options(self.codec, crf, preset, bitrate_kbps, maxrate_kbps)
         self.crf, self.preset, self.threads, self.thread_type = crf, preset, threads, thread_type
+        self.bitrate_kbps, self.maxrate_kbps = bitrate_kbps, maxrate_kbps
         self._open()
         self.audio: AudioCopier | None = None
         self.frames = 0
@@ -234,12 +266,17 @@ class VideoWriter:
         self._finished = False
 
     def encoder_settings(self) -> dict:
-        """The encoder as opened: codec (and the one asked for), quality, preset, thread count and type."""
-        x264 = self.codec == FALLBACK_CODEC  # NVENC has no x264 preset nor threads of its own
+        """The encoder as opened: codec (and the one asked for), rate control (constant quality ``crf``, or
+        an average ``bitrate_kbps``; a peak ``maxrate_kbps`` or None), preset, thread count and type."""
+        software = self.codec in X26X  # NVENC has no x264 preset nor threads of its own
         ctx = self.stream.codec_context
-        return {"codec": self.codec, "requested": self.requested_codec, "crf": self.crf,
-                "preset": self.preset if x264 else None, "threads": ctx.thread_count,
-                "thread_type": ctx.thread_type.name.lower() if x264 else None, "pix_fmt": PIX_FMT}
+        return {"codec": self.codec, "requested": self.requested_codec,
+                "rate_control": "bitrate" if self.bitrate_kbps else "crf",
+                "crf": None if self.bitrate_kbps else self.crf, "bitrate_kbps": self.bitrate_kbps or None,
+                "maxrate_kbps": self.maxrate_kbps or None,
+                "preset": self.preset if software else None, "threads": ctx.thread_count,
+                "thread_type": ctx.thread_type.name.lower() if self.codec == FALLBACK_CODEC else None,
+                "pix_fmt": PIX_FMT}
 
     def _open(self) -> None:
         """(Re)create the file with its video stream, nothing written yet."""
@@ -250,6 +287,8 @@ class VideoWriter:
         self.stream = self.container.add_stream(self.codec, rate=self.rate, options=self._options)
         self.stream.width, self.stream.height = self.width, self.height
         self.stream.pix_fmt = PIX_FMT
+        if self.codec in MP4_TAGS and self.container.format.name in ("mp4", "mov"):
+            self.stream.codec_context.codec_tag = MP4_TAGS[self.codec]
         self.stream.time_base = self.stream.codec_context.time_base = self.time_base
         # Both before the encoder opens on the first frame.
         self.stream.codec_context.thread_count = self.threads

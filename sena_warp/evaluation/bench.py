@@ -1,8 +1,10 @@
-"""Frame-rate benchmark of the video path (issue 6): ``sena-warp bench``.
+"""Frame-rate benchmark of the video path: ``sena-warp bench``.
 
-From one real high-resolution pair (``pairs/rew_lawn_2160``, 2160x1440) it makes two-camera clips at
-720p, 1080p and 4K: a slow pan of both views together (a 16:9 crop window moving across each image,
-the same motion in both, resized to the clip size), encoded with libx264 into a work folder. Then,
+From one real pair it makes two-camera clips at 720p, 1080p and 4K: a slow pan of both views together
+(a 16:9 crop window moving across each image, the same motion in both, resized to the clip size),
+encoded with libx264 into a work folder. The pair is the shared data set's ``pairs/rew_lawn_2160``
+(2160x1440) when it is there (``--data``), else the one the package ships (``data/bench``, 1000x750:
+its clips above 1000 px wide are upscaled, softer, so their figures are not the shared pair's). Then,
 per size and in one run, it measures
 
 - a transcode-only baseline: decode both clips, place them side by side, encode with the stitcher's
@@ -21,6 +23,7 @@ import json
 import os
 import subprocess
 import sys
+import textwrap
 import time
 from dataclasses import dataclass
 from datetime import datetime
@@ -35,12 +38,25 @@ from sena_warp.gains import tone_curve
 from sena_warp.errors import InputError, error_for_exit_code
 from sena_warp.imageio import read_image
 from sena_warp.outputs import OutputPlan, atomic_output, make_folder
+from sena_warp.progress import LOGGER, stage
 
 SIZES = {"720p": (1280, 720), "1080p": (1920, 1080), "4k": (3840, 2160)}
+MAX_SIDE_PX = 8192  # --sizes: each side at most this, and ...
+MAX_PIXELS = 7680 * 4320  # ... at most 8K's pixels (the clips of both views are encoded at that size)
 REPO = Path(__file__).resolve().parents[2]
 DATA_DIR = REPO.parent / "shared" / "data"
 PAIR = "rew_lawn_2160"
+BUNDLED_PAIR = Path(__file__).resolve().parents[1] / "data" / "bench"  # shipped: spw_13 (ATTRIBUTION.md there)
 ERROR_PREFIX = "sena-warp: error: "
+
+
+@dataclass(frozen=True)
+class BenchPair:
+    """The pair the clips are made from: its name (in the clips' file names and the table's header)
+    and its (a, b) image paths."""
+
+    name: str
+    paths: tuple[Path, Path]
 
 
 @dataclass(frozen=True)
@@ -66,17 +82,22 @@ def parse_size(text: str) -> tuple[str, tuple[int, int]]:
         raise InputError(f"size {text!r} unknown; use {', '.join(SIZES)} or WIDTHxHEIGHT") from None
     if width < 16 or height < 16 or width % 2 or height % 2:
         raise InputError(f"size {text!r}: width and height must be even and at least 16")
+    if max(width, height) > MAX_SIDE_PX or width * height > MAX_PIXELS:
+        raise InputError(f"size {text!r}: at most {MAX_SIDE_PX} px a side and {MAX_PIXELS / 1e6:.1f} MP (8K)")
     return f"{width}x{height}", (width, height)
 
 
-def pair_paths(data_dir: Path) -> tuple[Path, Path]:
-    """The a/b images of the benchmark pair, or InputError saying the shared data is missing."""
-    paths = tuple(data_dir / "pairs" / PAIR / name for name in ("a.jpg", "b.jpg"))
+def bench_pair(data_dir: Path | None = None) -> BenchPair:
+    """The pair in the shared data set at ``data_dir`` (InputError when it lacks it); without one, the
+    shared set beside the source tree when it is there, else the pair the package ships."""
+    paths = tuple((data_dir or DATA_DIR) / "pairs" / PAIR / name for name in ("a.jpg", "b.jpg"))
     missing = [str(p) for p in paths if not p.is_file()]
-    if missing:
-        raise InputError(f"benchmark pair not found ({', '.join(missing)}); the bench needs the shared data "
-                         f"set at {data_dir} (pass --data DIR)")
-    return paths
+    if not missing:
+        return BenchPair(PAIR, paths)
+    if data_dir is None:
+        return BenchPair("bundled_spw_13", (BUNDLED_PAIR / "a.jpg", BUNDLED_PAIR / "b.jpg"))
+    raise InputError(f"benchmark pair not found ({', '.join(missing)}); give --data the shared data set's "
+                     f"folder, or leave --data out to use the pair the package ships")
 
 
 def pan_window(image_shape: tuple[int, int], aspect: float, crop_fraction: float,
@@ -92,7 +113,7 @@ def pan_window(image_shape: tuple[int, int], aspect: float, crop_fraction: float
     return int(round(t * (cols - width))), int(round(t * (rows - height))), width, height
 
 
-def make_clip_pair(pair: tuple[Path, Path], work: Path, size: tuple[int, int], seconds: float,
+def make_clip_pair(pair: BenchPair, work: Path, size: tuple[int, int], seconds: float,
                    settings: BenchSettings = BenchSettings()) -> tuple[Path, Path]:
     """Encode the slow-pan clips of both views at ``size`` (W, H) for ``seconds``; reuse existing ones.
 
@@ -102,10 +123,10 @@ def make_clip_pair(pair: tuple[Path, Path], work: Path, size: tuple[int, int], s
 
     width, height = size
     frames = max(1, round(seconds * settings.fps))
-    images = [read_image(path) for path in pair]
+    images = [read_image(path) for path in pair.paths]
     outputs = []
     for side, image in zip(("left", "right"), images):
-        path = work / f"{PAIR}_{width}x{height}_{frames}f_{side}.mp4"
+        path = work / f"{pair.name}_{width}x{height}_{frames}f_{side}.mp4"
         outputs.append(path)
         if path.is_file():
             continue
@@ -291,11 +312,14 @@ def compare_compositing(left: Path, right: Path, cfg: Config, settings: BenchSet
             "opencv_cpu_ms": opencv_cpu_ms, "cpu_ratio": warp_cpu_ms / opencv_cpu_ms, "max_diff": diff}
 
 
-def bench_size(label: str, size: tuple[int, int], seconds: float, work: Path, pair: tuple[Path, Path],
+def bench_size(label: str, size: tuple[int, int], seconds: float, work: Path, pair: BenchPair,
                cfg: Config, settings: BenchSettings = BenchSettings()) -> dict:
     """One table row: clips of ``size`` (W, H), baseline, end-to-end stitch, stages, compositing."""
+    stage(f"{label}: making the clips")
     left, right = make_clip_pair(pair, work, size, seconds, settings)
+    stage(f"{label}: the transcode baseline")
     baseline = transcode_baseline(left, right, work / f"baseline_{label}.mp4", cfg)
+    stage(f"{label}: sena-warp video, in a process of its own")
     stitch = stitch_in_child(left, right, work / f"stitch_{label}.mp4", cfg.device)
     timing, frames = stitch["timing_s"], stitch["frames_out"]
     # Whole run, and the steady rate after the first estimate (once per video, whatever its length).
@@ -303,6 +327,7 @@ def bench_size(label: str, size: tuple[int, int], seconds: float, work: Path, pa
     stitch_fps = frames / (timing["total"] - timing["compositor_setup"])
     # From the child's start to its first frame composited: until its run started, then the run's own.
     first_frame_s = datetime.fromisoformat(stitch["started"]).timestamp() - stitch["spawned"] + timing["first_frame"]
+    stage(f"{label}: compositing, Warp against OpenCV")
     compositing = compare_compositing(left, right, cfg, settings)
     decode_s = sum(stitch["inputs"][side]["decode_s"] for side in ("left", "right"))
     return {
@@ -335,27 +360,43 @@ COLUMNS = (  # (key, header, format)
 )
 
 
+# The plain table: the headline figures in columns that fit an 80-column terminal, said in the legend below.
+SHORT_COLUMNS = (  # (key, header, format)
+    ("size", "size", "{}"), ("canvas", "canvas", "{}"), ("baseline_fps", "base", "{:.1f}"),
+    ("run_fps", "run", "{:.1f}"), ("stitch_fps", "steady", "{:.1f}"), ("fps_ratio", "x base", "{:.2f}"),
+    ("setup_s", "est s", "{:.1f}"), ("composite_ms", "comp ms", "{:.1f}"), ("kernel_ratio", "vs cv2", "{:.2f}"),
+    ("rss_mib", "RSS MiB", "{:.0f}"),
+)
+LEGEND = ("frames per second: base = decode both, side by side, encode (no stitch); run = sena-warp video, the "
+          "whole run; steady = after its one-time estimate (est s); x base = steady / base. comp ms: compositing "
+          "per frame; vs cv2: Warp compositing / an OpenCV reference. Every column: --markdown FILE")
+TERMINAL_COLUMNS = 80
+
+
 def format_table(rows: list[dict], markdown: bool = False) -> str:
-    """The rows as a Markdown table or as aligned plain text."""
-    cells = [[header for _, header, _ in COLUMNS]] + [[fmt.format(row[key]) for key, _, fmt in COLUMNS] for row in rows]
+    """The rows as the wide Markdown table (every column) or as a plain text table that fits a terminal
+    (:data:`SHORT_COLUMNS`, then :data:`LEGEND`)."""
+    columns = COLUMNS if markdown else SHORT_COLUMNS
+    cells = [[header for _, header, _ in columns]] + [[fmt.format(row[key]) for key, _, fmt in columns] for row in rows]
     if markdown:
         lines = ["| " + " | ".join(r) + " |" for r in cells]
-        lines.insert(1, "|" + "|".join("---" if i < 2 else "---:" for i in range(len(COLUMNS))) + "|")
+        lines.insert(1, "|" + "|".join("---" if i < 2 else "---:" for i in range(len(columns))) + "|")
         return "\n".join(lines)
-    widths = [max(len(r[i]) for r in cells) for i in range(len(COLUMNS))]
-    return "\n".join("  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in cells)
+    widths = [max(len(r[i]) for r in cells) for i in range(len(columns))]
+    table = ["  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in cells]
+    return "\n".join(table + [textwrap.fill(LEGEND, TERMINAL_COLUMNS)])
 
 
-def run_bench(sizes: list[str], seconds: float, work: Path, cfg: Config, data_dir: Path = DATA_DIR,
+def run_bench(sizes: list[str], seconds: float, work: Path, cfg: Config, pair: BenchPair,
               settings: BenchSettings = BenchSettings()) -> list[dict]:
-    """Benchmark every size (labels as :func:`parse_size` takes); one row dict per size (keys: COLUMNS).
+    """Benchmark every size (labels as :func:`parse_size` takes) on clips made from ``pair``; one row
+    dict per size (keys: COLUMNS).
 
     ``cfg``: the stitcher's settings (its device is resolved here, once for every size).
     """
     from sena_warp.kernels.runtime import resolve_config
 
     parsed = [parse_size(size) for size in sizes]  # all of them before anything is read or made
-    pair = pair_paths(data_dir)
     make_folder(work, "--work")
     cfg = resolve_config(cfg)
     return [bench_size(*size, seconds, work, pair, cfg, settings) for size in parsed]
@@ -371,29 +412,35 @@ def cmd_bench(args: argparse.Namespace) -> int:
     """``sena-warp bench``: print the table (and write it as Markdown with --markdown)."""
     from sena_warp.jobs import checked
 
-    data, sizes = Path(args.data or DATA_DIR), args.sizes or list(SIZES)
+    sizes = args.sizes or list(SIZES)
     plan = OutputPlan((), args.overwrite)
     if args.markdown:
         plan.add(args.markdown, "--markdown")
     if not checked(plan):
         return 0
-    rows = run_bench(sizes, args.seconds, Path(args.work), Config(device=args.device), data)
-    rss_rows = [measure_rss(seconds, Path(args.work), args.device, data) for seconds in args.rss]
+    for size in sizes:
+        parse_size(size)  # a bad size is refused before the pair is looked for
+    pair = bench_pair(Path(args.data) if args.data else None)
+    LOGGER.info("clips made from the pair %s (%s)", pair.name, pair.paths[0].parent)
+    rows = run_bench(sizes, args.seconds, Path(args.work), Config(device=args.device), pair)
+    rss_rows = [measure_rss(seconds, Path(args.work), args.device, pair) for seconds in args.rss]
     text = format_table(rows)
-    print(f"sena-warp bench: {machine_line()}\n{text}")
+    print(f"sena-warp bench: {rows[0]['frames']} frames a clip, made from the pair {pair.name}\n{machine_line()}\n"
+          f"{text}")
     for rss in rss_rows:
         print(f"peak RSS, 1080p {rss['seconds']:g} s ({rss['frames']} frames): {rss['rss_mib']:.0f} MiB")
     if args.markdown:
         with plan, atomic_output(args.markdown, plan=plan) as tmp:
-            lines = [f"Machine: {machine_line()}", "", format_table(rows, markdown=True), ""]
+            lines = [f"Machine: {machine_line()}; clips from the pair {pair.name}", "",
+                     format_table(rows, markdown=True), ""]
             lines += [f"- peak RSS of `sena-warp video`, 1080p {r['seconds']:g} s ({r['frames']} frames): "
                       f"{r['rss_mib']:.0f} MiB" for r in rss_rows]
             tmp.write_text("\n".join(lines) + "\n")
     return 0
 
 
-def measure_rss(seconds: float, work: Path, device: str, data_dir: Path = DATA_DIR) -> dict:
-    """Peak RSS (MiB) of ``sena-warp video`` on 1080p clips of ``seconds`` (child process)."""
-    left, right = make_clip_pair(pair_paths(data_dir), work, SIZES["1080p"], seconds)
+def measure_rss(seconds: float, work: Path, device: str, pair: BenchPair) -> dict:
+    """Peak RSS (MiB) of ``sena-warp video`` on 1080p clips of ``seconds`` made from ``pair`` (child process)."""
+    left, right = make_clip_pair(pair, work, SIZES["1080p"], seconds)
     report = stitch_in_child(left, right, work / f"rss_{seconds:g}s.mp4", device)
     return {"seconds": seconds, "frames": report["frames_out"], "rss_mib": report["max_rss_mib"]}

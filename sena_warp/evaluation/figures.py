@@ -193,7 +193,7 @@ def dense_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Con
     ``white_cast_plain_grey`` likewise. ``cfg.device`` resolved.
     """
     maps = pano.maps
-    warp, seam = maps.warp, maps.seam
+    seam = maps.seam
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
     raw = panorama_views(img_src, img_tgt, pano, cfg)
     views = compensated_views(raw, seam.gains)

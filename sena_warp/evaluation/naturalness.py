@@ -159,6 +159,11 @@ def seam_step(pano_grey: np.ndarray, src_grey: np.ndarray, tgt_grey: np.ndarray,
     return float(np.mean(np.abs(steps[known]))) if known.any() else float("nan")
 
 
+def _across(img: np.ndarray, outside: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """Per column, the mean of ``img`` over the rows ``outside`` a border minus that over the rows ``inside``."""
+    return img[outside].mean(axis=0) - img[inside].mean(axis=0)
+
+
 def border_step(pano_grey: np.ndarray, src_grey: np.ndarray, valid_src: np.ndarray, weight_tgt: np.ndarray,
                 borders: tuple[float, float]) -> float:
     """The border step in grey levels (module docstring); NaN where no column switches views across a border.
@@ -178,10 +183,7 @@ def border_step(pano_grey: np.ndarray, src_grey: np.ndarray, valid_src: np.ndarr
         switch = (valid_src[outside].all(axis=0) & valid_src[inside].all(axis=0)
                   & (weight_tgt[inside] >= 0.5).all(axis=0) & (weight_tgt[outside] == 0).all(axis=0))
 
-        def across(img: np.ndarray) -> np.ndarray:
-            return img[outside].mean(axis=0) - img[inside].mean(axis=0)
-
-        step = np.where(switch, across(pano_grey) - across(src_grey), 0.0)
+        step = np.where(switch, _across(pano_grey, outside, inside) - _across(src_grey, outside, inside), 0.0)
         window = np.ones(STEP_ROWS)
         count = np.convolve(switch.astype(np.float64), window, "same")
         kept = switch & (count >= STEP_ROWS / 2)
