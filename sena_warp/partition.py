@@ -169,7 +169,7 @@ def thin_strips(label: np.ndarray, max_px: float) -> tuple[np.ndarray, np.ndarra
     ``max_px`` along the canvas's edge of what it covers, before the other view takes over: the source
     a few px beyond the target's top, bottom or far border, the target a few px beyond the warped
     source's edge. A strip that thin shows nothing whole, only content the switch cuts, and what is
-    left of the parallax shifts it against the other view all along (issue 35).
+    left of the parallax shifts it against the other view all along.
 
     label: (H, W) uint8 the view shown per canvas pixel (``switch_align.shown_labels``: 1 source, 2
     target, 0 none). Per column from the top and from the bottom, per row from the left and the right:

@@ -3,7 +3,7 @@
 The step-6 warp aligns the overlap as a whole; where the seam crosses a near plane (paving, a kerb,
 a lane line) or beyond the seam's ends, where the canvas switches from the target to the source
 along the target's border (or from the source to the target along the warped source's own edge),
-what is left of the parallax shows as a step in every line the switch crosses (issue 35). The
+what is left of the parallax shows as a step in every line the switch crosses. The
 anchors of step 9 correct the seam at keypoints only, and nothing corrects the borders.
 
 Here the views are compared densely at every *switch* of a finished stitch (the pixels next to one

@@ -1,4 +1,4 @@
-"""Dense figures of a panorama (issue 35): misalignment wherever the views switch, what is shown twice
+"""Dense figures of a panorama: misalignment wherever the views switch, what is shown twice
 or nowhere, and how faithfully each view's tones come through.
 
 The sparse figures of ``naturalness`` judge the panorama at reliable keypoints, and the seam step at
