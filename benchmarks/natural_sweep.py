@@ -91,6 +91,7 @@ def switch_crops(pano_canvas: np.ndarray, border: np.ndarray, columns: int = 5) 
         crops.append(crop)
     if not crops:
         return None
+    columns = min(columns, len(crops))
     crops += [np.full_like(crops[0], 255)] * (-len(crops) % columns)
     return np.vstack([np.hstack(crops[i:i + columns]) for i in range(0, len(crops), columns)])
 
