@@ -139,8 +139,10 @@ class Config:
     border_blend_mad_grey: float = 6.0  # seam and border blend: a row or block whose views differ by more (MAD) shows other content
     thin_strip_ratio: float = 0.02  # a view shown only in a strip thinner than this x image diagonal where the other
     # takes over (beyond the other's border) is left out: it shows nothing whole (0: kept, the earlier and the paper's)
-    seam_blend_gain: bool = True  # seam and border blend: one grey value per line, applied as a relative gain
-    # (no colour, no contrast change); False: per-channel grey levels added (the earlier version)
+    seam_blend_gain: bool = True  # seam and border blend: applied as a relative gain (no contrast change);
+    # False: per-channel grey levels added (the earlier version)
+    seam_blend_colour: bool = True  # seam blend as a gain: per channel, each within 10 % of the grey one
+    # (a smooth colour difference of the views: a sky bluer in one); False: one grey value per line
     # --- seam, switch alignment (ours, switch_align.py; no step of the paper) -------------------
     switch_align: bool = True  # align the source to the target at the seam and the borders, cut again (False: paper)
     switch_rounds: int = 2  # align and cut again this many times

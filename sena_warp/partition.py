@@ -195,6 +195,7 @@ def thin_strips(label: np.ndarray, max_px: float) -> tuple[np.ndarray, np.ndarra
 LEVEL_MIN_GREY = 16.0  # relative offsets: a view's level is taken as at least this (dark rows: no huge gains)
 BLEND_LOG_SPREAD = 0.1  # seam blend as a gain: a row whose log ratio's median absolute deviation is larger ...
 BLEND_LOG_MAX = 0.3  # ... or whose ratio is further than this from 1 (log) shows other content, not an exposure
+BLEND_COLOUR_MAX = 0.1  # seam blend in colour: a channel's log ratio departs from the grey one by at most this
 
 
 @dataclass(frozen=True)
@@ -218,9 +219,11 @@ class SeamOffsets:
 
 
 def relative_to(offsets: np.ndarray, level: np.ndarray) -> np.ndarray:
-    """Offsets in grey levels as relative gains at ``level`` (broadcast against them), float32, within
+    """Offsets in grey levels as relative gains at ``level`` (per channel, or one per line broadcast
+    against them), float32, within
     exp(+-``BLEND_LOG_MAX``) - 1: a larger ratio is not an exposure the blend should spread."""
-    relative = offsets / np.maximum(level, LEVEL_MIN_GREY)[..., None]
+    level = np.asarray(level)
+    relative = offsets / np.maximum(level if level.ndim == offsets.ndim else level[..., None], LEVEL_MIN_GREY)
     return np.clip(relative, np.expm1(-BLEND_LOG_MAX), np.expm1(BLEND_LOG_MAX)).astype(np.float32)
 
 
@@ -242,12 +245,13 @@ def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, 
     """Offsets that take half the two views' mean difference next to the seam off one side and add it
     to the other (module docstring), with each view's mean level there; zero when
     ``cfg.seam_blend_ratio`` is 0. With ``cfg.seam_blend_gain`` it is a ratio: per row the median log
-    ratio of the grey views, the same for every channel (the gains took the colour; a colour residual
-    next to the seam is content, and spread over the blend it tints what it reaches), from the rows
-    where it is one ratio (``BLEND_LOG_SPREAD``) near 1 (``BLEND_LOG_MAX``): elsewhere the views show
-    other things there, not one thing at two exposures, and those rows follow their neighbours. Each
-    side then moves half of it as a gain: offsets of (exp(-+ r / 2) - 1) x its level, which
-    :meth:`SeamOffsets.relative` turns back into those gains.
+    ratio of the grey views, from the rows where it is one ratio (``BLEND_LOG_SPREAD``) near 1
+    (``BLEND_LOG_MAX``): elsewhere the views show other things there, not one thing at two exposures,
+    and those rows follow their neighbours. With ``cfg.seam_blend_colour`` each channel's median log
+    ratio departs from the grey one by up to ``BLEND_COLOUR_MAX`` (the views' colours differ smoothly:
+    a sky bluer in one view), else every channel takes the grey one. Each side then moves half of it
+    as a gain: offsets of (exp(-+ r / 2) - 1) x its level, which :meth:`SeamOffsets.relative` turns
+    back into those gains (a gain, not grey levels added: dark texture is not lifted into a haze).
 
     views: the gain-compensated canvas views; seam_x_canvas: (H,) seam x per row.
     """
@@ -282,16 +286,20 @@ def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, 
     ratio = np.where(strip, ratio, np.nan)[known]
     median[known] = np.nanmedian(ratio, axis=1)
     spread[known] = np.nanmedian(np.abs(ratio - median[known, None]), axis=1)
+    colour = np.zeros((height, channels))
+    if cfg.seam_blend_colour:  # each channel's ratio less the grey one, within BLEND_COLOUR_MAX
+        ratios = np.log((src + 1.0) / (tgt + 1.0))
+        ratios = np.where(strip[:, :, None], ratios, np.nan)[known]
+        colour[known] = np.clip(np.nanmedian(ratios, axis=1) - median[known, None], -BLEND_COLOUR_MAX, BLEND_COLOUR_MAX)
     known &= (spread <= BLEND_LOG_SPREAD) & (np.abs(median) <= BLEND_LOG_MAX)
-    per_row = running_mean(np.concatenate([means, median[:, None]], axis=1), known, cfg.seam_blend_rows)
+    per_row = running_mean(np.concatenate([means, median[:, None] + colour], axis=1), known, cfg.seam_blend_rows)
     level_src, level_tgt = per_row[:, :channels].mean(axis=1), per_row[:, channels:2 * channels].mean(axis=1)
-    half = 0.5 * per_row[:, -1]
-    # Grey levels at each side's level, so that ``relative`` gives the gains exp(-+ half) - 1.
-    off_src = (np.exp(-half) - 1.0) * np.maximum(level_src, LEVEL_MIN_GREY)
-    off_tgt = (np.exp(half) - 1.0) * np.maximum(level_tgt, LEVEL_MIN_GREY)
-    return SeamOffsets(np.repeat(off_src[:, None], channels, axis=1).astype(np.float32),
-                       np.repeat(off_tgt[:, None], channels, axis=1).astype(np.float32),
-                       float(cfg.seam_blend_ratio * diag_px), level_src.astype(np.float32), level_tgt.astype(np.float32))
+    half = 0.5 * per_row[:, 2 * channels:]
+    # Grey levels at each side's level, so that ``relative`` gives the gains exp(-+ half) - 1 per channel.
+    off_src = (np.exp(-half) - 1.0) * np.maximum(level_src, LEVEL_MIN_GREY)[:, None]
+    off_tgt = (np.exp(half) - 1.0) * np.maximum(level_tgt, LEVEL_MIN_GREY)[:, None]
+    return SeamOffsets(off_src.astype(np.float32), off_tgt.astype(np.float32), float(cfg.seam_blend_ratio * diag_px),
+                       level_src.astype(np.float32), level_tgt.astype(np.float32))
 
 
 @dataclass(frozen=True)
@@ -300,8 +308,9 @@ class BorderOffsets:
     ``lines`` the two borders' y (between the target's first row and the one above it, between its
     last and the one below); ``src``, ``tgt``: (2, W, C) float32 grey levels added to each view per
     canvas column at that border, fading linearly to 0 at ``fade_px`` from it; ``on``: False when
-    off (all zero). ``level_src``, ``level_tgt``: (2, W) float32 each view's mean grey level just
-    inside the border (None: not measured), for :meth:`relative`."""
+    off (all zero). ``level_src``, ``level_tgt``: (2, W, C) float32 each view's mean level just
+    inside the border (grey in every channel, or each channel's with ``seam_blend_colour``; None: not
+    measured), for :meth:`relative`."""
 
     lines: tuple[float, float]
     src: np.ndarray
@@ -325,12 +334,15 @@ def with_seam_offsets(img: np.ndarray, rows: slice, seam_x_canvas: np.ndarray, p
     return img[rows].astype(np.float32) + weight[:, :, None] * per_row[rows, None, :]
 
 
-def block_medians(diff: np.ndarray, used: np.ndarray, block: int, mad_limit: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per block of ``block`` columns of a strip: (centres (K,), medians (K,)) of the channel-mean
-    differences ``diff`` (R, W, C) where ``used`` (R, W) (a brightness residual: the gains took the
-    colour), for the blocks where at least a third of the strip is used
-    and every channel's median absolute deviation of the differences is at most ``mad_limit`` (above it
-    the two views show different things there, not one thing at two exposures)."""
+def block_medians(diff: np.ndarray, used: np.ndarray, block: int, mad_limit: float,
+                  colour: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Per block of ``block`` columns of a strip: (centres (K,), medians (K, C)) of the differences
+    ``diff`` (R, W, C) where ``used`` (R, W): the median of the channel mean in every channel (a
+    brightness residual: the gains took the colour), or with ``colour`` each channel's own median. For
+    the blocks where at least a third of the strip is used and every channel's median absolute
+    deviation of the differences is at most ``mad_limit`` (above it the two views show different
+    things there, not one thing at two exposures)."""
+    channels = diff.shape[2]
     centres, medians = [], []
     for x0 in range(0, diff.shape[1], block):
         mask = used[:, x0:x0 + block]
@@ -340,8 +352,8 @@ def block_medians(diff: np.ndarray, used: np.ndarray, block: int, mad_limit: flo
         if np.median(np.abs(values - np.median(values, axis=0)), axis=0).max() > mad_limit:
             continue
         centres.append(x0 + 0.5 * (mask.shape[1] - 1))
-        medians.append(np.median(values.mean(axis=1)))
-    return np.asarray(centres), np.asarray(medians)
+        medians.append(np.median(values, axis=0) if colour else np.full(channels, np.median(values.mean(axis=1))))
+    return np.asarray(centres), np.asarray(medians).reshape(-1, channels)
 
 
 def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamOffsets, offset_tgt: tuple[float, float],
@@ -353,8 +365,9 @@ def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamO
     to nothing over ``cfg.seam_blend_rows`` columns where the source does not go on.
 
     The difference is measured on the ``cfg.seam_blend_strip_px`` rows just inside the border, after
-    the seam offsets, as the median of each block of ``cfg.seam_blend_rows`` columns, and interpolated
-    between blocks; a block whose views show different things (``block_medians``,
+    the seam offsets, as the median of each block of ``cfg.seam_blend_rows`` columns (of the grey
+    difference, or with ``cfg.seam_blend_colour`` of each channel's, within ``BLEND_COLOUR_MAX`` of the
+    grey one as a ratio), and interpolated between blocks; a block whose views show different things (``block_medians``,
     ``cfg.border_blend_mad_grey``) follows its neighbours. All zero when ``cfg.border_blend`` is off or
     the seam blend is.
 
@@ -366,7 +379,8 @@ def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamO
     oy = int(round(offset_tgt[1]))
     lines = (oy - 0.5, oy + height_tgt - 0.5)
     zeros = np.zeros((2, width, channels), np.float32)
-    levels = np.full((2, 2, width), 255.0, np.float32)  # (view, border, column)
+    levels = np.full((2, 2, width, channels), 255.0, np.float32)  # (view, border, column, channel)
+    colour = cfg.seam_blend_gain and cfg.seam_blend_colour
     if not cfg.border_blend or offsets.fade_px <= 0:
         return BorderOffsets(lines, zeros, zeros.copy(), False, *levels)
     strip = max(1, cfg.seam_blend_strip_px)
@@ -385,25 +399,33 @@ def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamO
                 - with_seam_offsets(views.tgt, rows, seam_x, offsets.tgt, offsets.fade_px))
         used = shown_tgt & views.valid_src[beyond][None, :]
         for side, img in enumerate((views.src, views.tgt)):
-            levels[side, k] = column_level(img[rows], used, block)
-        centres, medians = block_medians(diff, used, block, cfg.border_blend_mad_grey)
+            levels[side, k] = column_level(img[rows], used, block, colour)
+        centres, medians = block_medians(diff, used, block, cfg.border_blend_mad_grey, colour)
         seam_at = float(seam_x[rows.start if k == 0 else rows.stop - 1])
         if not len(centres) or not np.isfinite(seam_at):
             continue
         right = centres > seam_at  # at the seam the seam blend has met the views already: the offsets start at 0 there
-        along = np.interp(cols, np.r_[seam_at, centres[right]], np.r_[0.0, medians[right]], left=0.0)
+        along = np.stack([np.interp(cols, np.r_[seam_at, centres[right]], np.r_[0.0, medians[right, c]], left=0.0)
+                          for c in range(channels)], axis=1)
         goes_on = np.convolve(views.valid_src[beyond].astype(np.float64), np.ones(block) / block, "same")
-        delta[k] = (along * goes_on)[:, None]
+        if colour:  # each channel within BLEND_COLOUR_MAX (as a ratio) of the grey difference, as the seam's
+            grey = along.mean(axis=1, keepdims=True)
+            limit = BLEND_COLOUR_MAX * levels[:, k].mean(axis=(0, 2))[:, None]
+            along = grey + np.clip(along - grey, -limit, limit)
+        delta[k] = along * goes_on[:, None]
     return BorderOffsets(lines, -0.5 * delta, 0.5 * delta, True, *levels)
 
 
-def column_level(img: np.ndarray, used: np.ndarray, block: int) -> np.ndarray:
-    """(W,) float32: the mean grey level of a strip (R, W, C) per column where ``used`` (R, W), averaged
-    over ``block`` columns; columns without any used pixel near take the nearest that has one (255
-    where none has)."""
-    grey = img.astype(np.float32).mean(axis=2)
+def column_level(img: np.ndarray, used: np.ndarray, block: int, colour: bool = False) -> np.ndarray:
+    """(W, C) float32: the mean grey level of a strip (R, W, C) per column where ``used`` (R, W), in
+    every channel, or with ``colour`` each channel's own mean, averaged over ``block`` columns; columns
+    without any used pixel near take the nearest that has one (255 where none has)."""
+    values = img.astype(np.float32)
+    channels = values.shape[2]
     count = used.sum(axis=0)
     if not count.any():
-        return np.full(len(count), 255.0, np.float32)
-    mean = (grey * used).sum(axis=0) / np.maximum(count, 1)
-    return running_mean(mean[:, None], count > 0, block)[:, 0].astype(np.float32)
+        return np.full((len(count), channels), 255.0, np.float32)
+    mean = (values * used[:, :, None]).sum(axis=0) / np.maximum(count, 1)[:, None]
+    if not colour:
+        mean = np.repeat(mean.mean(axis=1, keepdims=True), channels, axis=1)
+    return running_mean(mean, count > 0, block).astype(np.float32)

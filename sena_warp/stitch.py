@@ -290,7 +290,7 @@ def seam_layout(seam: Seam, rig: Rig, cfg: Config, band_px: float | None = None)
 def panorama_compositor(maps: StitchMaps, cfg: Config,
                         transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> Compositor:
     """A compositor for BGR images of the two inputs: the maps, the seam, both views' gains and offsets
-    (with ``cfg.seam_blend_gain`` as relative gains: a smooth gain changes no colour or contrast).
+    (with ``cfg.seam_blend_gain`` as relative gains: a smooth gain changes no contrast).
     ``transparent``: per input (a, b), (H, W) bool pixels it must not sample (``without_transparent``)."""
     transparent_src, transparent_tgt = maps.rig.pick(*transparent)
     relative = cfg.seam_blend_gain

@@ -10,7 +10,7 @@ from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.evaluation.metrics import anchor_residuals_px, transition_mad
 from sena_warp.imageio import read_image
-from sena_warp.partition import (SeamOffsets, border_offsets, seam_maps, seam_offsets, seam_rows, smooth_curve,
+from sena_warp.partition import (BLEND_COLOUR_MAX, SeamOffsets, border_offsets, seam_maps, seam_offsets, seam_rows, smooth_curve,
                                  thin_strips)
 from sena_warp.seam_path import straight_path
 from sena_warp.warp_map import CanvasViews
@@ -78,16 +78,21 @@ def test_seam_offsets_meet_halfway_and_vanish_when_off():
     assert np.all(off.src == 0) and np.all(off.tgt == 0) and off.fade_px == 0
 
 
-def test_seam_offsets_as_a_gain_are_grey_and_relative_to_the_level_they_were_measured_at():
+def test_seam_offsets_as_a_gain_are_relative_to_the_level_they_were_measured_at_per_channel_or_grey():
     """A source brighter than the target by (20, 10, 0) levels per channel at levels 120 / 110 / 100:
-    with ``seam_blend_gain`` each side moves half way in ratio, the same gain in every channel (no
-    colour): the grey levels 110 and 100 meet near 105; without it, per channel and in grey levels."""
+    with ``seam_blend_gain`` each side moves half way in ratio; per channel with ``seam_blend_colour``
+    (each channel meets the other view's at the geometric mean), else the same gain in every channel
+    (the grey levels 110 and 100 meet near 105); without ``seam_blend_gain``, per channel in grey levels."""
     height, width = 60, 100
     src = np.tile(np.uint8([120, 110, 100]), (height, width, 1))
     tgt = np.tile(np.uint8([100, 100, 100]), (height, width, 1))
     valid = np.ones((height, width), bool)
     views = CanvasViews(src, tgt, valid, valid)
-    offsets = seam_offsets(views, np.full(height, 50.0), 500.0, Config())
+    relative_src, relative_tgt = seam_offsets(views, np.full(height, 50.0), 500.0, Config()).relative()
+    met = np.sqrt(np.float32([121.0, 111.0, 101.0]) * 101.0) - 1.0
+    np.testing.assert_allclose(np.float32([120, 110, 100]) * (1.0 + relative_src), met[None, :].repeat(height, 0), atol=0.1)
+    np.testing.assert_allclose(100.0 * (1.0 + relative_tgt), met[None, :].repeat(height, 0), atol=0.1)
+    offsets = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_colour=False))
     np.testing.assert_allclose(offsets.src, -5.0, atol=0.1)
     np.testing.assert_allclose(offsets.tgt, 5.0, atol=0.2)
     relative_src, relative_tgt = offsets.relative()
@@ -95,6 +100,22 @@ def test_seam_offsets_as_a_gain_are_grey_and_relative_to_the_level_they_were_mea
     np.testing.assert_allclose(110.0 * (1.0 + relative_src), 100.0 * (1.0 + relative_tgt), atol=0.1)
     per_channel = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_gain=False))
     np.testing.assert_allclose(per_channel.src[0], [-10.0, -5.0, 0.0], atol=1e-4)
+
+
+def test_a_colour_difference_at_the_seam_is_blended_only_up_to_its_limit():
+    """Blue 60 % stronger in the source than in the target while green and red agree: the seam blend
+    takes the grey ratio and each channel at most ``BLEND_COLOUR_MAX`` (in log) away from it, so a
+    colour the views disagree about that much (other content) is not spread over the panorama."""
+    height, width = 60, 100
+    src = np.tile(np.uint8([160, 100, 100]), (height, width, 1))
+    tgt = np.full((height, width, 3), 100, np.uint8)
+    valid = np.ones((height, width), bool)
+    relative_src, relative_tgt = seam_offsets(CanvasViews(src, tgt, valid, valid), np.full(height, 50.0), 500.0,
+                                              Config()).relative()
+    grey = np.log(121.0 / 101.0)
+    blended = np.log((1.0 + relative_tgt) / (1.0 + relative_src))  # the log ratio the blend takes off
+    np.testing.assert_allclose(blended[:, 0], grey + BLEND_COLOUR_MAX, atol=1e-3)
+    np.testing.assert_allclose(blended[:, 1:], grey - BLEND_COLOUR_MAX, atol=1e-3)
 
 
 def test_seam_maps_alpha_and_target_map():
@@ -212,6 +233,28 @@ def test_border_offsets_meet_halfway_across_the_targets_borders_and_leave_other_
     off = border_offsets(_border_views(img, 100, 300, 150, darker), seam_x, none, (150.0, 100.0), 300,
                          cfg.replace(border_blend=False))
     assert not off.on and np.abs(off.tgt).max() == 0
+
+
+def test_border_offsets_take_a_colour_difference_per_channel_or_as_grey(bundled_dir):
+    """The target's blue 8 levels lower inside rows 100-399 right of x 150: with ``seam_blend_colour`` the
+    border blend takes half of it off the source's blue alone; without it, a third of that in every
+    channel (the grey difference)."""
+    img = read_image(bundled_dir / "udisd_test_000001" / "a.jpg")
+    height, width = img.shape[:2]
+    seam_x = np.full(height, 120.0, np.float32)
+    zero = np.zeros((height, 3), np.float32)
+    none = SeamOffsets(zero, zero.copy(), 60.0)
+    bluer = img.astype(np.int16)
+    bluer[:, :, 0] -= 8
+    bluer = np.clip(bluer, 0, 255).astype(np.uint8)
+    views = _border_views(img, 100, 300, 150, bluer)
+    inside = slice(200, width - 20)
+    colour = border_offsets(views, seam_x, none, (150.0, 100.0), 300, Config(device=DEVICE))
+    grey = border_offsets(views, seam_x, none, (150.0, 100.0), 300, Config(device=DEVICE, seam_blend_colour=False))
+    for k in range(2):
+        np.testing.assert_allclose(colour.src[k, inside, 0], -4.0, atol=1.0)
+        np.testing.assert_allclose(colour.src[k, inside, 1:], 0.0, atol=0.5)
+        np.testing.assert_allclose(grey.src[k, inside], -4.0 / 3.0, atol=0.5)
 
 
 def test_thin_strips_of_either_view_where_the_other_takes_over_are_found():
