@@ -70,7 +70,7 @@ def test_sena_runs_carry_the_dense_figures(evaluated):
     and the summary lists them per pair."""
     _, out, table = evaluated
     summary = (out / "summary.md").read_text()
-    assert "## Dense figures (issue 35)" in summary
+    assert "## Dense figures" in summary
     for pair in ("graf_gt", "udisd_test_000001"):
         sena, swapped = table[pair, "sena"], table[pair, "sena_ba"]
         assert sena.seam_misalign_median_px <= sena.seam_misalign_p95_px < 20

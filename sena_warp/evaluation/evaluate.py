@@ -106,7 +106,7 @@ class MethodResult:
     visible_bend_max_pct: float = math.nan
     continuity_px: float = math.nan
     cut_lines: int = 0
-    seam_misalign_median_px: float = math.nan  # issue 35's dense figures (dense), SENA's runs
+    seam_misalign_median_px: float = math.nan  # the dense figures (dense), SENA's runs
     seam_misalign_p95_px: float = math.nan
     border_misalign_median_px: float = math.nan
     border_misalign_p95_px: float = math.nan
@@ -421,7 +421,7 @@ def natural_markdown(pairs: list[str], table: dict) -> list[str]:
 
 def dense_markdown(pairs: list[str], table: dict) -> list[str]:
     """The summary's issue-35 section: the dense figures per SENA run over all pairs, then each pair."""
-    lines = ["", "## Dense figures (issue 35)", "",
+    lines = ["", "## Dense figures", "",
              "Misalignment: optical flow between the views as the panorama shows them, at textured pixels within "
              "T/2 of the seam and near the borders where the views switch beyond it (px, median / 95th percentile); "
              "doubled / lost: of the consistent textured overlap pixels, % whose two copies (the flow) are > 2 px "
