@@ -1,15 +1,20 @@
 """The natural-panorama figures of SENA on every shared pair for one set of Config changes: a sweep step.
 
     .venv/bin/python benchmarks/natural_sweep.py [--set border_blend=False ...] [--pairs cave spw_1] [--ba]
-        [--save DIR] --out sweep.json
+        [--save DIR] [--order [--no-figures]] --out sweep.json
 
 Per pair (``../shared/data/pairs``, or the folders named): the stitch's natural figures
 (``evaluation.figures.natural_figures``: duplicated / lost points, seam and border steps, bend,
 continuity), its dense figures (``dense_figures``: misalignment at the seam and the borders, shown
 twice / nowhere, tone fidelity) and its overlap PSNR, one line each on stdout and all of them in
 ``--out`` (JSON), so a setting is measured before and after on the same pairs without ``sena-warp
-eval``'s baselines. ``--ba``: the inputs swapped (``b a``). ``--save DIR``: each panorama as
-``DIR/PAIR.png`` (to look at, and to compare the two orders).
+eval``'s baselines. ``--ba``: the inputs swapped (``b a``); ``--order``: both orders stitched and
+their panoramas compared (``order_diff_grey``), with ``--no-figures`` that check alone.
+
+``--save DIR``: each panorama as ``DIR/PAIR.png`` and what to look at at 100 %: ``DIR/PAIR_seam.png``,
+the panorama around the seam, ``SEAM_SEGMENT_ROWS`` rows at a time, each as it is and with the seam
+drawn in red; ``DIR/PAIR_switches.png``, crops around the places where the panorama switches views
+beyond the seam (a view's border), one every ``CROP_PX`` px along them.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import cv2
 import numpy as np
 
 from sena_warp.config import Config
+from sena_warp.evaluation.evaluate import order_difference
 from sena_warp.evaluation.figures import dense_figures, natural_figures, overlap_figures, panorama_views
 from sena_warp.imageio import read_image, write_image
 from sena_warp.kernels import runtime
@@ -114,17 +120,22 @@ def save_pictures(folder: Path, img_a: np.ndarray, img_b: np.ndarray, pano: Pano
             write_image(save / f"{folder.name}_{name}.png", picture)
 
 
-def measure(folder: Path, cfg: Config, swapped: bool = False, save: Path | None = None) -> dict:
+def measure(folder: Path, cfg: Config, swapped: bool = False, save: Path | None = None, figures: bool = True,
+            order: bool = False) -> dict:
+    """A pair's figures (``figures``), and with ``order`` the largest grey-level difference between its
+    panorama and the one of the inputs swapped (``order_diff_grey``: 0 when the order does not matter)."""
     img_a, img_b = pair_images(folder)[::-1 if swapped else 1]
     t0 = time.perf_counter()
     pano = stitch_images(img_a, img_b, cfg)
-    seconds = time.perf_counter() - t0
+    result = {"stitch_seconds": round(time.perf_counter() - t0, 3)}
     if save is not None:
         save_pictures(folder, img_a, img_b, pano, cfg, save)
-    figures = natural_figures(img_a, img_b, pano, cfg) | dense_figures(img_a, img_b, pano, cfg)
-    figures["psnr_db"] = float(overlap_figures(img_a, img_b, pano, cfg)[0])
-    figures["stitch_seconds"] = round(seconds, 3)
-    return figures
+    if figures:
+        result |= natural_figures(img_a, img_b, pano, cfg) | dense_figures(img_a, img_b, pano, cfg)
+        result["psnr_db"] = float(overlap_figures(img_a, img_b, pano, cfg)[0])
+    if order:
+        result["order_diff_grey"] = order_difference(pano.image, stitch_images(img_b, img_a, cfg).image)
+    return result
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -133,6 +144,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pairs", nargs="*", default=None, help="pair names or folders (default: every shared pair)")
     parser.add_argument("--ba", action="store_true", help="the inputs swapped: b a")
     parser.add_argument("--save", type=Path, metavar="DIR", help="write each panorama here as PAIR.png")
+    parser.add_argument("--order", action="store_true", help="also stitch the inputs swapped and compare")
+    parser.add_argument("--no-figures", action="store_true", help="no figures (with --order: that check alone)")
     parser.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
     changes = {k: ast.literal_eval(v) for k, v in (item.split("=", 1) for item in args.set)}
@@ -144,7 +157,7 @@ def main(argv: list[str] | None = None) -> int:
         args.save.mkdir(parents=True, exist_ok=True)
     results = {}
     for folder in folders:
-        results[folder.name] = measure(folder, cfg, args.ba, args.save)
+        results[folder.name] = measure(folder, cfg, args.ba, args.save, not args.no_figures, args.order)
         print(folder.name, json.dumps({k: round(v, 3) if isinstance(v, float) else v
                                        for k, v in results[folder.name].items()}), flush=True)
     args.out.write_text(json.dumps({"changes": changes, "pairs": results}, indent=1))
