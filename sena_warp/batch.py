@@ -1,13 +1,16 @@
 """``sena-warp batch JOBS --out DIR``: many stitches, on local worker processes or as Ray tasks, resumable.
 
 JOBS is a folder of pair folders (each holding images ``a.*`` + ``b.*`` or videos ``left.*`` +
-``right.*``; the folder's name names the job), or a job list: TOML (``[defaults]`` and ``[[job]]``
-tables) or CSV (a header row, one job per row). A job gives its inputs (``a``/``b`` or
+``right.*``; the folder's name names the job; a folder that tries to be one and is not, such as
+``a.jpg`` + ``c.jpg``, is a failed job saying why), or a job list: TOML (``[defaults]`` and
+``[[job]]`` tables) or CSV (a header row, one job per row). A job gives its inputs (``a``/``b`` or
 ``left``/``right``, relative to the list's folder) and optionally ``name``, ``output`` (relative to
-DIR), ``reference``, ``crop``, ``offset`` (videos: seconds, or "auto" to estimate them) and any setting
-of ``sena-warp config``. Settings and these keys apply in this order, the later winning: defaults,
-``--config``, command-line options (``--crop``, ``--offset``, ``--ss``/``--to``, ``--codec``, ...), the
-list's ``[defaults]``, the job's own.
+DIR, and inside it), ``reference``, ``crop``, ``offset`` (videos: seconds, or "auto" to estimate them)
+and any setting of ``sena-warp config``. Settings and these keys apply in this order, the later
+winning: defaults, ``--config``, command-line options (``--crop``, ``--offset``, ``--ss``/``--to``,
+``--codec``, ...), the list's ``[defaults]``, the job's own. Before any job runs, every output is
+resolved (``..``, links) and refused (exit 2) when it lies outside DIR, is any job's input, or is
+another job's output; DIR is made only then.
 
 Each job writes ``DIR/NAME.png`` or ``DIR/NAME.mp4`` and then ``DIR/reports/NAME.json`` (its report
 with a ``job`` block: status, error, time). A job whose report says "ok" and whose output exists is
@@ -16,32 +19,40 @@ is recorded with its error, the others go on, and it is tried again next time (`
 again, ``-n`` only those whose output does not exist). At the end: a table
 on stdout, ``DIR/summary.json``, and exit code 7 when any job failed.
 
-The same job function, :func:`run_entry`, runs in ``--jobs N`` local worker processes or as Ray
-tasks (``--ray ADDRESS``, extra ``sena-warp[cluster]``); a job that asks for ``device = "cuda"`` gets
+The same job function, :func:`run_entry`, runs in ``--jobs N`` local worker processes
+(``sena_warp.workers``: no more workers than jobs; on SIGINT, SIGTERM or SIGHUP no job starts, the
+running ones are stopped and leave nothing, and workers die with the parent) or as Ray tasks
+(``--ray ADDRESS``, extra ``sena-warp[cluster]``; an address that does not answer within
+:data:`RAY_CONNECT_TIMEOUT_S` is refused in one line); a job that asks for ``device = "cuda"`` gets
 one GPU per task. On a cluster, inputs and DIR must be on storage every node sees.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import json
 import logging
 import os
+import signal
 import socket
+import stat
+import sys
+import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import dataclass
-from multiprocessing import get_context
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Iterator
 
 from .config import OFFSET_AUTO
 from .config_file import check_value, field_types, read_toml, unknown_key_error
 from .errors import InputError, StitchError, out_of_memory
+from .imageio import input_stat
 from .jobs import INPUT_SUFFIXES, OUTPUT_SUFFIXES, PAIR_STEMS, Job, pair_inputs, run_job, summary_line
-from .outputs import atomic_output, make_folder
+from .outputs import NAME_MAX_BYTES, atomic_output, make_folder, remove_stale_temps
 from .progress import LOGGER, Count, echo, stage
+from .workers import STOP_WAIT_S, run_in_workers
 
 # Job keys besides the settings: name -> (type, the kind it applies to or None for both).
 JOB_KEYS = {"name": (str, None), "output": (str, None), "reference": (str, None), "crop": (bool, None),
@@ -54,6 +65,9 @@ TOML_TABLES = ("defaults", "job")
 REPORTS = "reports"  # DIR/reports/NAME.json
 SUMMARY = "summary.json"
 RAY_LOCAL = "local"
+RAY_AUTO = "auto"
+RAY_PORTS = {"ray://": 10001, "": 6379}  # Ray Client's port, the GCS's port: where an address names none
+RAY_CONNECT_TIMEOUT_S = 5.0  # a cluster address that does not accept a connection this fast is refused
 
 
 class BatchError(StitchError):
@@ -64,11 +78,13 @@ class BatchError(StitchError):
 
 @dataclass(frozen=True)
 class Entry:
-    """One job of a batch: its name, the job, and where its report goes."""
+    """One job of a batch: its name, the job, and where its report goes; or, for a pair folder that
+    is not one, its name and ``error`` (no job: it is recorded as failed without running)."""
 
     name: str
-    job: Job
+    job: Job | None
     report: str
+    error: str | None = None
 
 
 def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: dict,
@@ -76,14 +92,13 @@ def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: d
     """The batch's jobs from a folder of pair folders or a .toml / .csv list; ``settings``: for every job;
     ``options``: job keys (``crop``, ``offset``) for every job of a kind they apply to, under the list's own.
 
-    Paths come back absolute (a Ray task may run elsewhere); names, outputs and inputs are checked.
+    Paths come back absolute (a Ray task may run elsewhere); names, outputs and inputs are checked,
+    and how the outputs lie against DIR, the inputs and each other.
     """
     source, out_dir = Path(source).resolve(), Path(out_dir).resolve()
-    if source.is_dir():
-        rows = _folder_rows(source)
+    if stat.S_ISDIR(input_stat(source).st_mode):
         defaults: dict = {}
-    elif not source.exists():
-        raise InputError(f"{source}: not found; give a folder of pair folders or a .toml or .csv job list")
+        rows = _folder_rows(source, out_dir)
     elif source.suffix.lower() == ".toml":
         defaults, rows = _toml_rows(source)
     elif source.suffix.lower() == ".csv":
@@ -92,20 +107,40 @@ def read_jobs(source: str | os.PathLike, out_dir: str | os.PathLike, settings: d
         raise InputError(f"{source}: a job list is a .toml or .csv file (or give a folder of pair folders)")
     if not rows:
         raise InputError(f"{source}: no jobs found")
-    entries = [_entry({**defaults, **row}, where, source, out_dir, settings, options or {}) for where, row in rows]
+    entries = [_refused(where, row, out_dir) if isinstance(row, InputError)
+               else _entry({**defaults, **row}, where, source, out_dir, settings, options or {})
+               for where, row in rows]
     _check_unique(entries, source)
+    _check_outputs(entries, source)
     return entries
 
 
-def _folder_rows(folder: Path) -> list[tuple[str, dict]]:
-    pairs = [folder] if pair_inputs(folder) else sorted(p for p in folder.iterdir() if p.is_dir() and pair_inputs(p))
+def _folder_rows(folder: Path, out_dir: Path) -> list[tuple[str, dict | InputError]]:
+    """(where, row) per pair folder of ``folder`` (or ``folder`` itself when it is one); a folder that
+    tries to be a pair folder and is not gives (its name, its InputError) instead. ``out_dir`` (DIR,
+    whose outputs would look like one) is not looked at."""
+    own = _pair_or_error(folder)
+    if isinstance(own, tuple):
+        return [(str(folder), _pair_row(folder, *own))]
+    subs = sorted(p for p in folder.iterdir() if p.is_dir() and not p.name.startswith(".") and p.resolve() != out_dir)
+    pairs = [(sub, found) for sub in subs if (found := _pair_or_error(sub)) is not None]
     if not pairs:
-        raise InputError(f"{folder}: no pair folders (sub-folders holding a.* + b.* images or left.* + right.* videos)")
-    rows = []
-    for pair in pairs:
-        kind, inputs = pair_inputs(pair)
-        rows.append((str(pair), {"name": pair.name, **dict(zip(PAIR_STEMS[kind], map(str, inputs)))}))
-    return rows
+        raise own if isinstance(own, InputError) else InputError(
+            f"{folder}: no pair folders (sub-folders holding a.* + b.* images or left.* + right.* videos)")
+    return [(pair.name, found) if isinstance(found, InputError) else (str(pair), _pair_row(pair, *found))
+            for pair, found in pairs]
+
+
+def _pair_or_error(folder: Path) -> tuple[str, tuple[Path, Path]] | InputError | None:
+    """What :func:`~sena_warp.jobs.pair_inputs` says of ``folder``, its InputError returned, not raised."""
+    try:
+        return pair_inputs(folder)
+    except InputError as exc:
+        return exc
+
+
+def _pair_row(folder: Path, kind: str, inputs: tuple[Path, Path]) -> dict:
+    return {"name": folder.name, **dict(zip(PAIR_STEMS[kind], map(str, inputs)))}
 
 
 def _toml_rows(path: Path) -> tuple[dict, list[tuple[str, dict]]]:
@@ -124,10 +159,15 @@ def _toml_rows(path: Path) -> tuple[dict, list[tuple[str, dict]]]:
 
 def _csv_rows(path: Path) -> list[tuple[str, dict]]:
     try:
-        with open(path, newline="", encoding="utf-8") as handle:
-            table = list(csv.DictReader(handle))
+        with open(path, newline="", encoding="utf-8-sig") as handle:  # -sig: a spreadsheet's byte order mark
+            reader = csv.DictReader(handle)
+            header = [name.strip() for name in reader.fieldnames or ()]
+            table = list(reader)
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise InputError(f"{path}: cannot read it as a CSV job list ({exc})") from exc
+    twice = sorted({name for name in header if header.count(name) > 1})
+    if twice:
+        raise InputError(f"{path}: line 1: the column {twice[0]!r} appears twice; keep one")
     rows = []
     for line_no, cells in enumerate(table, start=2):
         where = f"{path}: line {line_no}"
@@ -169,14 +209,31 @@ def _entry(row: dict, where: str, source: Path, out_dir: Path, settings: dict, g
     base = source if source.is_dir() else source.parent
     inputs = tuple(str((base / options[stem]).resolve()) for stem in PAIR_STEMS[kind])
     name = options.get("name") or Path(inputs[0]).parent.name
-    if not name or "/" in name or "\\" in name or name.startswith("."):
-        raise InputError(f"{where}: job name {name!r} cannot name a file; give a plain name")
-    output = out_dir / options.get("output", name + OUTPUT_SUFFIXES[kind][0])
+    _check_name(name, where)
+    named = options.get("output", name + OUTPUT_SUFFIXES[kind][0])
+    output = Path(os.path.realpath(out_dir / named))  # "g/../x.png" and "x.png" are one output
+    if not output.is_relative_to(out_dir) or output == out_dir:
+        raise InputError(f"{where}: output = {named!r} lies outside --out {out_dir}; give a name inside it")
     job_settings = {**settings, **{key: check_value(key, value, where) for key, value in row.items() if key in types}}
     # A job still to run replaces what an earlier, unfinished run left (complete jobs are skipped before).
     job = Job(kind, inputs, str(output), job_settings, reference=options.get("reference", "auto"),
               crop=options.get("crop", False), offset_s=options.get("offset", 0.0), overwrite="overwrite")
     return Entry(name, job, str(out_dir / REPORTS / f"{name}.json"))
+
+
+def _check_name(name: str, where: str) -> None:
+    """A job's name names its output and report: a plain file name, short enough for ``NAME.json``."""
+    if not name or "/" in name or "\\" in name or name.startswith(".") or not name.isprintable():
+        raise InputError(f"{where}: job name {name!r} cannot name a file; give a plain name")
+    if len(os.fsencode(f"{name}.json")) > NAME_MAX_BYTES:
+        raise InputError(f"{where}: job name {name[:40]!r}... is {len(os.fsencode(name))} bytes, too long for a "
+                         f"file name ({NAME_MAX_BYTES} bytes with its .json); give a shorter name")
+
+
+def _refused(name: str, error: InputError, out_dir: Path) -> Entry:
+    """The entry of pair folder ``name`` that is not one: failed from the start, ``error`` its reason."""
+    _check_name(name, name)
+    return Entry(name, None, str(out_dir / REPORTS / f"{name}.json"), str(error))
 
 
 def _job_value(key: str, value, kind: str, where: str):
@@ -199,13 +256,28 @@ def _job_value(key: str, value, kind: str, where: str):
 
 
 def _check_unique(entries: list[Entry], source: Path) -> None:
-    for attribute in ("name", "output"):
-        seen: set[str] = set()
-        for entry in entries:
-            value = entry.name if attribute == "name" else entry.job.output
-            if value in seen:
-                raise InputError(f"{source}: two jobs have the {attribute} {value}; give each job its own")
-            seen.add(value)
+    seen: set[str] = set()
+    for entry in entries:
+        if entry.name in seen:
+            raise InputError(f"{source}: two jobs have the name {entry.name}; give each job its own")
+        seen.add(entry.name)
+
+
+def _check_outputs(entries: list[Entry], source: Path) -> None:
+    """No job's output (resolved: links, ``..``) may be another job's output or any job's input."""
+    inputs = {path: entry.name for entry in entries if entry.job for path in entry.job.inputs}
+    outputs: dict[str, str] = {}
+    for entry in entries:
+        if entry.job is None:
+            continue
+        output = entry.job.output
+        if output in outputs:
+            raise InputError(f"{source}: jobs {outputs[output]} and {entry.name} have the same output {output}; "
+                             f"give each job its own")
+        if output in inputs:
+            raise InputError(f"{source}: the output of job {entry.name}, {output}, is an input of job "
+                             f"{inputs[output]}; give it another name")
+        outputs[output] = entry.name
 
 
 def is_complete(entry: Entry) -> bool:
@@ -258,11 +330,24 @@ def _skipped(entry: Entry) -> dict:
     return {**earlier, "status": "skipped"}
 
 
-def _failed(entry: Entry, error: str | None) -> dict:
-    """The result record of a job whose worker itself failed (a crashed process, a lost Ray task)."""
-    return {"name": entry.name, "kind": entry.job.kind, "status": "failed", "inputs": list(entry.job.inputs),
-            "output": entry.job.output, "error": error, "exit_code": 1, "seconds": None, "host": None,
-            "summary": None}
+def _failed(entry: Entry, error: str | None, exit_code: int = 1) -> dict:
+    """The result record of a job that did not run to a result: a pair folder that is not one, a
+    crashed worker process, a lost Ray task."""
+    job = entry.job
+    return {"name": entry.name, "kind": job.kind if job else None, "status": "failed",
+            "inputs": list(job.inputs) if job else [], "output": job.output if job else None, "error": error,
+            "exit_code": exit_code, "seconds": None, "host": None, "summary": None}
+
+
+def _with_threads(entry: Entry, threads: int) -> Entry:
+    """``entry`` with ``threads`` as its cpu_threads unless a setting of the batch or the job chose them."""
+    return replace(entry, job=replace(entry.job, settings={"cpu_threads": threads, **entry.job.settings}))
+
+
+def _remove_leftovers(entry: Entry) -> None:
+    """Remove the temporaries of ``entry``'s output and report left by a worker that was killed."""
+    for path in (entry.job.output, entry.report):
+        remove_stale_temps(Path(path))
 
 
 def _started(entry: Entry) -> None:
@@ -271,53 +356,107 @@ def _started(entry: Entry) -> None:
 
 
 def run_local(entries: list[Entry], workers: int) -> Iterator[dict]:
-    """Run ``entries`` in ``workers`` fresh processes, at most one job per worker at a time (each said as it
-    starts); yield each result as its job finishes."""
-    waiting = list(reversed(entries))
-    # spawn, not fork: the parent may hold Warp, onnxruntime and decoder threads, which fork does not copy
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        futures: dict = {}
-        try:
-            while waiting or futures:
-                while waiting and len(futures) < workers:
-                    entry = waiting.pop()
-                    _started(entry)
-                    futures[pool.submit(run_entry, entry)] = entry
-                done, _ = wait(futures, return_when=FIRST_COMPLETED)
-                for future in done:
-                    entry = futures.pop(future)
-                    try:
-                        yield future.result()
-                    except Exception as exc:  # the worker process died (out of memory, a crash)
-                        yield _failed(entry, f"worker failed: {type(exc).__name__}: {exc}")
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
+    """Run ``entries`` in ``workers`` fresh processes sharing the cores, one job per worker at a time (each
+    said as it starts); yield each result as its job finishes."""
+    share = max((os.cpu_count() or 1) // workers, 1)
+    tasks = [_with_threads(entry, share) for entry in entries]
+    for entry, result, why in run_in_workers(tasks, workers, f"{__name__}:run_entry", _started, _remove_leftovers):
+        yield result if why is None else _failed(entry, f"worker failed: {why}")
+
+
+def local_runner(workers: int) -> Callable[[list[Entry]], tuple[str, Iterator[dict]]]:
+    """A runner for :func:`run_batch`: ``workers`` local processes, no more than there are jobs to run."""
+    def runner(todo: list[Entry]) -> tuple[str, Iterator[dict]]:
+        count = max(min(workers, len(todo)), 1)
+        return f"{count} local worker{'s' if count > 1 else ''}", run_local(todo, count)
+    return runner
+
+
+def ray_runner(address: str, cpus: int) -> Callable[[list[Entry]], tuple[str, Iterator[dict]]]:
+    """A runner for :func:`run_batch`: Ray tasks on the cluster at ``address`` (see :func:`run_ray`).
+    InputError now, before any work, when Ray is not installed or the address does not answer."""
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        raise InputError("--ray needs Ray: pip install 'sena-warp[cluster]'") from None
+    check_reachable(address)
+    return lambda todo: (f"ray {address}", run_ray(todo, address, cpus))
+
+
+def check_reachable(address: str) -> None:
+    """InputError unless the Ray cluster at ``address`` accepts a TCP connection within
+    :data:`RAY_CONNECT_TIMEOUT_S` (Ray itself retries an unreachable address for minutes, with its
+    own log lines). "local" starts a cluster; "auto" is checked where ``RAY_ADDRESS`` names one."""
+    if address == RAY_AUTO:
+        address = os.environ.get("RAY_ADDRESS", RAY_AUTO)
+    if address in (RAY_LOCAL, RAY_AUTO):
+        return
+    scheme = "ray://" if address.startswith("ray://") else ""
+    host, colon, port = address[len(scheme):].rpartition(":")
+    if not colon:
+        host, port = address[len(scheme):], str(RAY_PORTS[scheme])
+    if not host or not port.isdigit():
+        raise InputError(f"--ray {address}: not a cluster address; give auto, local, HOST:PORT or ray://HOST:PORT")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=RAY_CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        why = f"no answer in {RAY_CONNECT_TIMEOUT_S:g} s" if isinstance(exc, TimeoutError) else exc.strerror or str(exc)
+        raise InputError(f"--ray {address}: cannot reach {host}:{port} ({why}); check the address and that the "
+                         f"cluster is up") from None
+
+
+@contextlib.contextmanager
+def _own_sigterm() -> Iterator[None]:
+    """Keep the SIGTERM handler in place across ``ray.init``, which puts its own (exit 15) there."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    handler = signal.getsignal(signal.SIGTERM)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, handler)
+
+
+@contextlib.contextmanager
+def _stderr_to_devnull() -> Iterator[None]:
+    """Point file descriptor 2 at /dev/null: Ray's C++ core writes its connection retries there, several
+    lines a second, and the processes a local Ray starts inherit it (they log to their own files)."""
+    sys.stderr.flush()
+    saved, null = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
 
 
 def run_ray(entries: list[Entry], address: str, cpus: int) -> Iterator[dict]:
     """Run ``entries`` as Ray tasks on the cluster at ``address`` (or a Ray started here with ``cpus``);
-    yield each result as its job finishes. A task reserves its job's threads as CPUs, and a GPU when the
-    job asks for CUDA."""
-    try:
-        import ray
-    except ImportError:
-        raise InputError("--ray needs Ray: pip install 'sena-warp[cluster]'") from None
+    yield each result as its job finishes. A task reserves its job's threads as CPUs (one unless a
+    setting says otherwise), and a GPU when the job asks for CUDA. Leaving early (a signal)
+    cancels every task; a running one ends as Ctrl-C ends a command, leaving nothing."""
+    import ray
+
     quiet = dict(logging_level=logging.ERROR, log_to_driver=False)
     # Ray takes seconds to start or reach: said before, so the wait is not silent.
     stage(f"starting Ray here with {cpus} CPUs" if address == RAY_LOCAL else f"connecting to the Ray cluster at {address}")
     try:
-        if address == RAY_LOCAL:
-            ray.init(num_cpus=cpus, include_dashboard=False, **quiet)
-        else:
-            ray.init(address=address, **quiet)
+        with _own_sigterm(), _stderr_to_devnull():
+            if address == RAY_LOCAL:
+                ray.init(num_cpus=cpus, include_dashboard=False, **quiet)
+            else:
+                ray.init(address=address, **quiet)
     except (ConnectionError, ValueError, RuntimeError) as exc:
         raise InputError(f"--ray {address}: cannot connect ({' '.join(str(exc).split())})") from exc
+    pending: dict = {}
     try:
         task = ray.remote(run_entry)
         cluster_cpus = int(ray.cluster_resources().get("CPU", cpus))
         LOGGER.info("Ray: %d CPUs%s", cluster_cpus, "" if address == RAY_LOCAL else f" at {address}")
-        waiting, pending = list(reversed(entries)), {}
+        waiting = [_with_threads(entry, 1) for entry in reversed(entries)]
         while waiting or pending:
             # Handed to Ray only while the cluster has the CPUs to start them: "started" means started.
             while waiting and (not pending or sum(_task_cpus(e) for e in pending.values()) + _task_cpus(waiting[-1])
@@ -334,7 +473,14 @@ def run_ray(entries: list[Entry], address: str, cpus: int) -> Iterator[dict]:
             except ray.exceptions.RayError as exc:
                 yield _failed(entry, f"Ray task failed: {' '.join(str(exc).split())[:500]}")
     finally:
+        for ref in pending:
+            ray.cancel(ref)  # a running task gets KeyboardInterrupt: its outputs' temporaries are removed
+        if pending:
+            ray.wait(list(pending), num_returns=len(pending), timeout=STOP_WAIT_S)
         ray.shutdown()
+        if address == RAY_LOCAL:  # its workers are gone now; on a cluster they may still be cleaning up
+            for entry in pending.values():
+                _remove_leftovers(entry)
 
 
 def _task_cpus(entry: Entry) -> int:
@@ -342,29 +488,37 @@ def _task_cpus(entry: Entry) -> int:
     return max(entry.job.settings.get("cpu_threads", 1), 1)
 
 
-def run_batch(entries: list[Entry], out_dir: str | os.PathLike, runner: Callable[[list[Entry]], Iterator[dict]],
-              runner_name: str, overwrite: str = "refuse") -> dict:
-    """Run the entries with ``runner``, write ``DIR/summary.json``; the summary.
+def run_batch(entries: list[Entry], out_dir: str | os.PathLike,
+              runner: Callable[[list[Entry]], tuple[str, Iterator[dict]]], overwrite: str = "refuse") -> dict:
+    """Record the pair folders that are not ones as failed, run the other entries with ``runner`` (which
+    names itself), write ``DIR/summary.json``; the summary.
 
     ``overwrite`` (``outputs.OVERWRITE_MODES``, as ``-y`` / ``-n`` set it): "refuse" skips the entries an
     earlier run completed (and redoes the others: the batch resumes), "overwrite" runs every entry
     again, "skip" runs only those whose output does not exist.
     """
     t0 = time.perf_counter()
+    refused = [e for e in entries if e.error is not None]
     done_before = {"refuse": is_complete, "overwrite": lambda e: False, "skip": lambda e: Path(e.job.output).exists()}
-    todo = [e for e in entries if not done_before[overwrite](e)]
-    results = {e.name: _skipped(e) for e in entries if e not in todo}
+    todo = [e for e in entries if e.error is None and not done_before[overwrite](e)]
+    results = {e.name: _skipped(e) for e in entries if e not in todo and e not in refused}
     if results:
         why = "have an output already (-n)" if overwrite == "skip" else "complete from an earlier run"
         LOGGER.info("%d of %d jobs %s: skipped", len(results), len(entries), why)
+    for entry in refused:
+        results[entry.name] = _failed(entry, entry.error, InputError.exit_code)
+        _write_report(entry.report, {"job": results[entry.name]})
+        LOGGER.warning("%s: failed: %s", entry.name, entry.error)
+    runner_name, stream = runner(todo) if todo else ("no jobs to run", (result for result in ()))  # closable
     count = Count("jobs", len(todo), "jobs/s")
-    for done, result in enumerate(runner(todo) if todo else (), start=1):
-        results[result["name"]] = result
-        if result["status"] == "ok":
-            LOGGER.info("%s: ok (%.1f s)", result["name"], result["seconds"])
-        else:
-            LOGGER.warning("%s: failed: %s", result["name"], result["error"])
-        count.update(done)
+    with contextlib.closing(stream):  # a signal here stops the runner's jobs before it propagates
+        for done, result in enumerate(stream, start=1):
+            results[result["name"]] = result
+            if result["status"] == "ok":
+                LOGGER.info("%s: ok (%.1f s)", result["name"], result["seconds"])
+            else:
+                LOGGER.warning("%s: failed: %s", result["name"], result["error"])
+            count.update(done)
     count.close(len(todo))
     wall_s = time.perf_counter() - t0
     ran_ok = sum(r["status"] == "ok" for r in results.values())
@@ -385,7 +539,7 @@ def summary_table(summary: dict) -> str:
     rows = [("job", "kind", "status", "time_s", "result")]
     for r in summary["results"]:
         seconds = "" if r["seconds"] is None else f"{r['seconds']:.1f}"
-        rows.append((r["name"], r["kind"], r["status"], seconds, r["error"] or r["summary"] or ""))
+        rows.append((r["name"], r["kind"] or "-", r["status"], seconds, r["error"] or r["summary"] or ""))
     widths = [max(len(row[i]) for row in rows) for i in range(4)]
     lines = [f"{n:<{widths[0]}}  {k:<{widths[1]}}  {s:<{widths[2]}}  {t:>{widths[3]}}  {res}"
              for n, k, s, t, res in rows]
@@ -396,23 +550,19 @@ def summary_table(summary: dict) -> str:
 
 def cmd_batch(args: argparse.Namespace) -> int:
     """``sena-warp batch``: run every job, print the table; BatchError (exit 7) when any failed."""
-    out_dir = make_folder(args.out, "--out")
-    cores = os.cpu_count() or 1
     # Job keys given on the command line, for every job they apply to (a job list's own win).
     options = {"offset": args.offset, **({"crop": True} if args.crop else {})}
-    if args.ray:
-        cpus = args.workers or cores
-        # A task takes one thread unless told otherwise; Ray packs tasks onto the cluster's cores.
-        entries = read_jobs(args.jobs, out_dir, {"cpu_threads": 1, **args.settings}, options)
-        summary = run_batch(entries, out_dir, lambda todo: run_ray(todo, args.ray, cpus), f"ray {args.ray}",
-                            args.overwrite)
-    else:
-        workers = args.workers or 1
-        # Workers share the cores: each job's Warp bands, onnxruntime and codecs get its part of them.
-        entries = read_jobs(args.jobs, out_dir, {"cpu_threads": max(cores // workers, 1), **args.settings}, options)
-        summary = run_batch(entries, out_dir, lambda todo: run_local(todo, workers),
-                            f"{workers} local worker{'s' if workers > 1 else ''}",
-                            args.overwrite)
+    entries = read_jobs(args.jobs, args.out, args.settings, options)
+    runner = ray_runner(args.ray, args.workers or os.cpu_count() or 1) if args.ray else local_runner(args.workers or 1)
+    made = not os.path.isdir(args.out)
+    out_dir = make_folder(args.out, "--out")  # only once the job list and the runner are known good
+    try:
+        summary = run_batch(entries, out_dir, runner, args.overwrite)
+    except BaseException:
+        if made:  # a batch that wrote nothing (Ray refused, a signal before any job ended) leaves no DIR
+            with contextlib.suppress(OSError):
+                out_dir.rmdir()
+        raise
     echo(summary_table(summary))
     if summary["failed"]:
         raise BatchError(f"{summary['failed']} of {summary['jobs']} jobs failed; their reports in "

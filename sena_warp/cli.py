@@ -15,16 +15,18 @@ import contextlib
 import importlib
 import json
 import logging
+import os
 import signal
 import sys
 import threading
 import time
+from typing import Iterator
 
 from . import __version__
 from .config import CHOICES, OFFSET_AUTO, Config
 from .errors import InputError, StitchError, out_of_memory
 from .outputs import OutputPlan
-from .progress import LOGGER, ConsoleHandler, echo
+from .progress import LOGGER, ConsoleHandler, echo, write_stdout
 
 PROGRESS_MODES = ("auto", "bar", "plain", "json")
 # Command-line options that set a Config field: option dest -> field name.
@@ -43,7 +45,6 @@ class Interrupted(KeyboardInterrupt):
 
     def __init__(self, signum: int):
         super().__init__(signal.Signals(signum).name)
-        self.signum = signum
 
 
 class _Parser(argparse.ArgumentParser):
@@ -218,7 +219,7 @@ def cmd_match(args: argparse.Namespace) -> int:
     if args.output:
         with plan:
             write_image(args.output, draw_matches(img_a, img_b, matches), plan=plan)
-    print(json.dumps(summary))
+    write_stdout(json.dumps(summary) + "\n")
     return 0
 
 
@@ -253,7 +254,7 @@ def cmd_video(args: argparse.Namespace) -> int:
 def cmd_config(args: argparse.Namespace) -> int:
     from .config_file import config_toml, settings_config
 
-    print(config_toml(settings_config(args.settings, "settings")), end="")
+    write_stdout(config_toml(settings_config(args.settings, "settings")))
     return 0
 
 
@@ -371,6 +372,20 @@ def _lazy(module: str, function: str):
     return run
 
 
+def _standard_streams() -> None:
+    """Put /dev/null on any of file descriptors 0, 1 and 2 that the caller closed (``2>&-``), and a
+    stream on it where Python left ``sys.stdin`` / ``stdout`` / ``stderr`` None: else the first file
+    opened takes the number (a library's stderr lines would land in an output) and code that writes
+    to ``sys.stderr`` fails."""
+    for fd, name, mode in ((0, "stdin", "r"), (1, "stdout", "w"), (2, "stderr", "w")):
+        try:
+            os.fstat(fd)
+        except OSError:
+            os.open(os.devnull, os.O_RDWR)  # the lowest free number: fd itself
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(fd, mode, closefd=False))
+
+
 def _console(args: argparse.Namespace) -> ConsoleHandler:
     """Show the run's stages, counts and messages on stderr as the output options ask."""
     mode = args.progress
@@ -383,13 +398,15 @@ def _console(args: argparse.Namespace) -> ConsoleHandler:
 
 
 @contextlib.contextmanager
-def _signals_as_interrupts():
+def _signals_as_interrupts() -> Iterator[list[int]]:
     """While the command runs, SIGINT, SIGTERM and SIGHUP raise :class:`Interrupted` (once: a second
-    signal must not break the clean-up of the first). Only the main thread can set handlers."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
+    signal must not break the clean-up of the first). Yields the list of the signal received: a
+    library that catches the interrupt may raise a KeyboardInterrupt of its own instead (Ray does).
+    Only the main thread can set handlers."""
     received: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
 
     def interrupt(signum, frame):
         if not received:
@@ -398,24 +415,28 @@ def _signals_as_interrupts():
 
     previous = {signum: signal.signal(signum, interrupt) for signum in HANDLED_SIGNALS}
     try:
-        yield
+        yield received
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
 
 
 def main(argv: list[str] | None = None) -> int:
+    _standard_streams()
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:  # --help, --version, or a malformed command line (said on one line)
         return int(exc.code or 0)
     level = LOGGER.level
     console = _console(args)
+    received: list[int] = []
     try:
-        with _signals_as_interrupts():
+        with _signals_as_interrupts() as received:
             if hasattr(args, "config"):
                 args.settings = _settings(args)
-            return args.run(args)
+            code = args.run(args)
+            write_stdout()  # flush what was printed: a full disk says so here, in one line
+            return code
     except StitchError as exc:
         LOGGER.error(str(exc))
         return exc.exit_code
@@ -425,8 +446,8 @@ def main(argv: list[str] | None = None) -> int:
             raise
         LOGGER.error(str(error))
         return error.exit_code
-    except KeyboardInterrupt as exc:
-        signum = getattr(exc, "signum", signal.SIGINT)
+    except KeyboardInterrupt:
+        signum = received[0] if received else signal.SIGINT
         by = "" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"
         LOGGER.error(f"interrupted{by}", extra={"label": ""})
         return 128 + signum

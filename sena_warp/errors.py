@@ -51,14 +51,18 @@ class OutputError(StitchError):
 
 OUT_OF_MEMORY = "out of memory; lower --max-megapixels, downscale the inputs or free some memory"
 # How the native libraries say an allocation failed: Warp ("Failed to allocate N bytes on device 'cpu'"),
-# onnxruntime's arena ("Failed to allocate memory for requested buffer", or a C++ bad_alloc), CUDA.
-_ALLOCATION_FAILED = ("Failed to allocate", "bad_alloc", "out of memory", "CUDA_ERROR_OUT_OF_MEMORY")
+# onnxruntime's arena ("Failed to allocate memory for requested buffer", or a C++ bad_alloc), CUDA, OpenCV
+# ("(-4:Insufficient memory) Failed to allocate N bytes").
+_ALLOCATION_FAILED = ("Failed to allocate", "bad_alloc", "out of memory", "CUDA_ERROR_OUT_OF_MEMORY",
+                      "Insufficient memory")
+_NATIVE_MODULES = ("onnxruntime", "cv2")  # libraries whose own exception types carry their allocation failures
 
 
 def out_of_memory(exc: BaseException) -> StitchError | None:
-    """The one-line error (exit code 1) for an allocation that failed, in numpy (``MemoryError``), Warp or
-    onnxruntime (a RuntimeError or onnxruntime's own exception saying so); None for any other exception."""
-    native = isinstance(exc, RuntimeError) or type(exc).__module__.startswith("onnxruntime")
+    """The one-line error (exit code 1) for an allocation that failed, in numpy (``MemoryError``), Warp,
+    onnxruntime or OpenCV (a RuntimeError or the library's own exception saying so); None for any other
+    exception."""
+    native = isinstance(exc, RuntimeError) or type(exc).__module__.startswith(_NATIVE_MODULES)
     if isinstance(exc, MemoryError) or native and any(text in str(exc) for text in _ALLOCATION_FAILED):
         return StitchError(OUT_OF_MEMORY)
     return None

@@ -8,6 +8,7 @@ were fully transparent. Inputs are never modified; outputs go through ``sena_war
 from __future__ import annotations
 
 import os
+import stat
 from pathlib import Path
 
 import cv2
@@ -91,25 +92,35 @@ def transparent_mask(img: np.ndarray) -> np.ndarray | None:
     return transparent if transparent.any() else None
 
 
+def input_stat(path: str | os.PathLike) -> os.stat_result:
+    """``os.stat`` of input ``path``, or InputError when it is missing or a name the file system refuses
+    (too long, a loop of links)."""
+    try:
+        return os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        raise InputError(f"{path}: file not found") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot be opened ({exc.strerror})") from None
+
+
 def existing_file(path: str | os.PathLike) -> Path:
-    """``path`` as a Path, or InputError when it is missing or not a regular file."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: file not found")
-    if not path.is_file():
+    """``path`` as a Path, or InputError when it is missing, not a regular file or cannot be looked up."""
+    if not stat.S_ISREG(input_stat(path).st_mode):
         raise InputError(f"{path}: not a file")
-    return path
+    return Path(path)
 
 
 def check_size(name: str, width: int, height: int, max_megapixels: float | None, what: str = "image") -> None:
     """InputError when a ``width`` x ``height`` input is above ``max_megapixels`` (None: no limit of
     ours) or above what OpenCV decodes, before anything that size is allocated."""
     megapixels = width * height / 1e6
+    shown = f"{megapixels:.3g}" if megapixels < 1000 else f"{megapixels:.0f}"  # 0.307, 625, 1600: never "0 MP"
+    size = f"{width}x{height} px ({shown} MP)"
     if width * height > OPENCV_MAX_PIXELS:
-        raise InputError(f"{name}: {what} is {width}x{height} px ({megapixels:.0f} MP), above the "
+        raise InputError(f"{name}: {what} is {size}, above the "
                          f"{OPENCV_MAX_PIXELS / 1e6:.0f} MP OpenCV decodes; downscale it first")
     if max_megapixels is not None and megapixels > max_megapixels:
-        raise InputError(f"{name}: {what} is {width}x{height} px ({megapixels:.0f} MP), above the limit of "
+        raise InputError(f"{name}: {what} is {size}, above the limit of "
                          f"{max_megapixels:g} MP per input; downscale it first, or raise --max-megapixels if the "
                          f"machine has the memory (see the README)")
 

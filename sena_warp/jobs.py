@@ -19,7 +19,7 @@ from .config_file import check_settings, settings_config
 from .errors import InputError
 from .imageio import IMAGE_SUFFIXES
 from .outputs import OVERWRITE_MODES, OutputPlan
-from .progress import LOGGER, stage
+from .progress import LOGGER, stage, write_stdout
 from .rig import REFERENCES
 
 KINDS = ("image", "video")
@@ -89,17 +89,37 @@ def job_config(settings: dict) -> Config:
 
 
 def pair_inputs(folder: str | os.PathLike) -> tuple[str, tuple[Path, Path]] | None:
-    """("image", (a, b)) or ("video", (left, right)) for a pair folder; None when ``folder`` is not one.
+    """("image", (a, b)) or ("video", (left, right)) for a pair folder; None when ``folder`` holds no
+    input of either kind (a folder of something else); InputError saying what is wrong with one that
+    tries to be a pair folder and is not.
 
-    A pair folder holds exactly one file per stem (``a.*`` and ``b.*``, or ``left.*`` and ``right.*``)
-    with a suffix of that kind.
+    A pair folder holds exactly one file per stem (``a.*`` and ``b.*``, or ``left.*`` and ``right.*``;
+    stems and suffixes in any case: ``A.JPG``) with a suffix of that kind, and not both pairs.
+    Hidden files (``.name``) are not looked at.
     """
     folder = Path(folder)
-    for kind, stems in PAIR_STEMS.items():
-        found = [[p for p in folder.glob(f"{stem}.*") if p.suffix.lower() in INPUT_SUFFIXES[kind]] for stem in stems]
-        if all(len(paths) == 1 for paths in found):
-            return kind, (found[0][0], found[1][0])
-    return None
+    files = sorted(p for p in folder.iterdir() if not p.name.startswith(".") and p.is_file())
+    found = {kind: {stem: [p for p in files if p.stem.lower() == stem and p.suffix.lower() in INPUT_SUFFIXES[kind]]
+                    for stem in stems} for kind, stems in PAIR_STEMS.items()}
+    complete = [kind for kind, by_stem in found.items() if all(len(paths) == 1 for paths in by_stem.values())]
+    if len(complete) == 1:
+        return complete[0], tuple(paths[0] for paths in found[complete[0]].values())
+    listed = ", ".join(p.name for p in files)
+    if complete:
+        raise InputError(f"{folder}: holds both an image pair and a video pair ({listed}); keep one of them")
+    for by_stem in found.values():
+        for stem, paths in by_stem.items():
+            if len(paths) > 1:
+                raise InputError(f"{folder}: {len(paths)} files for {stem}.* ({', '.join(p.name for p in paths)}); "
+                                 f"keep one")
+    media = [p for p in files if any(p.suffix.lower() in suffixes for suffixes in INPUT_SUFFIXES.values())]
+    if not media:
+        return None
+    kind = max(found, key=lambda k: sum(len(paths) for paths in found[k].values()))
+    missing = " and ".join(f"{stem}.*" for stem, paths in found[kind].items() if not paths)
+    raise InputError(f"{folder}: no {missing} {'image' if kind == 'image' else 'video'} (found {listed}); a pair "
+                     f"folder holds {' + '.join(s + '.*' for s in PAIR_STEMS['image'])} images or "
+                     f"{' + '.join(s + '.*' for s in PAIR_STEMS['video'])} videos")
 
 
 def checked(plan: OutputPlan) -> bool:
@@ -107,7 +127,7 @@ def checked(plan: OutputPlan) -> bool:
     existing output (the command then does nothing)."""
     existing = plan.check()
     for path in existing:
-        print(f"{path}: exists, skipped (-n)")
+        write_stdout(f"{path}: exists, skipped (-n)\n")
     return not existing
 
 

@@ -5,18 +5,26 @@ One :class:`OutputPlan` per command holds its outputs (files such as ``-o`` and 
 folders such as ``--debug`` and ``eval --out``). ``check()`` applies the rules below to all of them
 before anything is read or computed; inside ``with plan:`` each output is written to a temporary
 name beside it (``plan.writing(path)``), and only when the whole block succeeds are they all
-renamed to their names. A failure or an interruption anywhere (the report after the panorama, a
-full disk, SIGTERM) leaves none of them, and replaces no existing file.
+given their names. A failure or an interruption anywhere (the report after the panorama, a full
+disk, SIGTERM) leaves none of them, and replaces no existing file.
 
 The rules (also in the README, "Outputs"):
 
 - **Folders**: an output goes into a folder that exists. An output folder itself is created when
   missing, but never its parents: ``-o new/p.png`` and ``--debug new/nested`` are both refused
   while ``new`` does not exist.
-- **Overwriting**, as ffmpeg does it: an existing output (a file, or a folder that is not empty) is
-  refused with ``overwrite="refuse"``, replaced with ``"overwrite"`` (``-y``); with ``"skip"``
-  (``-n``) ``check()`` reports it and the command does nothing. Files written into an existing
-  output folder replace those of the same name; other files there are left alone.
+- **Overwriting**, as ffmpeg does it: an existing output (a file, a link, or a folder that is not
+  empty) is refused with ``overwrite="refuse"``, replaced with ``"overwrite"`` (``-y``); with
+  ``"skip"`` (``-n``) ``check()`` reports it and the command does nothing. Files written into an
+  existing output folder replace those of the same name; other files there are left alone.
+- **Commit without replacing**: without ``-y`` an output is given its name by a hard link (a file)
+  or a rename (a folder, onto nothing or an empty folder), which fail when something took the name
+  while the command ran (another run to the same output, a file made meanwhile): OutputError, and
+  the outputs this commit had already placed are taken back.
+- **Only files and folders**: a device, FIFO or socket is never an output, not even with ``-y``
+  (``--report /dev/null -y`` would otherwise replace the device node with a file).
+- **Names**: a name longer than its file system allows (``PC_NAME_MAX``, 255 bytes on most) is
+  refused before any work.
 - **Collisions**: no output may be an input (also through links), lie inside another output, hold
   another output or hold an input. Even ``-y`` never overwrites an input.
 - **Temporaries** are named ``.NAME.TAG.PID.RANDOM.part.EXT`` (``NAME`` shortened so the whole fits
@@ -27,10 +35,12 @@ The rules (also in the README, "Outputs"):
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import os
 import re
 import shutil
+import stat
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +51,8 @@ from .errors import InputError, OutputError
 OVERWRITE_MODES = ("refuse", "overwrite", "skip")
 NAME_MAX_BYTES = 255  # longest file name on the usual file systems (ext4, xfs, btrfs, tmpfs, APFS)
 SUFFIX_MAX_BYTES = 16  # a longer output extension is left off its temporary's name (no encoder needs it)
+NO_HARD_LINKS = (errno.EPERM, errno.EOPNOTSUPP, errno.ENOTSUP, errno.EMLINK)  # link(2) on FAT, some network mounts
+TAKEN = (errno.EEXIST, errno.ENOTEMPTY, errno.ENOTDIR)  # link(2) / rename(2): something else has the name
 RANDOM_CHARS = 8  # what tempfile.mkstemp / mkdtemp put between prefix and suffix: [a-z0-9_]
 _TEMP_NAME = re.compile(r"\.(?P<tag>[0-9a-f]{8})\.(?P<pid>\d+)\.[a-z0-9_]{%d}\.part(\.[^.]*)?$" % RANDOM_CHARS)
 
@@ -72,7 +84,10 @@ def _real(path: Path) -> Path:
 def _same_file(a: Path, b: Path) -> bool:
     if _real(a) == _real(b):
         return True
-    return a.exists() and b.exists() and os.path.samefile(a, b)
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # either one missing, or a name the file system refuses (checked on its own)
+        return False
 
 
 def _inside(inner: Path, outer: Path) -> bool:
@@ -84,7 +99,33 @@ def _inside(inner: Path, outer: Path) -> bool:
 def _exists(output: Output) -> bool:
     if output.folder:
         return output.path.is_dir() and any(output.path.iterdir())
-    return output.path.exists()
+    return os.path.lexists(output.path)  # a link whose target is gone still holds the name
+
+
+def _kind(path: Path, option: str) -> str:
+    """What ``path`` names, following links: "missing", "file", "folder" or "other" (a device, FIFO or
+    socket); OutputError when the file system refuses to look (a name too long, a loop of links)."""
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return "missing"
+    except OSError as exc:
+        raise OutputError(f"{path}: {option} cannot be used ({exc.strerror}); choose another name") from exc
+    return "file" if stat.S_ISREG(mode) else "folder" if stat.S_ISDIR(mode) else "other"
+
+
+def _check_name_lengths(path: Path, option: str) -> None:
+    """OutputError when a name in ``path`` is longer than its file system takes (asked of the deepest
+    folder of ``path`` that exists; 255 bytes where it cannot say)."""
+    existing = next((p for p in (path.absolute(), *path.absolute().parents) if os.path.isdir(p)), None)
+    try:
+        limit = os.pathconf(existing, "PC_NAME_MAX") if existing is not None else NAME_MAX_BYTES
+    except (OSError, ValueError):
+        limit = NAME_MAX_BYTES
+    for name in path.parts:
+        if len(os.fsencode(name)) > limit:
+            raise OutputError(f"{path}: {option} has a name of {len(os.fsencode(name))} bytes, longer than the "
+                              f"{limit} this file system allows; choose a shorter name")
 
 
 def _alive(pid: int) -> bool:
@@ -195,14 +236,19 @@ class OutputPlan:
     def _check_place(out: Output) -> None:
         """The folder rule, and a file where a folder is needed (or the reverse)."""
         path = out.path
-        if out.folder and path.exists() and not path.is_dir():
+        _check_name_lengths(path, out.option)
+        kind = _kind(path, out.option)
+        if kind == "other":
+            raise OutputError(f"{path}: {out.option} names a device, FIFO or socket, not a file; choose another name")
+        if out.folder and kind == "file":
             raise OutputError(f"{path}: {out.option} needs a folder and this is a file; choose another name")
-        if not out.folder and path.is_dir():
+        if not out.folder and kind == "folder":
             raise OutputError(f"{path}: is a folder; give {out.option} a file name")
         parent = path.parent
-        if not parent.exists():
+        parent_kind = _kind(parent, out.option)
+        if parent_kind == "missing":
             raise OutputError(f"{path}: folder {parent} does not exist; create it first")
-        if not parent.is_dir():
+        if parent_kind != "folder":
             raise OutputError(f"{path}: {parent} is not a folder")
         if not os.access(parent, os.W_OK):
             raise OutputError(f"{path}: folder {parent} is not writable")
@@ -264,18 +310,51 @@ class OutputPlan:
                               f"another folder") from exc
 
     def _commit(self) -> None:
-        for out in self.outputs:
-            tmp = self._temps.get(out.path)
-            if tmp is None:
-                continue
-            try:
-                if out.folder and out.path.is_dir():
+        """Give every written output its name: replacing what is there with -y, else only where the name
+        is still free (all or none: what this commit placed is taken back when a later output fails)."""
+        replace = self.overwrite == "overwrite"
+        placed: list[Path] = []
+        written = [(out, self._temps[out.path]) for out in self.outputs if out.path in self._temps]
+        try:
+            for out, tmp in written:
+                if replace and out.folder and out.path.is_dir():
                     _merge_folder(tmp, out.path)
-                else:
-                    os.chmod(tmp, (0o777 if out.folder else 0o666) & ~_UMASK)  # mkstemp/mkdtemp: 0600/0700
+                    continue
+                os.chmod(tmp, (0o777 if out.folder else 0o666) & ~_UMASK)  # mkstemp/mkdtemp: 0600/0700
+                if replace:
+                    if _kind(out.path, out.option) == "other":  # made while the command ran
+                        raise OutputError(f"{out.path}: {out.option} names a device, FIFO or socket, not a "
+                                          f"file; choose another name")
                     os.replace(tmp, out.path)
-            except OSError as exc:
+                elif out.folder:
+                    os.rename(tmp, out.path)  # onto nothing or an empty folder only
+                else:
+                    _link_new(tmp, out.path)
+                placed.append(out.path)
+        except BaseException as exc:
+            for path in placed if not replace else ():
+                _remove(path)
+            if isinstance(exc, OSError) and exc.errno in TAKEN and not replace:
+                raise OutputError(f"{out.path}: appeared while this run was writing {out.option} (another run to "
+                                  f"the same output?); nothing written, add -y to replace it") from exc
+            if isinstance(exc, OSError):
                 raise OutputError(f"{out.path}: cannot write it ({exc.strerror}); choose another name") from exc
+            raise
+
+
+def _link_new(tmp: Path, path: Path) -> None:
+    """Give file ``tmp`` the name ``path`` too, or FileExistsError when ``path`` is taken (never replaced).
+
+    Where the file system has no hard links, the name is claimed by an exclusive create and the file
+    renamed onto the claim.
+    """
+    try:
+        os.link(tmp, path)
+    except OSError as exc:
+        if exc.errno not in NO_HARD_LINKS:
+            raise
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        os.replace(tmp, path)
 
 
 def make_folder(path: str | os.PathLike, option: str) -> Path:

@@ -7,7 +7,8 @@ Three kinds of record:
 - a stage starting, :func:`stage` ("estimating maps" at INFO; the steps inside it, "features",
   "local_affines", at DEBUG);
 - a count advancing, :class:`Count` (frames, pairs, jobs: done / total, rate, ETA);
-- a message: a warning or a fallback is ``LOGGER.warning(text)``, one line each.
+- a message: a warning or a fallback is ``LOGGER.warning(text)``, one line each (a newline or
+  another control character in it, say from a file name, is shown escaped: ``\\n``).
 
 The CLI shows them with :class:`ConsoleHandler`: "bar" redraws one tqdm-style line on a terminal,
 "plain" writes whole lines (no escape codes, for logs), "json" one JSON object per line.
@@ -17,8 +18,12 @@ from __future__ import annotations
 
 import json
 import logging
+import os
+import sys
 import time
 from typing import TextIO
+
+from .errors import OutputError
 
 LOGGER = logging.getLogger("sena_warp")
 LOGGER.addHandler(logging.NullHandler())  # a library stays silent until its user configures logging
@@ -66,9 +71,30 @@ def echo(line: str) -> None:
     consoles = [h for h in LOGGER.handlers if isinstance(h, ConsoleHandler)]
     for console in consoles:
         console.clear_line()
-    print(line, flush=True)
+    write_stdout(line + "\n")
     for console in consoles:
         console.redraw()
+
+
+def write_stdout(text: str = "") -> None:
+    """Write ``text`` on stdout and flush it; OutputError (one line, exit 6) when stdout cannot take it
+    (a full disk, a pipe whose reader left), after pointing stdout at /dev/null so that the
+    interpreter's own last flush does not fail again with a traceback. Nothing when stdout was closed."""
+    if sys.stdout is None:
+        return
+    try:
+        sys.stdout.write(text)
+        sys.stdout.flush()
+    except OSError as exc:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+        raise OutputError(f"stdout: cannot write the results ({exc.strerror or exc})") from exc
+
+
+def one_line(text: str) -> str:
+    """``text`` with its control characters escaped (``\\n``, ``\\t``, ``\\x1b``): one line on a terminal or in a log."""
+    return "".join(ch if ch.isprintable() else ch.encode("unicode_escape").decode("ascii") for ch in text)
 
 
 class ConsoleHandler(logging.Handler):
@@ -149,7 +175,7 @@ class ConsoleHandler(logging.Handler):
             self._line = ""
 
     def _message(self, record: logging.LogRecord) -> None:
-        level, text = record.levelname.lower(), record.getMessage()
+        level, text = record.levelname.lower(), one_line(record.getMessage())
         if self.mode == "json":
             self._json(level, message=text)
             return

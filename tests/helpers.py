@@ -1,10 +1,12 @@
 """Helpers shared by several test modules (imported as ``helpers``: pytest puts tests/ on sys.path) and
 by ``benchmarks/soak.py``: running the CLI, reading media back, making damaged, huge-claiming,
-rotated or black-starting inputs from the bundled data."""
+rotated or black-starting inputs from the bundled data, a worker task, a process's children."""
 
 from __future__ import annotations
 
+import os
 import struct
+import time
 import zlib
 from fractions import Fraction
 from pathlib import Path
@@ -15,6 +17,7 @@ import numpy as np
 
 from sena_warp.cli import main
 from sena_warp.imageio import read_image
+from sena_warp.outputs import OutputPlan
 from sena_warp.video.reader import FrameReader, YuvFrame, probe_video
 from sena_warp.video.writer import VideoWriter
 
@@ -203,3 +206,117 @@ def with_repeated_pts(src, dst, repeats: range) -> None:
             previous = packet.pts, packet.dts
             packet.stream = stream_out
             c_out.mux(packet)
+
+
+def shortened(src: Path, dst: Path, frames: int) -> Path:
+    """The first ``frames`` frames of ``src``, re-encoded at its rate: a recording stopped early."""
+    kept = decoded_frames(src)[:frames]
+    with VideoWriter(dst, *kept[0].y.shape[::-1], probe_video(src).fps) as writer:
+        for i, frame in enumerate(kept):
+            writer.write(frame.y, frame.u, frame.v, pts=i)
+    return dst
+
+
+def without_key_frames(src: Path, dst: Path) -> Path:
+    """``src``'s video packets but its key frames: a piece cut out of a longer stream."""
+    with av.open(str(src)) as cin, av.open(str(dst), "w") as cout:
+        sin = cin.streams.video[0]
+        sout = cout.add_stream_from_template(sin)
+        for packet in cin.demux(sin):
+            if packet.dts is not None and not packet.is_keyframe:
+                packet.stream = sout
+                cout.mux(packet)
+    return dst
+
+def worker_task(task):
+    """A task for ``sena_warp.workers`` in tests: ("double", n) -> 2n; ("die", code) ends its process
+    with that code; ("hold", folder) writes a temporary of folder/out.bin and waits to be stopped."""
+    what, arg = task
+    if what == "die":
+        os._exit(arg)
+    if what == "hold":
+        plan = OutputPlan()
+        plan.add(Path(arg) / "out.bin", "-o")
+        plan.check()
+        with plan, plan.writing(Path(arg) / "out.bin") as tmp:
+            tmp.write_bytes(b"partial")
+            time.sleep(600)
+    return 2 * arg
+
+
+def child_processes(pid: int, marker: str) -> list[int]:
+    """The live child processes of ``pid`` whose command line holds ``marker`` (Linux /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit() and alive(int(entry.name)):
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+                cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            except (OSError, IndexError, ValueError):
+                continue
+            if ppid == pid and marker in cmdline:
+                found.append(int(entry.name))
+    return found
+
+
+def alive(pid: int) -> bool:
+    """Process ``pid`` exists and is not a zombie (one nobody reaped counts as gone)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+def claiming(ext: str, width: int, height: int, img: np.ndarray) -> bytes:
+    """A small real ``ext`` file whose header is patched to claim width x height."""
+    if ext == ".png":
+        return png_claiming(width, height)
+    data = bytearray(cv2.imencode(ext, img)[1].tobytes())
+    if ext == ".jpg":
+        sof = next(i for i in range(2, len(data) - 1) if data[i] == 0xFF and data[i + 1] in (0xC0, 0xC2))
+        struct.pack_into(">HH", data, sof + 5, height, width)
+    elif ext == ".tif":
+        order = "<" if data[:2] == b"II" else ">"
+        (ifd,) = struct.unpack_from(order + "I", data, 4)
+        (count,) = struct.unpack_from(order + "H", data, ifd)
+        for i in range(count):
+            entry = ifd + 2 + 12 * i
+            tag, kind = struct.unpack_from(order + "HH", data, entry)
+            if tag in (256, 257):
+                fmt = order + ("H" if kind == 3 else "I")
+                struct.pack_into(fmt, data, entry + 8, width if tag == 256 else height)
+    elif ext == ".webp":
+        assert data[12:16] == b"VP8L"  # OpenCV writes lossless WebP: 14-bit width - 1, height - 1 after 0x2f
+        (bits,) = struct.unpack_from("<I", data, 21)
+        struct.pack_into("<I", data, 21, (bits & ~0xFFFFFFF) | (width - 1) | ((height - 1) << 14))
+    elif ext == ".bmp":
+        struct.pack_into("<ii", data, 18, width, height)
+    return bytes(data)
+
+
+def claiming_more(fmt: str, width: int, height: int, img: np.ndarray) -> bytes:
+    """A small real file of a format beyond ``claiming``'s, whose header claims width x height."""
+    if fmt == "bigtiff":
+        return bigtiff(width, height, bytes(1000))  # what the 19 KB BigTIFF bomb is: a size and a token of data
+    data = bytearray(encoded(fmt, img))
+    if fmt == ".gif":
+        struct.pack_into("<HH", data, 6, width, height)
+    elif fmt == ".ras":
+        struct.pack_into(">II", data, 4, width, height)
+    elif fmt in (".jp2", "j2k"):
+        if fmt == ".jp2":
+            at = data.find(b"ihdr")
+            struct.pack_into(">II", data, at + 4, height, width)
+        at = data.find(b"\xff\x4f\xff\x51")
+        struct.pack_into(">IIII", data, at + 8, width, height, 0, 0)
+    elif fmt == ".hdr":
+        blank = data.find(b"\n\n")
+        end = data.find(b"\n", blank + 2)
+        data[blank + 2:end] = b"-Y %d +X %d" % (height, width)
+    elif fmt == ".pam":
+        end = data.find(b"ENDHDR")
+        data[:end] = b"P7\nWIDTH %d\nHEIGHT %d\nDEPTH 3\nMAXVAL 255\nTUPLTYPE RGB\n" % (width, height)
+    else:  # PNM and PFM: "P6\n37 23\n..."
+        first, second = data.find(b"\n"), data.find(b"\n", data.find(b"\n") + 1)
+        data[first + 1:second] = b"%d %d" % (width, height)
+    return bytes(data)

@@ -2,16 +2,24 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
-from sena_warp.batch import REPORTS, SUMMARY, read_jobs
+from sena_warp.batch import REPORTS, SUMMARY, local_runner, read_jobs
 from sena_warp.cli import main
 from sena_warp.errors import InputError
+from helpers import alive, assert_one_line_error, child_processes
 
 PAIRS = ("udisd_test_000001", "graf_gt")
 VARYING = {"seconds", "host", "timing_s", "decode_wait_s", "decode_s", "output_fps", "summary"}  # differ run to run
@@ -200,6 +208,284 @@ def test_the_max_megapixels_option_reaches_every_job(bundled_dir, tmp_path, capf
     rc, _, _ = batch([bundled_dir / PAIRS[0], "--out", out, "--max-megapixels", "0.01", "-q"], capfd, warp_device)
     job = json.loads((out / REPORTS / f"{PAIRS[0]}.json").read_text())["job"]
     assert rc == 7 and job["exit_code"] == InputError.exit_code and "--max-megapixels" in job["error"]
+
+
+# --- outputs: resolved, inside DIR, never an input, never shared; refused before any job runs (exit 2) ----
+
+def job_list(tmp_path, jobs: list[dict], kind: str = "toml") -> Path:
+    """A job list of ``jobs`` (key -> text) beside the copies of a pair in tmp_path/lst/c/."""
+    lst = tmp_path / "lst"
+    if kind == "toml":
+        path = lst / "jobs.toml"
+        path.write_text("".join("[[job]]\n" + "".join(f'{k} = "{v}"\n' for k, v in job.items()) for job in jobs))
+    else:
+        keys = sorted({k for job in jobs for k in job})
+        path = lst / "jobs.csv"
+        path.write_text(",".join(keys) + "\n" + "".join(",".join(job.get(k, "") for k in keys) + "\n" for job in jobs))
+    return path
+
+
+@pytest.fixture
+def lst(bundled_dir, tmp_path):
+    """tmp_path/lst/c/{a,b}.jpg; tmp_path/victim.png, a file outside every DIR."""
+    shutil.copytree(bundled_dir / PAIRS[0], tmp_path / "lst" / "c")
+    (tmp_path / "victim.png").write_bytes(b"victim")
+    return tmp_path / "lst"
+
+
+PAIR = {"a": "c/a.jpg", "b": "c/b.jpg"}
+ESCAPES = [  # (jobs, words of the one error line)
+    ([{**PAIR, "name": "one", "output": "../victim.png"}], ("output = '../victim.png' lies outside --out",)),
+    ([{**PAIR, "name": "one", "output": "{tmp}/victim.png"}], ("lies outside --out",)),
+    ([{**PAIR, "name": "one", "output": "g/../../victim.png"}], ("lies outside --out",)),
+    ([{**PAIR, "name": "one", "output": "link/x.png"}], ("lies outside --out",)),  # DIR/link -> tmp_path
+    ([{**PAIR, "name": "one", "output": "../lst/c/a.jpg"}], ("lies outside --out",)),
+    ([{**PAIR, "name": "one", "output": "x.png"}, {**PAIR, "name": "two", "output": "g/../x.png"}],
+     ("jobs one and two have the same output", "x.png; give each job its own")),
+    ([{**PAIR, "name": "one", "output": "x.png"}, {**PAIR, "name": "two", "output": "./x.png"}],
+     ("jobs one and two have the same output",)),
+    ([{**PAIR, "name": "one"}, {"a": "../out/one.png", "b": "c/b.jpg", "name": "two"}],
+     ("the output of job one,", "is an input of job two; give it another name")),
+    ([{**PAIR, "name": "one", "output": "in.jpg"}, {"a": "../out/in.jpg", "b": "c/b.jpg", "name": "two"}],
+     ("the output of job one,", "is an input of job two")),
+]
+
+
+@pytest.mark.parametrize("kind", ["toml", "csv"])
+@pytest.mark.parametrize("jobs, words", ESCAPES, ids=lambda v: None if isinstance(v, list) else "-".join(v)[:40])
+def test_outputs_outside_dir_onto_inputs_or_shared_are_refused_before_any_job(jobs, words, kind, lst, tmp_path,
+                                                                              capfd, warp_device):
+    jobs = [{k: v.replace("{tmp}", str(tmp_path)) for k, v in job.items()} for job in jobs]
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "g").mkdir()
+    (out / "link").symlink_to(tmp_path)
+    (out / "in.jpg").write_bytes((lst / "c" / "a.jpg").read_bytes())
+    before = {p: p.read_bytes() for p in (*tmp_path.rglob("*.jpg"), *tmp_path.rglob("*.png")) if p.is_file()}
+    rc, stdout, err = batch([job_list(tmp_path, jobs, kind), "--out", out, "-q"], capfd, warp_device)
+    assert rc == InputError.exit_code and stdout == []
+    assert_one_line_error(err, *words)
+    assert sorted(p.name for p in out.iterdir()) == ["g", "in.jpg", "link"]  # no job ran: no report, no summary
+    assert {p: p.read_bytes() for p in before} == before
+
+
+def test_a_batch_refused_on_its_job_list_leaves_no_out_folder(lst, tmp_path, capfd, warp_device):
+    jobs = job_list(tmp_path, [{**PAIR, "grid_xx": "2"}])
+    rc, _, err = batch([jobs, "--out", tmp_path / "new", "-q"], capfd, warp_device)
+    assert rc == InputError.exit_code and "unknown setting 'grid_xx'" in err[0]
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_csv_list_with_a_byte_order_mark_reads_as_without(lst, tmp_path):
+    jobs = job_list(tmp_path, [{**PAIR, "name": "one"}], "csv")
+    jobs.write_bytes(b"\xef\xbb\xbf" + jobs.read_bytes())  # as spreadsheets save "CSV UTF-8"
+    (entry,) = read_jobs(jobs, tmp_path / "out", {})
+    assert entry.name == "one" and entry.job.inputs == (str(lst / "c" / "a.jpg"), str(lst / "c" / "b.jpg"))
+
+
+@pytest.mark.parametrize("header, column", [("name,a,b,name", "name"), ("name,a, b,b ", "b"),
+                                            ("name,a,b,grid_x,grid_x", "grid_x")])
+def test_a_csv_column_given_twice_is_refused(lst, tmp_path, header, column):
+    jobs = lst / "jobs.csv"
+    jobs.write_text(f"{header}\none,c/a.jpg,c/b.jpg,{'8,9' if 'grid_x' in header else 'two'}\n")
+    with pytest.raises(InputError, match=f"line 1: the column '{column}' appears twice; keep one"):
+        read_jobs(jobs, tmp_path / "out", {})
+
+
+@pytest.mark.parametrize("name", ["a\nb", "tab\there", "x" * 251, "../up", ".hidden"])
+def test_a_job_name_that_cannot_name_a_file_is_refused(lst, tmp_path, name):
+    jobs = lst / "jobs.toml"
+    jobs.write_text(f'[[job]]\nname = {json.dumps(name)}\na = "c/a.jpg"\nb = "c/b.jpg"\n')
+    with pytest.raises(InputError, match="job name .* (cannot name a file|too long for a file name)"):
+        read_jobs(jobs, tmp_path / "out", {})
+
+
+# --- pair folders: one that tries to be a pair and is not is a failed job saying why -------------------------
+
+MALFORMED = {  # folder -> (files, the reason in its report)
+    "two_a": (("a.jpg", "a.png", "b.jpg"), "2 files for a.* (a.jpg, a.png); keep one"),
+    "typo": (("a.jpg", "c.jpg"), "no b.* image (found a.jpg, c.jpg)"),
+    "both": (("a.jpg", "b.jpg", "left.mp4", "right.mp4"), "holds both an image pair and a video pair"),
+    "one_video": (("left.mp4", "notes.txt"), "no right.* video (found left.mp4, notes.txt)"),
+    "unknown": (("x.png", "y.png"), "no a.* and b.* image (found x.png, y.png)"),
+}
+
+
+def test_pair_folders_that_are_not_ones_are_failed_jobs_and_case_variants_are_pairs(bundled_dir, tmp_path, capfd,
+                                                                                    warp_device):
+    root = tmp_path / "jobs"
+    pair, clip = bundled_dir / PAIRS[0], bundled_dir / "video" / "office_cam1.mp4"
+    for folder, (files, _) in MALFORMED.items():
+        (root / folder).mkdir(parents=True)
+        for name in files:
+            source = clip if name.endswith(".mp4") else pair / "a.jpg"
+            (root / folder / name).write_bytes(source.read_bytes() if not name.endswith(".txt") else b"notes")
+    (root / "upper").mkdir()  # A.JPG / B.JPG: a pair, as a camera names its files
+    shutil.copy(pair / "a.jpg", root / "upper" / "A.JPG")
+    shutil.copy(pair / "b.jpg", root / "upper" / "B.JPG")
+    (root / "empty").mkdir()  # no input of either kind: not a pair folder, not a job
+    (root / "upper" / ".DS_Store").write_bytes(b"x")
+    out = tmp_path / "out"
+    rc, _, err = batch([root, "--out", out, "-q"], capfd, warp_device)
+    assert rc == 7
+    summary = json.loads((out / SUMMARY).read_text())
+    status = {r["name"]: (r["status"], r["exit_code"]) for r in summary["results"]}
+    assert status == {**{folder: ("failed", InputError.exit_code) for folder in MALFORMED}, "upper": ("ok", 0)}
+    for folder, (_, reason) in MALFORMED.items():
+        job = json.loads((out / REPORTS / f"{folder}.json").read_text())["job"]
+        assert job["error"] == f"{root / folder}: {reason}" or job["error"].startswith(f"{root / folder}: {reason}")
+        assert f"{folder}: failed: {root / folder}: {reason}" in "\n".join(err)
+    assert sorted(p.name for p in out.iterdir()) == [REPORTS, SUMMARY, "upper.png"]
+    assert sorted(p.name for p in (root / "upper").iterdir()) == [".DS_Store", "A.JPG", "B.JPG"]
+
+
+def test_a_pair_folder_given_itself_that_is_not_one_is_refused(bundled_dir, tmp_path, capfd, warp_device):
+    folder = tmp_path / "typo"
+    folder.mkdir()
+    shutil.copy(bundled_dir / PAIRS[0] / "a.jpg", folder / "a.jpg")
+    shutil.copy(bundled_dir / PAIRS[0] / "b.jpg", folder / "c.jpg")
+    rc, _, err = batch([folder, "--out", tmp_path / "out", "-q"], capfd, warp_device)
+    assert rc == InputError.exit_code
+    assert_one_line_error(err, f"{folder}: no b.* image (found a.jpg, c.jpg)")
+    assert not (tmp_path / "out").exists()
+
+
+# --- signals: no job starts after one, running jobs stop and leave nothing, workers die with the parent -----
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def start_video_batch(bundled_dir, tmp_path, jobs: int = 6, ray: bool = False) -> tuple[subprocess.Popen, Path]:
+    """``sena-warp batch`` of ``jobs`` video jobs (the rooftop clips) on 2 workers (or 2 CPUs of a local
+    Ray), as a process of its own."""
+    clips = bundled_dir / "video"
+    listing = tmp_path / "jobs.toml"
+    listing.write_text('[defaults]\nvideo_estimate_pairs = 1\nvideo_audio = "none"\nvideo_crf = 35\n' + "".join(
+        f'[[job]]\nname = "v{i}"\nleft = "{clips / "rooftop_left.mp4"}"\nright = "{clips / "rooftop_right.mp4"}"\n'
+        for i in range(jobs)))
+    out = tmp_path / "out"
+    code = "import sys; from sena_warp.cli import main; sys.exit(main(sys.argv[1:]))"
+    child = subprocess.Popen([sys.executable, "-c", code, "batch", str(listing), "--out", str(out), "--jobs", "2",
+                              *(["--ray", "local"] if ray else []), "--device", "cpu", "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             cwd=REPO)
+    return child, out
+
+
+def wait_for_a_job_writing(out: Path, child: subprocess.Popen, timeout_s: float = 120.0) -> None:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout_s:
+        with contextlib.suppress(OSError):
+            if any(p.name.startswith(".") and ".part" in p.name and p.stat().st_size for p in out.iterdir()):
+                return
+        assert child.poll() is None, child.communicate()
+        time.sleep(0.02)
+    raise AssertionError("no job was ever writing its output")
+
+
+def assert_nothing_half_done(out: Path, running: int) -> None:
+    """No temporary anywhere; each output there is a job complete with its ok report; no more of them than
+    jobs were running when the batch was stopped (none started after)."""
+    assert not [p for p in out.rglob(".*")], sorted(out.rglob("*"))
+    outputs = sorted(p.stem for p in out.glob("*.mp4"))
+    assert len(outputs) <= running, outputs
+    for name in outputs:
+        assert json.loads((out / REPORTS / f"{name}.json").read_text())["job"]["status"] == "ok"
+    assert sorted(p.stem for p in out.glob(f"{REPORTS}/*.json")) == outputs
+    assert not (out / SUMMARY).exists()
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT], ids=lambda s: s.name)  # SIGHUP: the same handler
+def test_a_signal_stops_the_batch_at_once_no_job_starts_and_nothing_is_left(signum, bundled_dir, tmp_path):
+    child, out = start_video_batch(bundled_dir, tmp_path)
+    wait_for_a_job_writing(out, child)
+    pids = child_processes(child.pid, "sena_warp.workers")
+    child.send_signal(signum)  # Ctrl-C reaches the batch alone: its workers run in sessions of their own
+    _, err = child.communicate(timeout=120)
+    assert child.returncode == 128 + signum
+    assert err.splitlines() == ["sena-warp: interrupted" + ("" if signum == signal.SIGINT else f" by {signum.name}")]
+    assert len(pids) == 2 and not any(alive(pid) for pid in pids)
+    assert_nothing_half_done(out, running=2)
+
+
+def test_workers_die_with_a_batch_killed_by_sigkill_and_leave_nothing(bundled_dir, tmp_path):
+    child, out = start_video_batch(bundled_dir, tmp_path)
+    wait_for_a_job_writing(out, child)
+    pids = child_processes(child.pid, "sena_warp.workers")
+    child.kill()
+    child.communicate()
+    t0 = time.monotonic()
+    while any(alive(pid) for pid in pids):
+        assert time.monotonic() - t0 < 60, "the workers outlived their parent"
+        time.sleep(0.05)
+    assert len(pids) == 2
+    assert_nothing_half_done(out, running=2)
+
+
+def test_no_more_local_workers_than_jobs_to_run(lst, tmp_path):
+    entries = read_jobs(job_list(tmp_path, [{**PAIR, "name": "one"}, {**PAIR, "name": "two"}]), tmp_path / "o", {})
+    name, runs = local_runner(1000)(entries)
+    runs.close()
+    assert name == "2 local workers"
+
+
+# --- Ray: an address that does not answer is one line at once; a signal stops the tasks like the workers ----
+
+def closed_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.mark.parametrize("address, why", [
+    ("127.0.0.1:{port}", "cannot reach 127.0.0.1:{port} (Connection refused)"),
+    ("ray://127.0.0.1:{port}", "cannot reach 127.0.0.1:{port} (Connection refused)"),
+    ("no-such-host.invalid", "cannot reach no-such-host.invalid:6379 ("),
+    ("ray://no-such-host.invalid", "cannot reach no-such-host.invalid:10001 ("),
+    ("host:port", "not a cluster address; give auto, local, HOST:PORT or ray://HOST:PORT"),
+])
+def test_a_ray_address_that_does_not_answer_is_one_line_before_ray_starts(address, why, lst, tmp_path, capfd,
+                                                                          warp_device, monkeypatch):
+    pytest.importorskip("ray", reason="the cluster extra (ray) is not installed")
+    import ray
+
+    monkeypatch.setattr(ray, "init", lambda *a, **k: pytest.fail("ray.init ran for an address that does not answer"))
+    port = closed_port()
+    address, why = address.format(port=port), why.format(port=port)
+    rc, stdout, err = batch([job_list(tmp_path, [PAIR]), "--out", tmp_path / "out", "--ray", address, "-q"], capfd,
+                            warp_device)
+    assert rc == InputError.exit_code and stdout == []
+    assert_one_line_error(err, f"--ray {address}: {why}")
+    assert not (tmp_path / "out").exists()
+
+
+def test_ray_connect_timeout_is_said_in_seconds(monkeypatch):
+    import sena_warp.batch as batch_module
+
+    def silent(*args, **kwargs):
+        raise socket.timeout("timed out")  # what a host that drops the connection gives after the timeout
+
+    monkeypatch.setattr(socket, "create_connection", silent)
+    with pytest.raises(InputError, match=r"--ray 192.0.2.1:6379: cannot reach 192.0.2.1:6379 \(no answer in 5 s\)"):
+        batch_module.check_reachable("192.0.2.1:6379")
+
+
+def test_a_signal_stops_a_ray_local_batch_one_line_nothing_left(bundled_dir, tmp_path):
+    pytest.importorskip("ray", reason="the cluster extra (ray) is not installed")
+    child, out = start_video_batch(bundled_dir, tmp_path, ray=True)
+    wait_for_a_job_writing(out, child, timeout_s=300)
+    child.send_signal(signal.SIGTERM)
+    _, err = child.communicate(timeout=120)
+    assert child.returncode == 143 and err.splitlines() == ["sena-warp: interrupted by SIGTERM"]
+    assert_nothing_half_done(out, running=2)
+
+
+def test_dir_inside_the_pair_folders_is_not_taken_for_a_pair_folder(bundled_dir, tmp_path):
+    root = tmp_path / "jobs"
+    shutil.copytree(bundled_dir / PAIRS[0], root / "one")
+    (root / "out").mkdir()
+    for name in ("one.png", "two.png"):  # what an earlier run to --out jobs/out left there
+        shutil.copy(bundled_dir / PAIRS[0] / "a.jpg", root / "out" / name)
+    assert [(e.name, e.error) for e in read_jobs(root, root / "out", {})] == [("one", None)]
 
 
 def test_a_folder_s_jobs_take_the_command_line_s_job_options(bundled_dir, tmp_path, capfd, warp_device):

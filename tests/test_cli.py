@@ -1,6 +1,8 @@
 import json
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import cv2
 import pytest
@@ -81,6 +83,57 @@ def test_unknown_output_type_is_refused_before_work(pair, tmp_path, capsys):
     assert main(["image", *pair, "-o", str(tmp_path / "p.gif")]) == 2  # a bad option, like any other
     assert "unsupported output type" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+# --- the standard streams: a stdout that cannot take the results, a closed stderr, names with newlines ---
+
+REPO = Path(__file__).resolve().parents[1]
+RUN = "import sys; from sena_warp.cli import main; sys.exit(main(sys.argv[1:]))"
+
+
+def run(argv, **streams) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", RUN, *map(str, argv), "--device", "cpu"], cwd=REPO, text=True,
+                          **{"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, **streams})
+
+
+@pytest.mark.parametrize("command", ["image", "match", "config"])
+def test_a_stdout_that_cannot_take_the_results_is_one_line_exit_6(command, pair, tmp_path):
+    argv = {"image": ["image", *pair, "-o", tmp_path / "p.png", "-q"], "match": ["match", *pair, "-q"],
+            "config": ["config"]}[command]
+    if command == "image":
+        argv.remove("-q")  # the summary line is what goes to stdout
+    with open("/dev/full", "w") as full:
+        done = run(argv, stdout=full)
+    lines = [line for line in done.stderr.splitlines() if ": error: " in line or "Traceback" in line
+             or "Exception" in line]
+    assert done.returncode == 6, done.stderr
+    assert lines == ["sena-warp: error: stdout: cannot write the results (No space left on device)"]
+    if command == "image":  # the panorama was committed before the summary line
+        assert cv2.imread(str(tmp_path / "p.png")) is not None
+
+
+def closed_stderr():
+    os.close(2)
+
+
+def test_with_stderr_closed_a_run_succeeds_and_no_output_holds_its_messages(pair, tmp_path):
+    done = run(["image", *pair, "-o", tmp_path / "p.png", "--report", tmp_path / "r.json"], stderr=None,
+               preexec_fn=closed_stderr)
+    assert done.returncode == 0 and done.stdout.startswith(f"{tmp_path / 'p.png'}: ")
+    assert cv2.imread(str(tmp_path / "p.png")) is not None and json.loads((tmp_path / "r.json").read_text())
+    failed = run(["image", pair[0], tmp_path / "missing.jpg", "-o", tmp_path / "q.png"], stderr=None,
+                 preexec_fn=closed_stderr)
+    assert failed.returncode == 2 and not (tmp_path / "q.png").exists()
+
+
+@pytest.mark.parametrize("name", ["new\nline.jpg", "carriage\rreturn.jpg", "tab\there.jpg", "esc\x1b[2Jape.jpg"])
+def test_a_name_with_control_characters_stays_on_one_stderr_line(name, pair, tmp_path, capfd):
+    missing = tmp_path / name
+    capfd.readouterr()
+    assert main(["image", pair[0], str(missing), "-o", str(tmp_path / "p.png"), "-q", "--device", "cpu"]) == 2
+    err = capfd.readouterr().err
+    assert err.count("\n") == 1 and "\r" not in err and "\x1b" not in err
+    assert err == f"sena-warp: error: {str(missing).encode('unicode_escape').decode()}: file not found\n"
 
 
 def test_python_m_sena_warp_is_the_command(tmp_path):

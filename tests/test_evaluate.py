@@ -125,7 +125,8 @@ def test_pair_folders_accepts_one_pair_and_refuses_folders_without_pairs(bundled
 
 
 @pytest.mark.parametrize("argv, code, message", [
-    (lambda d: [d / "missing", "--out", d / "o"], 2, "not a folder"),
+    (lambda d: [d / "missing", "--out", d / "o"], 2, "missing: file not found"),
+    (lambda d: (d / "file.txt").write_text("x") and [d / "file.txt", "--out", d / "o"], 2, "not a folder"),
     (lambda d: [d, "--out", d / "o"], 2, "no pair folders"),
 ])
 def test_cli_errors_are_one_line(tmp_path, capfd, warp_device, argv, code, message):

@@ -4,7 +4,9 @@ in test_robustness_outputs.py).
 
 from __future__ import annotations
 
+import errno
 import os
+import stat
 import subprocess
 import sys
 
@@ -163,3 +165,136 @@ def test_stale_temporaries_of_gone_processes_are_removed_and_live_ones_kept(tmp_
     finally:
         live.kill()
         live.wait()
+
+
+def make_special(path, kind: str) -> None:
+    """A FIFO, a Unix socket or a character device (like /dev/null: root only) at ``path``."""
+    if kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "socket":
+        import socket
+
+        with socket.socket(socket.AF_UNIX) as sock:
+            sock.bind(str(path))
+    else:
+        if os.geteuid() != 0:
+            pytest.skip("making a device node needs root")
+        os.mknod(path, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
+
+
+@pytest.mark.parametrize("kind", ["fifo", "socket", "device"])
+@pytest.mark.parametrize("overwrite", ["refuse", "overwrite", "skip"])
+@pytest.mark.parametrize("folder, link", [(False, False), (True, False), (False, True)],
+                         ids=["file", "folder", "link-to-it"])
+def test_a_device_fifo_or_socket_is_never_an_output_even_with_y(tmp_path, kind, overwrite, folder, link):
+    special = tmp_path / "special"
+    make_special(special, kind)
+    name = special
+    if link:
+        name = tmp_path / "link"
+        name.symlink_to(special)
+    before = sorted((p.name, p.lstat().st_mode) for p in tmp_path.iterdir())
+    with pytest.raises(OutputError, match="names a device, FIFO or socket, not a file; choose another name"):
+        plan_of(tmp_path, (name.name, "--report", folder), overwrite=overwrite).check()
+    assert sorted((p.name, p.lstat().st_mode) for p in tmp_path.iterdir()) == before
+
+
+def test_a_device_made_while_the_command_ran_is_not_replaced_with_y(tmp_path):
+    plan = plan_of(tmp_path, ("r.json", "--report", False), overwrite="overwrite")
+    plan.check()
+    with pytest.raises(OutputError, match="names a device, FIFO or socket"):
+        with plan, plan.writing(tmp_path / "r.json") as tmp:
+            tmp.write_text("{}")
+            os.mkfifo(tmp_path / "r.json")
+    assert stat.S_ISFIFO((tmp_path / "r.json").lstat().st_mode) and sorted(os.listdir(tmp_path)) == ["r.json"]
+
+
+def write_all(plan, tmp_path, appear=None):
+    """Write every output of ``plan`` (a file or a folder with one file); ``appear()`` runs just before
+    the commit, as another process would."""
+    with plan:
+        for out in plan.outputs:
+            with plan.writing(out.path) as tmp:
+                (tmp / "01.jpg" if out.folder else tmp).write_bytes(b"new")
+        if appear is not None:
+            appear()
+
+
+OUTS = [("p.png", "-o", False), ("r.json", "--report", False), ("dbg", "--debug", True)]
+
+
+@pytest.mark.parametrize("overwrite", ["refuse", "skip"])
+@pytest.mark.parametrize("taken, made", [("p.png", "file"), ("r.json", "file"), ("r.json", "link"),
+                                         ("dbg", "file"), ("dbg", "folder")])
+@pytest.mark.parametrize("hard_links", [True, False], ids=["links", "no-hard-links"])
+def test_an_output_that_appears_while_the_command_runs_is_never_replaced_without_y(
+        tmp_path, monkeypatch, overwrite, taken, made, hard_links):
+    if not hard_links:  # a file system without link(2): FAT, some network mounts
+        def no_link(*args, **kwargs):
+            raise OSError(errno.EPERM, "Operation not permitted")
+        monkeypatch.setattr(os, "link", no_link)
+
+    def appear():  # another run to the same output, or a user's file
+        path = tmp_path / taken
+        if made == "folder":
+            path.mkdir()
+            (path / "mine.txt").write_text("mine")
+        elif made == "link":
+            path.symlink_to(tmp_path / "nowhere")
+        else:
+            path.write_text("mine")
+
+    plan = plan_of(tmp_path, *OUTS, overwrite=overwrite)
+    assert plan.check() == []
+    with pytest.raises(OutputError, match=f"{taken}: appeared while this run was writing .*nothing written, "
+                                          f"add -y to replace it"):
+        write_all(plan, tmp_path, appear)
+    assert sorted(os.listdir(tmp_path)) == [taken]  # the outputs committed before it are taken back
+    path = tmp_path / taken
+    if made == "folder":
+        assert os.listdir(path) == ["mine.txt"]
+    elif made == "link":
+        assert os.readlink(path) == str(tmp_path / "nowhere")
+    else:
+        assert path.read_text() == "mine"
+
+
+@pytest.mark.parametrize("hard_links", [True, False], ids=["links", "no-hard-links"])
+def test_outputs_are_committed_without_y_when_their_names_are_free(tmp_path, monkeypatch, hard_links):
+    if not hard_links:
+        monkeypatch.setattr(os, "link", lambda *a, **k: (_ for _ in ()).throw(OSError(errno.EOPNOTSUPP, "no")))
+    (tmp_path / "dbg").mkdir()  # an empty folder is not an existing output
+    write_all(plan_of(tmp_path, *OUTS), tmp_path)
+    assert sorted(os.listdir(tmp_path)) == ["dbg", "p.png", "r.json"]
+    assert (tmp_path / "p.png").read_bytes() == b"new" and (tmp_path / "dbg" / "01.jpg").read_bytes() == b"new"
+    assert (tmp_path / "r.json").stat().st_nlink == 1 and (tmp_path / "p.png").stat().st_mode & 0o777 == (
+        0o666 & ~outputs._UMASK)
+
+
+def test_with_y_an_output_that_appears_while_the_command_runs_is_replaced(tmp_path):
+    write_all(plan_of(tmp_path, *OUTS, overwrite="overwrite"), tmp_path,
+              lambda: (tmp_path / "p.png").write_text("mine"))
+    assert (tmp_path / "p.png").read_bytes() == b"new"
+
+
+def test_a_link_to_nowhere_is_an_existing_output(tmp_path):
+    (tmp_path / "p.png").symlink_to(tmp_path / "gone.png")
+    with pytest.raises(OutputError, match="p.png: exists; add -y"):
+        plan_of(tmp_path, ("p.png", "-o", False)).check()
+
+
+@pytest.mark.parametrize("name, folder", [("p" * 252 + ".png", False), ("d" * 256, True),
+                                          ("é" * 128 + ".png", False), ("d" * 300 + "/p.png", False)],
+                         ids=["file-256", "folder-256", "utf8-260", "parent-300"])
+def test_a_name_longer_than_the_file_system_allows_is_refused(tmp_path, name, folder):
+    with pytest.raises(OutputError, match=r"has a name of \d+ bytes, longer than the 255 this file system allows"):
+        plan_of(tmp_path, (name, "-o", folder)).check()
+    with pytest.raises(OutputError, match="longer than the 255"):
+        make_folder(tmp_path / name, "--out")
+    assert os.listdir(tmp_path) == []
+
+
+def test_a_path_the_file_system_cannot_look_up_is_one_error(tmp_path):
+    (tmp_path / "loop").symlink_to(tmp_path / "loop")
+    with pytest.raises(OutputError, match=r"loop/p.png: -o cannot be used \(Too many levels of symbolic links\)"):
+        plan_of(tmp_path, ("loop/p.png", "-o", False)).check()

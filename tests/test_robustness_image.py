@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 
 import cv2
 import numpy as np
@@ -368,3 +369,13 @@ def test_two_unrelated_noise_images_are_refused_like_unrelated_photos(kind, dirs
     assert rc == MatchError.exit_code
     assert_one_line_error(err, "check that the images overlap")
     assert list(folder_out.iterdir()) == [] and [p.read_bytes() for p in paths] == before
+
+
+@pytest.mark.parametrize("width, height, shown", [
+    (640, 480, "640x480 px (0.307 MP)"), (100, 100, "100x100 px (0.01 MP)"), (25000, 25000, "25000x25000 px (625 MP)"),
+    (40000, 40000, "40000x40000 px (1600 MP)")])
+def test_a_size_refusal_shows_the_megapixels_never_as_0(width, height, shown):
+    from sena_warp.imageio import check_size
+
+    with pytest.raises(InputError, match=re.escape(shown)):
+        check_size("x.png", width, height, 0.001)

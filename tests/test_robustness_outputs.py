@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import errno
 import hashlib
+import importlib
 import os
+import stat
 import resource
 import shutil
 import signal
@@ -18,12 +20,13 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
 import pytest
 
 from sena_warp import imageio, outputs
 from sena_warp.errors import InputError, OutputError
 from sena_warp.video import reader as video_reader
-from helpers import assert_one_line_error, run_cli
+from helpers import assert_one_line_error, decoded_frames, run_cli
 
 FAST_VIDEO = ["--audio", "none", "--crf", "35"]
 REPO = Path(__file__).resolve().parents[1]
@@ -91,12 +94,12 @@ def default_outputs(command: str, folder_out: Path) -> dict[str, Path]:
 
 def run_refused(command, outs, ins, folder_out, capfd, warp_device, code, *words, extra=()):
     """Run a command that must be refused; check the code, the one line, nothing left, inputs unchanged."""
-    before_out, before_in = tree(folder_out), digest(p for p in ins if p.is_file())
+    before_out, before_in = tree(folder_out), digest(p for p in ins if os.path.isfile(p))
     rc, err, _ = run_cli([*argv_for(command, ins, outs), *extra], capfd, warp_device)
     assert rc == code, err
     assert_one_line_error(err, *words)
     assert tree(folder_out) == before_out
-    assert digest(p for p in ins if p.is_file()) == before_in
+    assert digest(p for p in ins if os.path.isfile(p)) == before_in
 
 
 # --- 1. outputs colliding with inputs and with each other: exit 6, before any work -------------------
@@ -191,6 +194,61 @@ def test_y_replaces_every_existing_output(command, inputs, dirs, capfd, warp_dev
         else:
             assert outs[option].read_bytes() != b"old"
     assert not [p for p in folder_out.rglob(".*")]  # no temporary left
+
+
+# --- 2: a device, FIFO or socket is never an output, not even with -y ------------------------------------
+
+@pytest.mark.parametrize("command, option", EXISTING, ids="-".join)
+def test_a_fifo_output_is_refused_even_with_y(command, option, inputs, dirs, capfd, warp_device, no_work):
+    _, folder_out = dirs
+    outs = default_outputs(command, folder_out)
+    os.mkfifo(outs[option])
+    run_refused(command, outs, inputs[command], folder_out, capfd, warp_device, OutputError.exit_code,
+                f"{outs[option]}: {option} names a device, FIFO or socket, not a file", extra=["-y"])
+    assert stat.S_ISFIFO(outs[option].lstat().st_mode)
+
+
+# --- 3: an output that appears while the command works is not replaced without -y -------------------------
+
+WORK = {"image": ("sena_warp.stitch", "stitch_images"), "video": ("sena_warp.video.stitch", "stitch_videos"),
+        "match": ("sena_warp.features", "match_images"), "eval": ("sena_warp.evaluation.evaluate", "run_eval")}
+
+
+@pytest.mark.parametrize("command, option", EXISTING, ids="-".join)
+@pytest.mark.parametrize("overwrite", [[], ["-n"]], ids=["refuse", "-n"])
+def test_an_output_that_appears_while_the_command_works_is_kept_exit_6(command, option, overwrite, inputs, dirs,
+                                                                       capfd, warp_device, monkeypatch):
+    _, folder_out = dirs
+    outs = default_outputs(command, folder_out)
+    module, name = importlib.import_module(WORK[command][0]), WORK[command][1]
+    work = getattr(module, name)
+
+    def appear_then_work(*args, **kwargs):  # another run, or a user, takes the name meanwhile
+        make_existing(outs[option], COMMANDS[command]["outputs"][option][1])
+        return work(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, appear_then_work)
+    before_in = digest(inputs[command][:2] if command != "eval" else [])
+    rc, err, _ = run_cli([*argv_for(command, inputs[command], outs), *overwrite], capfd, warp_device)
+    assert rc == OutputError.exit_code, err
+    assert_one_line_error(err, f"{outs[option]}: appeared while this run was writing {option}",
+                          "nothing written, add -y to replace it")
+    assert tree(folder_out) == (sorted([outs[option].name, f"{outs[option].name}/old.txt"])
+                                if COMMANDS[command]["outputs"][option][1] else [outs[option].name])
+    assert (outs[option] / "old.txt" if COMMANDS[command]["outputs"][option][1] else outs[option]).read_bytes() == b"old"
+    assert digest(inputs[command][:2] if command != "eval" else []) == before_in
+
+
+def test_two_runs_to_one_output_one_wins_the_other_exits_6(inputs, dirs):
+    _, folder_out = dirs
+    runs = [start_video(inputs["video"], folder_out / "pano.mp4") for _ in range(2)]
+    results = sorted((run.wait(timeout=300), run.communicate()[1]) for run in runs)
+    assert [code for code, _ in results] == [0, OutputError.exit_code], results
+    err = results[1][1].splitlines()
+    assert len(err) == 1 and err[0].startswith(f"sena-warp: error: {folder_out / 'pano.mp4'}: ") and (
+        "appeared while this run was writing -o" in err[0] or "exists; add -y" in err[0]), err
+    assert os.listdir(folder_out) == ["pano.mp4"] and len(decoded_frames(folder_out / "pano.mp4")) == len(
+        decoded_frames(inputs["video"][0]))
 
 
 # --- 16: one folder rule: an output's folder must exist; an output folder itself is made ---------------
@@ -300,6 +358,9 @@ OUT_OF_MEMORY = {
     "warp": ("sena_warp.stitch", "source_map_canvas",
              lambda: RuntimeError("Failed to allocate 166831664 bytes on device 'cpu'")),
     "onnxruntime": ("sena_warp.features", "detect_xfeat", _onnxruntime_out_of_memory),
+    "opencv": ("sena_warp.stitch", "field_from_lattice", lambda: cv2.error(
+        "OpenCV(5.1.0) /io/opencv/modules/core/src/alloc.cpp:73: error: (-4:Insufficient memory) Failed to allocate "
+        "33922016 bytes in function 'OutOfMemoryError'")),
 }
 
 
@@ -328,6 +389,7 @@ def test_only_a_failed_allocation_reads_as_out_of_memory_and_a_batch_job_records
     assert out_of_memory(RuntimeError("index 3 is out of bounds")) is None  # a bug stays a bug, with its traceback
     assert out_of_memory(ValueError("Failed to allocate")) is None
     assert out_of_memory(_onnxruntime_out_of_memory()).exit_code == 1
+    assert out_of_memory(cv2.error("(-215:Assertion failed) !ssize.empty()")) is None
     monkeypatch.setattr(batch, "run_job", lambda job: (_ for _ in ()).throw(RuntimeError("Failed to allocate 8 bytes")))
     entry = batch.Entry("pair", Job("image", ("a.jpg", "b.jpg"), str(tmp_path / "p.png")), str(tmp_path / "r.json"))
     result = batch.run_entry(entry)
@@ -393,3 +455,40 @@ def test_an_output_name_of_244_characters_is_written(inputs, dirs, capfd, warp_d
 
 def test_outputs_module_names_fit_the_file_system(tmp_path):
     assert os.pathconf(tmp_path, "PC_NAME_MAX") >= outputs.NAME_MAX_BYTES
+
+
+# --- 9: names longer than the file system allows: one line, exit 2 for an input, 6 for an output ---------
+
+LONG = "n" * 300
+LONG_OUTPUTS = [(command, option, how) for command, spec in COMMANDS.items() for option in spec["outputs"]
+                for how in ("name", "folder")] + [("batch", "--out", "name"), ("batch", "--out", "folder")]
+
+
+@pytest.mark.parametrize("command, option, how", LONG_OUTPUTS, ids=lambda v: str(v))
+def test_an_output_name_longer_than_the_file_system_allows_is_refused_before_work(
+        command, option, how, inputs, dirs, capfd, warp_device, no_work):
+    _, folder_out = dirs
+    ins = inputs["eval" if command == "batch" else command]
+    outs = default_outputs(command, folder_out) if command in COMMANDS else {"--out": folder_out / "b"}
+    name = outs[option].name
+    outs[option] = folder_out / (LONG + Path(name).suffix) if how == "name" else folder_out / LONG / name
+    run_refused(command, outs, ins, folder_out, capfd, warp_device, OutputError.exit_code,
+                f"{option} has a name of 30", "bytes, longer than the 255 this file system allows")
+
+
+LONG_INPUTS = [(command, 0) for command in COMMANDS] + [("video", 1), ("batch", 0), ("image", "--config")]
+
+
+@pytest.mark.parametrize("command, where", LONG_INPUTS, ids=lambda v: str(v))
+def test_an_input_name_longer_than_the_file_system_allows_is_one_line_exit_2(command, where, inputs, dirs, capfd,
+                                                                            warp_device):
+    folder_in, folder_out = dirs
+    ins = list(inputs["eval" if command == "batch" else command])
+    outs = default_outputs(command, folder_out) if command in COMMANDS else {"--out": folder_out / "b"}
+    extra = []
+    if where == "--config":
+        extra = ["--config", folder_in / (LONG + ".toml")]
+    else:
+        ins[where] = folder_in / (LONG + ins[where].suffix)
+    run_refused(command, outs, ins, folder_out, capfd, warp_device, InputError.exit_code, "File name too long",
+                extra=extra)

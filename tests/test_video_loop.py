@@ -24,7 +24,7 @@ from sena_warp.video.loop import VideoOptions, run_video
 from sena_warp.video.pairing import pair_times
 from sena_warp.video.reader import FrameReader, YuvFrame, probe_video
 from sena_warp.video.writer import VideoWriter, choose_codec
-from helpers import decoded_frames, stream_spans
+from helpers import decoded_frames, shortened, stream_spans, without_key_frames
 
 
 class SideBySide:
@@ -369,6 +369,30 @@ def test_variable_frame_rate_keeps_the_input_frame_times(clips, tmp_path):
     assert np.abs(np.array(out_ms) - (np.array(in_ms) - in_ms[0])).max() < 0.5
     assert report["dropped"] == report["repeated"] == 0
     assert any("variable frame rate" in note and "20 to 50 ms" in note for note in report["notes"])
+
+
+@pytest.mark.parametrize("case", ["right ends first", "right starts later"])
+def test_left_frames_without_a_right_frame_are_said_not_dropped_silently(clips, tmp_path, caplog, case):
+    if case == "right ends first":  # as futsal_night_static: 245 left frames, 239 right
+        right, options, count, where = shortened(clips / "rooftop_right.mp4", tmp_path / "r.mp4", 51), QUIET, 9, "last"
+    else:
+        right, options, count, where = clips / "rooftop_right.mp4", VideoOptions(offset_s=0.2), 6, "first"
+    with caplog.at_level(logging.WARNING, logger="sena_warp"):
+        report = run_video(clips / "rooftop_left.mp4", right, tmp_path / "o.mp4", SideBySide, options)
+    said = (f"the right input {'ends before' if where == 'last' else 'starts after'} the left one: the {where} "
+            f"{count} left frames have no right frame and are not in the output")
+    assert report["frames_out"] == 60 - count and said in report["notes"]
+    assert [r.getMessage() for r in caplog.records].count(said) == 1
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_a_video_without_key_frames_is_named_not_blamed_on_the_offset(clips, tmp_path, side):
+    broken = without_key_frames(clips / f"rooftop_{side}.mp4", tmp_path / "cut.mp4")
+    inputs = {"left": clips / "rooftop_left.mp4", "right": clips / "rooftop_right.mp4", side: broken}
+    with pytest.raises(VideoError, match=f"{broken}: no frame could be decoded: it holds no key frame") as caught:
+        run_video(inputs["left"], inputs["right"], tmp_path / "o.mp4", SideBySide, QUIET)
+    assert "offset" not in str(caught.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cut.mp4"]
 
 
 def test_a_trimmed_span_keeps_its_frames_their_pairs_and_its_audio(clips, tmp_path):

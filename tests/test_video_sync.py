@@ -168,7 +168,10 @@ def test_cli_auto_prints_the_estimate_and_reports_it(rooftop, tmp_path, dirs, ca
     out, report = dirs[1] / "pano.mp4", dirs[1] / "report.json"
     rc, err, _ = run_cli(["video", cut.left, cut.right, "-o", out, "--offset", "auto", "--report", report],
                          capfd, warp_device)
-    assert rc == 0 and len(err) == 1 and err[0].startswith("sena-warp: offset auto: audio, +500.")
+    assert rc == 0 and len(err) == 2 and err[0].startswith("sena-warp: offset auto: audio, +500.")
+    # The right input started 0.5 s later: the first left frames have no partner, and that is said.
+    assert err[1].startswith("sena-warp: warning: the right input starts after the left one: the first ") and \
+        err[1].endswith(" left frames have no right frame and are not in the output")
     sync = json.loads(report.read_text())["sync"]
     assert sync["method"] == "audio" and abs(sync["offset_ms"] - 500.0) < AUDIO_TOL_S * 1000
     assert sync["confidence"] > Config().sync_min_confidence and sync["span_s"]["left"] > 3.0

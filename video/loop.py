@@ -219,9 +219,13 @@ def _paired(left, right, infos: dict[str, VideoInfo], options: VideoOptions, sta
                         options.strict, span_of(options.start_s, options.end_s, period_r)) as reader_r:
         pairs = pair_by_time(reader_l, reader_r, period_r, attrgetter("time_s"), stats)
         first = next(pairs, None)
+        trimmed = f" between --ss {options.start_s:g} s and --to {options.end_s:g} s" if options.end_s else (
+            f" from --ss {options.start_s:g} s on" if options.start_s else "")
+        undecoded = [path for path, reader in ((left, reader_l), (right, reader_r)) if not reader.decoded + reader.damaged]
+        if first is None and undecoded and not trimmed:
+            raise VideoError(f"{undecoded[0]}: no frame could be decoded: it holds no key frame (as a piece cut out of a "
+                             f"longer stream may not); re-encode it")
         if first is None:
-            trimmed = f" between --ss {options.start_s:g} s and --to {options.end_s:g} s" if options.end_s else (
-                f" from --ss {options.start_s:g} s on" if options.start_s else "")
             raise VideoError(f"{left} and {right}: no frames overlap in time{trimmed} with offset "
                              f"{options.offset_s} s; check --offset{', --ss and --to' if trimmed else ''}")
         yield (reader_l, reader_r), first, pairs
@@ -315,8 +319,14 @@ def _note(notes: list[str], text: str) -> None:
 
 
 def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], stats: PairingStats) -> list[str]:
-    """What the report's reader should know about the inputs: rates that differ or vary, rotations."""
+    """What the report's reader should know about the inputs: left frames with no right frame (left
+    out of the output), rates that differ or vary, rotations."""
     notes = []
+    for count, where in ((stats.unpaired_ticks_start, "first"), (stats.leftover_ticks, "last")):
+        if count:
+            side = "starts after" if where == "first" else "ends before"
+            notes.append(f"the right input {side} the left one: the {where} {count} left frames have no right "
+                         f"frame and are not in the output")
     rate_l, rate_r = infos["left"].fps, infos["right"].fps
     if rate_l != rate_r:
         notes.append(f"frame rates differ (left {float(rate_l):g} fps, right {float(rate_r):g} fps): frames paired "
@@ -346,9 +356,10 @@ def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]
                              "each replaced by the last good frame (--strict fails instead)"))
         if reader.out_of_order:
             last_s, time_s = reader.out_of_order_at
-            problems.append((f"{side} input has {reader.out_of_order} frames whose time stamps go back or repeat "
-                             f"(the first: {float(time_s):.3f} s after {float(last_s):.3f} s)",
-                             "they were dropped (--strict fails instead)"))
+            frames = "1 frame whose time stamp goes back or repeats" if reader.out_of_order == 1 else \
+                f"{reader.out_of_order} frames whose time stamps go back or repeat"
+            problems.append((f"{side} input has {frames} (the first: {float(time_s):.3f} s after "
+                             f"{float(last_s):.3f} s)", "dropped (--strict fails instead)"))
         if reader.rescaled:
             (width, height), time_s = reader.rescaled_from
             problems.append((f"{side} input changes resolution from {reader.size[0]}x{reader.size[1]} to "

@@ -32,6 +32,7 @@ import argparse
 import csv
 import math
 import os
+import stat
 import sys
 import time
 import traceback
@@ -44,7 +45,7 @@ import numpy as np
 from sena_warp.config import Config
 from sena_warp.errors import InputError, StitchError
 from sena_warp.features import match_images
-from sena_warp.imageio import read_image, write_image
+from sena_warp.imageio import input_stat, read_image, write_image
 from sena_warp.kernels.runtime import resolve_config
 from sena_warp.outputs import OutputPlan, atomic_output, staged
 from sena_warp.progress import Count, echo
@@ -143,7 +144,7 @@ def pair_folders(data_dir: str | os.PathLike) -> list[Path]:
     """The pair folders of ``data_dir`` (each with an ``a.*`` or a ``b.*`` image: one lacking the other
     is evaluated as failed), sorted; the folder itself when it is one. InputError when there is none."""
     data_dir = Path(data_dir)
-    if not data_dir.is_dir():
+    if not stat.S_ISDIR(input_stat(data_dir).st_mode):
         raise InputError(f"{data_dir}: not a folder; give a folder of pair folders (each with a.* and b.*)")
 
     def is_pair(folder: Path) -> bool:
