@@ -421,7 +421,7 @@ def natural_markdown(pairs: list[str], table: dict) -> list[str]:
 
 
 def dense_markdown(pairs: list[str], table: dict) -> list[str]:
-    """The summary's issue-35 section: the dense figures per SENA run over all pairs, then each pair."""
+    """The summary's dense-figures section: per SENA run over all pairs, then each pair."""
     lines = ["", "## Dense figures", "",
              "Misalignment: optical flow between the views as the panorama shows them, at textured pixels within "
              "T/2 of the seam and near the borders where the views switch beyond it (px, median / 95th percentile); "
