@@ -1,4 +1,4 @@
-"""Jobs per hour of ``sena-warp batch`` (issue 16): image pairs and short video pairs, on 1 and 2 local
+"""Jobs per hour of ``sena-warp batch``: image pairs and short video pairs, on 1 and 2 local
 worker processes and on a Ray started for the run.
 
 Usage: ``.venv/bin/python benchmarks/bench_batch.py [--images 20] [--videos 4] [--seconds 3]

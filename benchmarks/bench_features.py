@@ -1,4 +1,4 @@
-"""Feature benchmark (SENA.md step 0): XFeat (onnxruntime) vs SIFT over every shared pair.
+"""Feature benchmark (docs/method.md step 0): XFeat (onnxruntime) vs SIFT over every shared pair.
 
 Prints a Markdown table: pair, resolution, matches per detector, extraction time per image
 (``detect``: XFeat = resize + ONNX backbone + numpy post-processing; SIFT = OpenCV at native

@@ -1,4 +1,4 @@
-"""Accuracy of ``--offset auto`` on the shared recordings and on clips cut from them (issue 14).
+"""Accuracy of ``--offset auto`` on the shared recordings and on clips cut from them.
 
 Usage: ``.venv/bin/python benchmarks/bench_sync.py [--videos ../shared/data/videos] [--work sync_work]``
 (prints two Markdown tables; see ``sena_warp/evaluation/sync_bench.py``).

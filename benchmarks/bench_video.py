@@ -1,4 +1,4 @@
-"""Frame-rate benchmark of the video path (issue 6): ``sena-warp bench`` run from the source tree.
+"""Frame-rate benchmark of the video path: ``sena-warp bench`` run from the source tree.
 
 Usage: ``.venv/bin/python benchmarks/bench_video.py [--sizes 720p 1080p 4k] [--seconds N]
 [--markdown FILE] [--device cpu] [--work DIR] [--rss 10 60]`` (see ``sena-warp bench --help``).

@@ -1,4 +1,4 @@
-"""What issue 17's CPU targets cannot beat on this machine: the set-up's floor, the whole run's ceiling.
+"""What the CPU targets (docs/benchmarks.md) cannot beat on this machine: the set-up's floor, the whole run's ceiling.
 
 Usage (from the repository root)::
 
@@ -7,7 +7,7 @@ Usage (from the repository root)::
 Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p clip pair in ``--work``.
 Every figure leaves out work the real run does, so each is a bound the real run cannot beat.
 
-*Set-up floor* (issue 17: <= 0.8 s from process start to the first frame composited), the least of
+*Set-up floor* (target: <= 0.8 s from process start to the first frame composited), the least of
 ``--repeats`` tries of each part:
 - a new process that only imports what a first frame needs (numpy, OpenCV, onnxruntime, PyAV, the
   reader and XFeat's matching; then Warp, the video loop and the cached kernels): from its spawn
@@ -16,13 +16,13 @@ Every figure leaves out work the real run does, so each is a bound the real run 
 - XFeat's matching of that pair at the screening side (``video_screen_max_side``), the cheapest the
   estimate can use, with onnxruntime's session made by the first call as in a real run;
 - the rest of an estimate (steps 1-9 without the matching) on that pair made as small as the
-  screening's side, with its matches: issue 17's "estimate at a working resolution" at the least
+  screening's side, with its matches: an estimate at a working resolution at the least
   resolution the tool works at anywhere (the full-resolution maps it would then build are left out);
 - the first ``composite_yuv`` of a compositor already made (the estimate itself, the rest of the
   set-up, is left out).
 The floor is their sum; "Warp overlapped" counts the Warp imports as if they cost nothing.
 
-*Whole-run ceiling* (issue 17: whole process >= 0.9x the transcode on 5 s, >= 1.0x on 60 s), in process
+*Whole-run ceiling* (target: whole process >= 0.9x the transcode on 5 s, >= 1.0x on 60 s), in process
 CPU per frame pair over ``--frames`` pairs: decoding both inputs, encoding the stitched canvas (frames
 the compositor made), and the Y pass's sample-only floor (``frame_kernel_floor.py``: no seam, no
 blend, no UV pass). On 2 cores a run takes at least its CPU time / 2 of wall, so the stitch's
@@ -147,7 +147,8 @@ def main() -> int:
     start = time.process_time()
     stitched += [composited(pair) for pair in pairs[1:]]
     composite_ms = (time.process_time() - start) / max(1, len(pairs) - 1) * 1e3
-    y_floor = y_floor_ms(compositor, *pairs[-1], cfg, args.repeats * 5)
+    plan, luma, chroma = compositor.last_frame
+    y_floor = y_floor_ms(compositor, compositor.device.gains(plan, luma.gains, chroma.gains)[0], cfg, args.repeats * 5)
     compositor.close()
     side_by_side = SideBySide(iter(pairs))
     sbs = [side_by_side.composite_yuv(a.y, a.u, a.v, b.y, b.u, b.v) for a, b in pairs]
@@ -165,7 +166,7 @@ def main() -> int:
     floor_overlapped = imports + decode_first + match_cold + small_estimate + first_composite
     rows, cols = stitched[0][0].shape
     print(f"{args.left.name}: canvas {cols}x{rows}, {cores} cores")
-    print("set-up floor, process start to the first frame (issue 17: <= 0.8 s):")
+    print("set-up floor, process start to the first frame (target: <= 0.8 s):")
     print(f"  imports for a first frame: {imports:.3f} s; "
           f"with Warp, the loop and the cached kernels: {imports_warp:.3f} s")
     print(f"  first pair opened and decoded: {decode_first:.3f} s")
@@ -179,9 +180,9 @@ def main() -> int:
     print(f"  (the transcode's encode of {sbs[0][0].shape[1]}x{sbs[0][0].shape[0]}: {encode_sbs_ms:.1f} ms)")
     print(f"  stitch at most {stitch_fps_max:.1f} fps on {cores} cores; transcode {baseline['fps']:.1f} fps "
           f"({clip_frames} frames, whole run)")
-    print(f"  long run: whole / transcode <= {stitch_fps_max / baseline['fps']:.2f} (issue 17: >= 1.0)")
+    print(f"  long run: whole / transcode <= {stitch_fps_max / baseline['fps']:.2f} (target: >= 1.0)")
     short = baseline["seconds"] / (floor + clip_frames / stitch_fps_max)
-    print(f"  this clip with the set-up floor: whole / transcode <= {short:.2f} (issue 17: >= 0.9 on 5 s)")
+    print(f"  this clip with the set-up floor: whole / transcode <= {short:.2f} (target: >= 0.9 on 5 s)")
     today_fps = cores * 1e3 / (decode_ms + encode_canvas_ms + composite_ms)
     print(f"  with today's composite_yuv ({composite_ms:.1f} ms, frames 1-{len(pairs) - 1}): stitch at most "
           f"{today_fps:.1f} fps, whole / transcode <= {today_fps / baseline['fps']:.2f}")

@@ -1,4 +1,4 @@
-"""The crossing measurement of issue 14: which frames show the crossing object twice or cut.
+"""The crossing measurement: which frames show the crossing object twice or cut.
 
 Usage (from the repository root)::
 

@@ -1,4 +1,4 @@
-"""Seam evaluation (issue 4, SENA.md "Measuring: Seam"): every shared pair in both input orders.
+"""Seam evaluation (steps 7-9, ``docs/evaluation.md``): every shared pair in both input orders.
 
 For each pair folder (``a.*``, ``b.*``) and each input order (a, b) and (b, a), runs
 ``stitch_images`` with the default Config and measures, in the pipeline's working frame:
@@ -45,8 +45,8 @@ from sena_warp.stitch import Panorama, stitch_images
 
 REPO = Path(__file__).resolve().parents[1]
 ORDERS = ("ab", "ba")
-TARGET_RESIDUAL_PX = 1.5  # issue 4: median anchor residual at most this
-TARGET_SEAM_WINS = 14  # issue 4: seam MAD below feather MAD on at least this many pairs
+TARGET_RESIDUAL_PX = 1.5  # target: median anchor residual at most this
+TARGET_SEAM_WINS = 14  # target: seam MAD below feather MAD on at least this many pairs
 THUMB_WH = (400, 260)  # contact-sheet thumbnail box (px)
 SHEET_COLUMNS = 4
 SHEET_JPEG_QUALITY = 82
@@ -108,7 +108,7 @@ def table_line(row: Row) -> str:
 
 
 def summary_lines(rows: list[Row]) -> list[str]:
-    """Summary of the issue-4 targets over all rows."""
+    """Summary of the seam targets over all rows."""
     done = [r for r in rows if r.figures is not None]
     pairs = sorted({r.pair for r in rows})
     residuals = np.array([r.figures.anchor_residual_px for r in done])

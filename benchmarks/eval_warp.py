@@ -1,4 +1,4 @@
-"""Warp alignment benchmark (issue 3): SENA warp vs the global affine vs a SIFT+RANSAC homography.
+"""Warp alignment benchmark: SENA warp vs the global affine vs a SIFT+RANSAC homography.
 
 For every pair of ``--data`` (folders holding ``a.*`` and ``b.*``), with the default ``Config``
 (XFeat): match, detect the rig (source = left), run SENA steps 1-6 (``estimate_warp``) and measure
@@ -6,7 +6,7 @@ overlap PSNR/SSIM (UDIS-D protocol, ``sena_warp.evaluation.metrics``) in the TAR
 canvas maps are cropped to the target rectangle at the canvas's integer offset and the warped
 source is compared with the target there (``sena_warp.evaluation.alignment``), for
 
-- SENA: the guarded source map ``M_s`` (SENA.md step 6),
+- SENA: the guarded source map ``M_s`` (docs/method.md step 6),
 - affine: ``A_glob`` alone (``source_map_canvas`` with a zero field),
 - homography: OpenCV SIFT matches, ``cv2.findHomography`` RANSAC 3 px, source warped into the target
   frame with ``cv2.warpPerspective`` (valid where a warped image of ones is 1), same rig orientation.
@@ -77,7 +77,7 @@ def finite_mean(values) -> float:
 
 
 def summary(rows: list[PairFigures], n_pairs: int) -> dict[str, float]:
-    """Issue 3 targets: SENA wins over the affine, mean gain, mean PSNR / SSIM of the three warps."""
+    """The targets: SENA wins over the affine, mean gain, mean PSNR / SSIM of the three warps."""
     return {
         "wins": sum(r.gain_db > 0 for r in rows),
         "pairs": n_pairs,

@@ -1,4 +1,4 @@
-"""How far the per-frame Y pass is from a kernel that only samples (issue 17's per-frame CPU budget).
+"""How far the per-frame Y pass is from a kernel that only samples (the per-frame CPU target, docs/benchmarks.md).
 
 Usage (from the repository root)::
 
@@ -11,15 +11,16 @@ over the first ``--frames`` pairs, in order: process CPU time per frame after th
 the last pair's plan and planes, the process CPU time per call (mean of ``--calls``, after one
 untimed call) of:
 
-- the Y pass's frame kernel as the loop launches it (``Compositor.composite``: seam, gains with the
-  knee, seam and border blends);
+- the Y pass's frame kernel as the loop launches it (``DeviceFrame.composite_pass``: seam, gains with
+  the knee, seam and border blends);
 - :func:`sample_only_kernel`: the same launch, plan words and copy runs, but each pixel outside the
   runs is only its one side's bilinear tap, gained, stored: no seam, no blend, no offsets. No frame
   kernel on this plan can cost less than this floor;
 - the UV pass's frame kernel (two channels at half resolution);
 - both passes once more with and without their runs, call by call in turn (every pixel by the
   full rule when without): the median process CPU time of each, so that what the runs buy is
-  measured under the same load (this machine's speed drifts between runs).
+  measured under the same load (this machine's speed drifts between runs);
+- both passes by the per-pixel kernel (CUDA's, here on the CPU: one thread per pixel, no runs).
 """
 
 from __future__ import annotations
@@ -27,18 +28,18 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from dataclasses import replace
 from itertools import islice
 from pathlib import Path
 
-import numpy as np
 import warp as wp
 
-from sena_warp.composite import Compositor
+from sena_warp.composite import frame_runs, kernel_plan
 from sena_warp.config import Config
 from sena_warp.evaluation.bench import DATA_DIR, bench_pair, make_clip_pair
 from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import (KIND_FILL, KIND_TARGET, RowRuns, adjusted, grey_level, sample_fixed, word_fx,
-                                         word_fy, word_offset)
+from sena_warp.kernels.composite import (KIND_FILL, KIND_TARGET, Gains, Plan, Planes, adjusted, grey_level,
+                                         sample_fixed, word_fx, word_fy, word_offset)
 from sena_warp.kernels.runtime import resolve_config
 from sena_warp.video.reader import FrameReader
 from sena_warp.video.stitch import SenaFrameCompositor
@@ -50,32 +51,29 @@ WARMUP_FRAMES = 10  # not timed: the seam's background model and the exposure se
 
 
 @wp.kernel
-def sample_only_kernel(row0: int, col_step: int, width: int, img_src: wp.array(dtype=wp.uint8),
-                       img_tgt: wp.array(dtype=wp.uint8), steps: wp.vec4i, plan: wp.array(dtype=wp.int64),
-                       plan_tgt: wp.array(dtype=wp.int64), runs: wp.array(dtype=RowRuns),
-                       table: wp.array(dtype=wp.uint8), gain: wp.vec4i, bias: wp.vec4i, tone: wp.vec2i,
+def sample_only_kernel(row0: int, col_step: int, width: int, planes: Planes, plan: Plan, gains: Gains,
                        out: wp.array(dtype=wp.uint8)):
     """One channel: per pixel of row ``row0 + i``, columns j, j + col_step, ..., its plan word's side
-    alone, or in the row's copy run its target element through ``table``."""
+    alone, or in the row's copy run its target element through ``gains.table``."""
     i, j = wp.tid()
     y = row0 + i
-    run = runs[y]
+    run = plan.runs[y]
     for x in range(j, width, col_step):
         q = y * width + x
         if x >= run[0] and x < run[1]:
-            out[q] = table[int(img_tgt[run[2] + x])]
+            out[q] = gains.table[int(planes.tgt[run[2] + x])]
             continue
-        word = plan[q]
+        word = plan.words[q]
         kind = int(word & wp.int64(3))
         if kind == KIND_FILL:
             out[q] = wp.uint8(0)
             continue
         p = word_offset(word)
         if kind == KIND_TARGET:
-            sample = sample_fixed(img_tgt, p, word_fx(word), word_fy(word), steps[2], steps[3])
+            sample = sample_fixed(planes.tgt, p, word_fx(word), word_fy(word), planes.steps[2], planes.steps[3])
         else:
-            sample = sample_fixed(img_src, p, word_fx(word), word_fy(word), steps[0], steps[1])
-        out[q] = grey_level(adjusted(sample, gain[0], bias[0], 0, tone))
+            sample = sample_fixed(planes.src, p, word_fx(word), word_fy(word), planes.steps[0], planes.steps[1])
+        out[q] = grey_level(adjusted(sample, gains.gain_src[0], gains.bias_src[0], 0, gains.tone))
 
 
 def cpu_ms(call, calls: int) -> float:
@@ -87,36 +85,32 @@ def cpu_ms(call, calls: int) -> float:
     return (time.process_time() - start) / calls * 1e3
 
 
-def y_floor_ms(compositor: SenaFrameCompositor, frame_l, frame_r, cfg: Config, calls: int) -> float:
-    """Process CPU ms a call of :func:`sample_only_kernel` over ``compositor``'s Y plan, on the pair's Y
-    planes; the Y pass's planes stay loaded for its frame kernel."""
-    luma = compositor._luma
-    y_src, y_tgt = (frame.y for frame in compositor.source_target(frame_l, frame_r))
-    rows, cols = luma.canvas_shape
+def y_floor_ms(compositor: SenaFrameCompositor, gains: Gains, cfg: Config, calls: int) -> float:
+    """Process CPU ms a call of :func:`sample_only_kernel` over ``compositor``'s last Y plan and planes
+    (still loaded), with its runs for the last frame's seam."""
+    plan, luma, _ = compositor.last_frame
+    arrays = compositor.device.frame_arrays("luma", plan.luma)
+    rows, cols = plan.luma.canvas_shape
     out = wp.zeros(rows * cols, dtype=wp.uint8, device="cpu")
-    luma.load(y_src, y_tgt)
-    buf, channels, _ = luma._loaded
-    luma.composite()  # the runs and the gains' table, as the frame kernel has them
-    floor_inputs = [*buf.frame_inputs, buf.frame_runs, buf.table, *luma._gains[channels][:2], luma.tone, out]
-    return cpu_ms(lambda: runtime.launch_row_loops(sample_only_kernel, rows, cols, floor_inputs, "cpu", cfg.cpu_threads),
+    seam = wp.array(luma.seam, dtype=float, device="cpu")
+    runs = frame_runs(plan.luma, seam, arrays.runs, arrays.no_runs)
+    inputs = [arrays.planes, kernel_plan(plan.luma, runs), gains, out]
+    return cpu_ms(lambda: runtime.launch_row_loops(sample_only_kernel, rows, cols, inputs, "cpu", cfg.cpu_threads),
                   calls)
 
 
-def with_and_without_runs_ms(compositor: Compositor, calls: int) -> tuple[float, float]:
-    """Median process CPU ms of ``compositor.composite`` on its loaded pair with its runs and with none
-    (every pixel by the full rule), ``calls`` each, in turn; the runs are found before, not timed."""
-    compositor.composite()
-    compositor.composite()  # the plan has served a frame: its runs are found
-    buf, _, _ = compositor._loaded
-    found = buf.runs.numpy().copy()
+def with_and_without_runs_ms(compositor: SenaFrameCompositor, name: str, gains: Gains, calls: int
+                             ) -> tuple[float, float]:
+    """Median process CPU ms of a pass of ``compositor``'s last plan on its loaded pair with its runs and
+    with none (every pixel by the full rule), ``calls`` each, in turn."""
+    plan = getattr(compositor.last_frame[0], name)
+    device = compositor.device
     with_runs, without = [], []
     for _ in range(calls + 1):
-        for runs, times in ((found, with_runs), (np.zeros_like(found), without)):
-            buf.runs.assign(runs)  # ready as they are: the frame's runs are cut from them
+        for pass_plan, times in ((plan, with_runs), (replace(plan, runs=None), without)):
             start = time.process_time()
-            compositor.composite()
+            device.composite_pass(name, pass_plan, gains)
             times.append(time.process_time() - start)
-    buf.runs.assign(found)
     return statistics.median(with_runs[1:]) * 1e3, statistics.median(without[1:]) * 1e3
 
 
@@ -153,17 +147,19 @@ def main() -> int:
         start = time.process_time() if index == WARMUP_FRAMES else start
         compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v)
     per_frame = (time.process_time() - start) / max(1, len(pairs) - WARMUP_FRAMES) * 1e3
-    luma, chroma = compositor._luma, compositor._chroma
-    floor = y_floor_ms(compositor, frame_l, frame_r, cfg, args.calls)
-    y_pass = cpu_ms(luma.composite, args.calls)
-    uv_src, uv_tgt = ((frame.u, frame.v) for frame in compositor.source_target(frame_l, frame_r))
-    chroma.load_planes(uv_src, uv_tgt)
-    uv_pass = cpu_ms(chroma.composite, args.calls)
-    chroma_runs = with_and_without_runs_ms(chroma, args.calls)
-    luma.load(*(frame.y for frame in compositor.source_target(frame_l, frame_r)))
-    luma_runs = with_and_without_runs_ms(luma, args.calls)
+    plan = compositor.last_frame[0]
+    device = compositor.device
+    _, luma_state, chroma_state = compositor.last_frame
+    luma_gains, chroma_gains = device.gains(plan, luma_state.gains, chroma_state.gains)
+    floor = y_floor_ms(compositor, luma_gains, cfg, args.calls)
+    y_pass = cpu_ms(lambda: device.composite_pass("luma", plan.luma, luma_gains), args.calls)
+    uv_pass = cpu_ms(lambda: device.composite_pass("chroma", plan.chroma, chroma_gains), args.calls)
+    chroma_runs = with_and_without_runs_ms(compositor, "chroma", chroma_gains, args.calls)
+    luma_runs = with_and_without_runs_ms(compositor, "luma", luma_gains, args.calls)
+    y_pixels = cpu_ms(lambda: device.composite_pass("luma", plan.luma, luma_gains, per_pixel=True), args.calls)
+    uv_pixels = cpu_ms(lambda: device.composite_pass("chroma", plan.chroma, chroma_gains, per_pixel=True), args.calls)
     compositor.close()
-    rows, cols = luma.canvas_shape
+    rows, cols = plan.luma.canvas_shape
     print(f"{args.left.name}: canvas {cols}x{rows}, {runtime.cpu_threads(cfg.cpu_threads)} row bands")
     print(f"  composite_yuv (exposure, the frame's seam, both passes): {per_frame:.2f} ms CPU a frame, "
           f"{len(pairs) - WARMUP_FRAMES} frames")
@@ -172,6 +168,7 @@ def main() -> int:
     print(f"  UV pass, frame kernel: {uv_pass:.2f} ms CPU a call")
     print(f"  in turn, median: Y pass {luma_runs[0]:.2f} ms with its runs, {luma_runs[1]:.2f} without; "
           f"UV pass {chroma_runs[0]:.2f} with, {chroma_runs[1]:.2f} without")
+    print(f"  per-pixel kernel (CUDA's) on the CPU: Y pass {y_pixels:.2f} ms, UV pass {uv_pixels:.2f} ms a call")
     return 0
 
 

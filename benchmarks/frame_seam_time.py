@@ -1,4 +1,4 @@
-"""Time of the per-frame seam (issue 14's budget: <= 3 ms CPU per 1080p frame), frame by frame.
+"""Time of the per-frame seam (its target: <= 3 ms CPU per 1080p frame), frame by frame.
 
 Usage (from the repository root)::
 
@@ -10,8 +10,8 @@ a slow pan over a real pair, so every line of the band changes every frame (the 
 is still, the free path is solved every frame). The first N frame pairs are decoded into memory, a
 :class:`~sena_warp.video.stitch.SenaFrameCompositor` is made as ``sena-warp video`` makes it (static
 rig, one estimate pair), and each frame is composited in order; the per-frame seam's call
-(``FrameSeam.next``: the band's difference, still lines, background model, paths, seam blend offsets)
-is timed in wall and process CPU time (no drift checks: nothing else of the process runs
+(the band's difference on the device and its download, ``DeviceFrame.band``, then ``FrameSeam.next``:
+still lines, background model, paths, seam blend offsets) is timed in wall and process CPU time (no drift checks: nothing else of the process runs
 meanwhile; the estimate is made on the first pair, ``video_estimate_pairs=1``). Prints median,
 mean and p95 over the frames after the first five, and the band's size. ``--parts`` also gives the
 mean process CPU time per call of its parts (the band's difference, the dynamic programming, the
@@ -29,18 +29,18 @@ from pathlib import Path
 
 import numpy as np
 
-from sena_warp import composite, seam_path
+from sena_warp import seam_path
 from sena_warp.config import Config
 from sena_warp.evaluation.bench import DATA_DIR, bench_pair, make_clip_pair
 from sena_warp.kernels.runtime import resolve_config
-from sena_warp.video import frame_seam
+from sena_warp.video import device_frame, frame_seam
 from sena_warp.video.reader import FrameReader
 from sena_warp.video.stitch import SenaFrameCompositor
 
 WARMUP = 5  # frames not counted: the first estimate's band, the background model's start
-PARTS = ((composite.Compositor, "band_difference", "band's difference (kernel)"),
+PARTS = ((device_frame, "band_difference", "band's difference (kernel)"),
          (seam_path.BandPath, "solve", "dynamic programming (per solve)"),
-         (frame_seam.FrameSeam, "foreground", "background model"),
+         (frame_seam.BandModel, "foreground", "background model"),
          (frame_seam, "whole_band_fit", "... its whole-band fit"),
          (frame_seam.FrameSeam, "still_lines", "still lines"),
          (frame_seam, "band_offsets", "seam blend's offsets"),
@@ -91,20 +91,24 @@ def main() -> int:
     # while the seam is timed (a worker's estimate would count in the process's CPU time).
     compositor = SenaFrameCompositor.from_videos(
         args.left, args.right, 0.0, cfg.replace(video_estimate_pairs=1, video_drift_check_s=0.0), "auto")
-    seam = compositor._seam  # the compositor's own FrameSeam, timed where the loop calls it
-    solve = seam.next
-    wall, cpu = [], []
+    seam = compositor.frame_seam  # the compositor's own FrameSeam, timed where the loop calls it
+    solve, band = seam.next, device_frame.DeviceFrame.band
+    wall, cpu = [0.0], [0.0]
 
-    def timed(luma):
+    def timed(call, *args):
         t0, c0 = time.perf_counter(), time.process_time()
-        result = solve(luma)
-        wall.append(time.perf_counter() - t0)
-        cpu.append(time.process_time() - c0)
+        result = call(*args)
+        wall[-1] += time.perf_counter() - t0
+        cpu[-1] += time.process_time() - c0
         return result
 
-    seam.next = timed
+    seam.next = lambda frame: timed(solve, frame)
+    device_frame.DeviceFrame.band = lambda device, *args: timed(band, device, *args)
     for planes_l, planes_r in zip(left, right):
         compositor.composite_yuv(*planes_l, *planes_r)
+        wall.append(0.0)
+        cpu.append(0.0)
+    wall, cpu = wall[:-1], cpu[:-1]
     compositor.close()
     width, height = compositor.output_size
     print(f"{args.left.name}: canvas {width}x{height}, band {seam.band} px each side, cells of {seam.cell} px, "

@@ -20,8 +20,9 @@ import collections
 import time
 
 from output_digest import clip_compositor, composited, compositor_parser, run
-from sena_warp.composite import Compositor
-from sena_warp.video import stitch
+from sena_warp import composite
+from sena_warp.video import device_frame, stitch, timeline
+from sena_warp.video.device_frame import DeviceFrame
 from sena_warp.video.drift import DriftWatch
 from sena_warp.video.exposure import ExposureTracker
 from sena_warp.video.frame_seam import FrameSeam
@@ -32,14 +33,17 @@ PARTS = (
     (stitch.SenaFrameCompositor, "composite_yuv", "composite_yuv (all of it)"),
     (MapsBlend, "__init__", "MapsBlend (a blend begins)"),
     (MapsBlend, "at", "MapsBlend.at (a blend step)"),
-    (stitch, "drifted_maps", "drifted_maps (a drift move)"),
+    (timeline, "drifted_maps", "drifted_maps (a drift move)"),
     (stitch, "map_change_px", "map_change_px (the jitter figure)"),
     (DriftWatch, "shifts", "DriftWatch.shifts"),
-    (ExposureTracker, "set_maps", "ExposureTracker.set_maps"),
     (ExposureTracker, "update", "ExposureTracker.update"),
     (FrameSeam, "next", "FrameSeam.next"),
-    (Compositor, "_buffers_for", "Compositor plans (made when due)"),
-    (Compositor, "_frame_runs", "Compositor runs"),
+    (device_frame, "frame_plan", "frame_plan (a map set's plans)"),
+    (device_frame, "with_runs", "with_runs (a plan's runs)"),
+    (composite, "frame_runs", "frame_runs (each frame's runs)"),
+    (DeviceFrame, "load", "DeviceFrame.load (the planes up)"),
+    (DeviceFrame, "band", "DeviceFrame.band (the band's difference)"),
+    (DeviceFrame, "composite", "DeviceFrame.composite (both passes)"),
 )
 
 

@@ -1,4 +1,4 @@
-"""The natural-panorama figures of SENA on every shared pair for one set of Config changes: a sweep step.
+"""The natural-appearance figures of SENA on every shared pair for one set of Config changes: a sweep step.
 
     .venv/bin/python benchmarks/natural_sweep.py [--set border_blend=False ...] [--pairs cave spw_1] [--ba]
         [--save DIR] [--order [--no-figures]] --out sweep.json

@@ -1,5 +1,5 @@
 """Which first pair a video's first estimate takes when its pairs are screened at a lower resolution
-(issue 17's set-up; ``video/estimate.py``'s ``video_screen_max_side``).
+(the video set-up; ``video/estimate.py``'s ``video_screen_max_side``).
 
 Usage (from the repository root)::
 

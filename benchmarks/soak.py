@@ -1,11 +1,11 @@
-"""Soak run (issues 7, 15 and 30): every image pair in both orders and every video pair through the real
-CLI, then the hostile classes of issues 15 and 30, each as a user would meet it, in a process of its own.
+"""Soak run: every image pair in both orders and every video pair through the real CLI, then the hostile
+classes, each as a user would meet it, in a process of its own.
 
 Real runs count outcomes by exit code and, above all, unhandled exceptions (anything that is not a
 ``StitchError`` reaching ``main``). Hostile runs (outputs colliding, existing outputs and -y / -n, the
 folder rule, huge inputs, signals and SIGKILL leftovers, damaged and truncated video with and
 without --strict, rotated and RGBA and float inputs, a variable frame rate, a full disk, bad
-options, misleading failures, eval and bench; then issue 30's: batch outputs escaping DIR or
+options, misleading failures, eval and bench; then the batch and output ones: batch outputs escaping DIR or
 clobbering, -y onto a FIFO or a device node, an output appearing mid-run, names longer than the
 file system allows, signals to a batch and its workers, Ray addresses that do not answer, pair
 folders that are not ones, and the small ones: CSV byte order mark and repeated columns, control
@@ -37,10 +37,8 @@ import tempfile
 import time
 import traceback
 from dataclasses import dataclass
-from fractions import Fraction
 from pathlib import Path
 
-import av
 import cv2
 import numpy as np
 
@@ -48,8 +46,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests"))
 
 from helpers import (alive, child_processes, claiming_more, damage_the_middle, decoded_frames,  # noqa: E402
-                     index_first, png_claiming, reencode_with_black_start, shortened, truncated, ts_clip,
-                     with_orientation, with_repeated_pts, without_key_frames)
+                     index_first, joined_ts_files, one_mjpeg_frame, png_claiming, reencode_with_black_start,
+                     shortened, truncated, with_orientation, without_key_frames)
 from sena_warp.cli import main as cli_main  # noqa: E402
 from sena_warp.jobs import INPUT_SUFFIXES  # noqa: E402
 
@@ -193,7 +191,7 @@ def run_hostile(case: Hostile, inputs: Path, out: Path) -> tuple[bool, str, floa
 
 
 def hostile_cases(data: Path, work: Path) -> list[tuple[Hostile, object]]:
-    """The issue 15 classes on the shared data: (case, setup), setup() run just before the case (each
+    """The input, output and signal classes on the shared data: (case, setup), setup() run just before the case (each
     one starts from an empty output folder, plus what the case needs there)."""
     inputs, out = work / "in", work / "out"
     inputs.mkdir()
@@ -331,7 +329,7 @@ def hostile_cases(data: Path, work: Path) -> list[tuple[Hostile, object]]:
         (Hostile("bench --sizes 17x9", ["bench", "--sizes", "17x9", "--work", out / "bench"], 2, "error",
                  ("17x9",)), clean),
     ]
-    return cases + issue_30_cases(inputs, out, clean) + input_cases(data, inputs, out, clean)
+    return cases + batch_and_output_cases(inputs, out, clean) + input_cases(data, inputs, out, clean)
 
 
 def _job_list(path: Path, jobs: list[dict], defaults: dict | None = None) -> Path:
@@ -343,8 +341,8 @@ def _job_list(path: Path, jobs: list[dict], defaults: dict | None = None) -> Pat
     return path
 
 
-def issue_30_cases(inputs: Path, out: Path, clean) -> list[tuple[Hostile, object]]:
-    """Issue 30's classes (its items 1-3, 9-11, 15 and 17) on the hostile run's inputs: (case, setup)."""
+def batch_and_output_cases(inputs: Path, out: Path, clean) -> list[tuple[Hostile, object]]:
+    """The batch, output and small reliability classes on the hostile run's inputs: (case, setup)."""
     a, b, left, right = inputs / "a.jpg", inputs / "b.jpg", inputs / "left.mp4", inputs / "right.mp4"
     (inputs / "victim.png").write_bytes(b"victim")  # outside every DIR; checked unchanged as an input
     lists = inputs / "lists"
@@ -460,30 +458,15 @@ def input_cases(data: Path, inputs: Path, out: Path, clean) -> list[tuple[Hostil
     a, b = inputs / "a.jpg", inputs / "b.jpg"
     clips = REPO / "tests" / "data" / "video"
     left_frames, right_frames = (decoded_frames(clips / name) for name in ("rooftop_left.mp4", "rooftop_right.mp4"))
-    ts = inputs / "ts"
-    ts.mkdir()
-    ts_clip(left_frames, ts / "left.ts")
-    ts_clip(left_frames, ts / "left_2x.ts", first_pts=3000 * len(left_frames), size=(540, 960))
-    ts_clip(right_frames[:60], ts / "right_a.ts")
-    ts_clip(right_frames[:60], ts / "right_b.ts", first_pts=3000 * 60)
-    (ts / "back.ts").write_bytes((ts / "left.ts").read_bytes() * 2)
-    (ts / "resized.ts").write_bytes((ts / "left.ts").read_bytes() + (ts / "left_2x.ts").read_bytes())
-    (ts / "right_4s.ts").write_bytes((ts / "right_a.ts").read_bytes() + (ts / "right_b.ts").read_bytes())
-    with_repeated_pts(ts / "left.ts", ts / "repeated.ts", range(10, 14))
+    (inputs / "ts").mkdir()
+    ts = joined_ts_files(left_frames, right_frames, inputs / "ts")
     right_clip = clips / "rooftop_right.mp4"
     small = cv2.imread(str(a))[:48, :70]
     bombs = inputs / "bombs"
     bombs.mkdir()
     for fmt in ("bigtiff", ".gif", ".jp2", ".hdr"):
         (bombs / f"huge_{fmt.strip('.')}.img").write_bytes(claiming_more(fmt, 20000, 20000, small))
-    big_mov = inputs / "big.mov"
-    with av.open(str(big_mov), "w") as c:
-        stream = c.add_stream("mjpeg", rate=1)
-        stream.width, stream.height, stream.pix_fmt = 1280, 1024, "yuvj420p"
-        frame = av.VideoFrame(1280, 1024, "yuvj420p")
-        frame.pts, frame.time_base = 0, Fraction(1, 1)
-        c.mux(stream.encode(frame))
-        c.mux(stream.encode(None))
+    big_mov = one_mjpeg_frame(inputs / "big.mov", 1280, 1024)
     settings = inputs / "settings"
     settings.mkdir()
     for name, value in {"gain_stride": "1000000000", "lattice_nx": "100000", "seam_separation_rows": "1000000000",

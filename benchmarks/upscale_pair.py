@@ -1,5 +1,5 @@
 """A recorded two-camera pair scaled to another size, to measure the per-frame video path there on a
-real scene (issue 14's 1080p budget: the shared recordings are at most 720p).
+real scene (the per-frame seam's 1080p budget: the shared recordings are at most 720p).
 
 Usage (from the repository root)::
 

@@ -1,4 +1,4 @@
-"""How far each camera's view of the shared recordings moves over the recording (issue 14's drift).
+"""How far each camera's view of the shared recordings moves over the recording (a static rig's drift).
 
 Usage (from the repository root)::
 

@@ -1,4 +1,4 @@
-"""Per-frame compositing along a seam (SENA.md "Maps, not images"; issue 13's gains and seam blend).
+"""Per-frame compositing along a seam (docs/method.md "Maps, not images"), with the gains and the seam blend.
 
 The source is shown on one side of the seam, the target on the other; across a transition of width T
 the two are mixed by ``kernels/seam.py``'s ``source_alpha`` (the rule the seam maps' alpha follows). Each side gets its own per-channel affine gain (exposure
@@ -47,6 +47,68 @@ FRAC_BITS = wp.constant(10)  # sub-pixel steps of 1/1024 px: the value moves < 0
 FRAC_ONE = wp.constant(1 << 10)
 FRAC_MASK = wp.constant(2047)  # 11 bits: a fraction may be exactly 1 at the last row / column
 ALPHA_TAIL_SIGMAS = wp.constant(8.0)  # the smoothed ramp is within 1e-4 of 0 or 1 this many sigmas past its ends
+
+
+@wp.struct
+class Planes:
+    """A frame pair on the device: the source's and the target's (H, W, C) uint8 elements, flat, and
+    ``steps`` = (source x step, source y step, target x step, target y step) in elements."""
+
+    src: wp.array(dtype=wp.uint8)
+    tgt: wp.array(dtype=wp.uint8)
+    steps: wp.vec4i
+
+
+@wp.struct
+class Layout:
+    """The seam's geometry on the canvas (``composite.SeamLayout``): lines are canvas rows when
+    ``lines_are_rows`` is 1, else columns; widths in canvas pixels."""
+
+    lines_are_rows: int
+    band_px: float
+    transition_px: float
+    smooth_sigma_px: float
+    lf_px: float
+
+
+@wp.struct
+class Border:
+    """The border blend: with ``on`` 1, each side's offsets per position along the target's two borders
+    (``src``, ``tgt``: (2, positions, C) int in 1/2**20 grey levels, flat; border k at line coordinate
+    ``lines[k]``; ``second``: border 1's first element, positions x C)."""
+
+    on: int
+    lines: wp.vec2
+    second: int
+    src: wp.array(dtype=int)
+    tgt: wp.array(dtype=int)
+
+
+@wp.struct
+class SeamState:
+    """A frame's seam: its position per line (``seam``) and each side's low-frequency offsets per line
+    (``lf_src``, ``lf_tgt``: (lines, C) int in 1/2**20 grey levels, flat)."""
+
+    seam: wp.array(dtype=float)
+    lf_src: wp.array(dtype=int)
+    lf_tgt: wp.array(dtype=int)
+
+
+@wp.struct
+class Gains:
+    """A frame's gains per channel of each side: gains in 1/2**12, biases in 1/2**20 grey levels;
+    ``tone`` = (knee, white) in 1/2**20 grey levels (white 0: no knee, ``adjusted``); ``relative`` 1:
+    the seam's and the borders' offsets change each side's gain relatively (``with_offset``), 0: they
+    are added; ``table``: the target's gains tabulated per channel and grey level
+    (``gain_table_kernel``)."""
+
+    gain_src: wp.vec4i
+    bias_src: wp.vec4i
+    gain_tgt: wp.vec4i
+    bias_tgt: wp.vec4i
+    tone: wp.vec2i
+    relative: int
+    table: wp.array(dtype=wp.uint8)
 
 
 @wp.func
@@ -119,8 +181,7 @@ def composite_plan_kernel(
     map_src: wp.array2d(dtype=wp.vec2),
     map_tgt: wp.array2d(dtype=wp.vec2),
     seam: wp.array(dtype=float),
-    lines_are_rows: int,
-    band_px: float,
+    layout: Layout,
     shape_src: wp.vec3i,
     shape_tgt: wp.vec3i,
     plan: wp.array(dtype=wp.int64),
@@ -129,7 +190,7 @@ def composite_plan_kernel(
 ):
     """Per canvas pixel q = y * Wc + x: plan[q], plan_tgt[q] for band pixels, coverage 255 / 0.
 
-    Where both sides are valid, pixels within ``band_px`` of the seam are band pixels (the frame
+    Where both sides are valid, pixels within ``layout.band_px`` of the seam are band pixels (the frame
     decides the side); the others show the source below the seam and the target above it. Thread
     (i, j) does row ``row0 + i``, columns j, j + col_step, ... (``runtime.launch_row_loops``): a
     blended-in map makes a plan every frame.
@@ -142,11 +203,11 @@ def composite_plan_kernel(
         p_tgt = map_tgt[y, x]
         ok_src = inside(p_src, shape_src)
         ok_tgt = inside(p_tgt, shape_tgt)
-        lp = line_and_position(x, y, lines_are_rows)
+        lp = line_and_position(x, y, layout.lines_are_rows)
         d = float(lp[1]) - seam[lp[0]]
         word = wp.int64(KIND_FILL)
         if ok_src and ok_tgt:
-            if wp.abs(d) <= band_px:
+            if wp.abs(d) <= layout.band_px:
                 word = plan_word(KIND_BAND, p_src, shape_src)
                 plan_tgt[q] = plan_word(KIND_TARGET, p_tgt, shape_tgt)
             elif d < 0.0:
@@ -251,20 +312,28 @@ RUN_COPY = wp.constant(1)  # the target's element through the gains' table,
 RUN_SAMPLE = wp.constant(2)  # the source sampled with its gains
 
 
+@wp.struct
+class Plan:
+    """What a map set fixes for a frame kernel (``composite_plan_kernel``): the plan words per canvas
+    pixel, the target's words of band pixels, each row's runs for this frame (all empty: the full rule
+    everywhere), the canvas's (width, height) and the fill value per channel where no side is sampled."""
+
+    words: wp.array(dtype=wp.int64)
+    words_tgt: wp.array(dtype=wp.int64)
+    runs: wp.array(dtype=RowRuns)
+    size: wp.vec2i
+    fill: wp.vec4i
+
+
 @wp.kernel
 def row_runs_kernel(
     row0: int,
     width: int,
     plan: wp.array(dtype=wp.int64),
     seam: wp.array(dtype=float),
-    lines_are_rows: int,
+    layout: Layout,
     clear_px: float,
-    lf_px: float,
-    border_on: int,
-    border_lines: wp.vec2,
-    second: int,
-    border_src: wp.array(dtype=int),
-    border_tgt: wp.array(dtype=int),
+    border: Border,
     channels: int,
     runs: wp.array(dtype=RowRuns),
 ):
@@ -274,12 +343,12 @@ def row_runs_kernel(
     elements; a sample run the source alone.
 
     ``seam``: the static seam; ``clear_px``: how far from it no frame's seam offsets reach (the reach
-    of its offsets beyond the band the frame's seam stays in, ``Compositor._frame_runs``; 0 where
+    of its offsets beyond the band the frame's seam stays in, ``composite.plan_runs``; 0 where
     ``frame_runs_kernel`` cuts each row around the frame's seam instead); the border as the frame
     kernel takes it."""
     i, _ = wp.tid()
     y = row0 + i
-    bw_row = border_weights(y, border_lines, border_on, lf_px)
+    bw_row = border_weights(y, border.lines, border.on, layout.lf_px)
     copy = wp.vec3i(0, 0, 0)
     sample = wp.vec3i(0, 0, 0)
     copy_start = int(-1)
@@ -288,14 +357,14 @@ def row_runs_kernel(
     for x in range(width):
         word = plan[y * width + x]
         kind = int(word & wp.int64(3))
-        lp = line_and_position(x, y, lines_are_rows)
+        lp = line_and_position(x, y, layout.lines_are_rows)
         bw = bw_row
-        if lines_are_rows == 0:
-            bw = border_weights(lp[0], border_lines, border_on, lf_px)
+        if layout.lines_are_rows == 0:
+            bw = border_weights(lp[0], border.lines, border.on, layout.lf_px)
         d = float(lp[1]) - seam[lp[0]]
         bo = lp[1] * channels
         copies = kind == KIND_TARGET and word_fx(word) == 0 and word_fy(word) == 0
-        copies = copies and clear_of_offsets(d, clear_px, bw, border_tgt, bo, second, channels)
+        copies = copies and clear_of_offsets(d, clear_px, bw, border.tgt, bo, border.second, channels)
         if copies and copy_start >= 0 and word_offset(word) != copy_offset + (x - copy_start) * channels:
             copy_start = -1  # the target jumps (a cropped or shifted canvas): a new run
         if copies and copy_start < 0:
@@ -304,7 +373,7 @@ def row_runs_kernel(
         if not copies:
             copy_start = -1
         copy = longer_run(copy, copy_start, x, copy_offset)
-        samples = kind == KIND_SOURCE and clear_of_offsets(d, clear_px, bw, border_src, bo, second, channels)
+        samples = kind == KIND_SOURCE and clear_of_offsets(d, clear_px, bw, border.src, bo, border.second, channels)
         if samples and sample_start < 0:
             sample_start = x
         if not samples:
@@ -369,8 +438,101 @@ def first_column(j: int, start: int, col_step: int) -> int:
     return j + (start - j + col_step - 1) / col_step * col_step
 
 
+@wp.struct
+class PixelRule:
+    """What the full rule needs of one canvas pixel, its channels aside (``pixel_rule``): its kind, the
+    source's weight ``a`` (1: the source alone, 0: the target alone), the seam offsets' weight ``lf``
+    and the line's first element ``lo`` in them, each border's weight ``bw`` and the position's first
+    element ``bo`` in theirs, the taps (element, fractions) of the side shown (the target's where ``a``
+    is 0) and of the target where both are mixed."""
+
+    kind: int
+    a: float
+    lf: float
+    lo: int
+    bw: wp.vec2
+    bo: int
+    p: int
+    fx: int
+    fy: int
+    p_t: int
+    fx_t: int
+    fy_t: int
+
+
+@wp.func(inline=True)  # per pixel: inlined, its struct arguments are not copied per call
+def pixel_rule(x: int, y: int, q: int, plan: Plan, seam: SeamState, layout: Layout, border: Border, bw_row: wp.vec2,
+               channels: int) -> PixelRule:
+    """The full rule's terms of canvas pixel (x, y), flat index q, for images of ``channels``
+    channels; ``bw_row``: the borders' weights of row y (what they are where the lines are rows)."""
+    r = PixelRule()
+    word = plan.words[q]
+    r.kind = int(word & wp.int64(3))
+    if r.kind == KIND_FILL:
+        return r
+    lp = line_and_position(x, y, layout.lines_are_rows)
+    d = float(lp[1]) - seam.seam[lp[0]]
+    r.lf = lf_weight(d, layout.lf_px)
+    r.lo = lp[0] * channels
+    r.bw = bw_row
+    if layout.lines_are_rows == 0:
+        r.bw = border_weights(lp[0], border.lines, border.on, layout.lf_px)
+    r.bo = lp[1] * channels
+    a = float(1.0)
+    if r.kind == KIND_TARGET:
+        a = 0.0
+    elif r.kind == KIND_BAND:
+        # The smoothed ramp's tails never reach 0 or 1 exactly: one side alone beyond 1e-4, which
+        # they pass well within ALPHA_TAIL_SIGMAS of the ramp's ends (no erf or exp there).
+        if wp.abs(d) >= 0.5 * layout.transition_px + ALPHA_TAIL_SIGMAS * layout.smooth_sigma_px:
+            a = wp.where(d > 0.0, 0.0, 1.0)
+        else:
+            a = source_alpha(d, layout.transition_px, layout.smooth_sigma_px)
+            a = wp.where(a > 0.9999, 1.0, wp.where(a < 0.0001, 0.0, a))
+    r.a = a
+    if a <= 0.0 and r.kind == KIND_BAND:
+        word = plan.words_tgt[q]
+    r.p = word_offset(word)
+    r.fx = word_fx(word)
+    r.fy = word_fy(word)
+    if a > 0.0 and a < 1.0:
+        word_t = plan.words_tgt[q]
+        r.p_t = word_offset(word_t)
+        r.fx_t = word_fx(word_t)
+        r.fy_t = word_fy(word_t)
+    return r
+
+
+@wp.func(inline=True)
+def rule_channel(r: PixelRule, c: int, planes: Planes, seam: SeamState, border: Border, gains: Gains,
+                 fill: wp.vec4i) -> wp.uint8:
+    """Channel c of a pixel by the full rule: ``fill[c]`` where no side covers it, else per side ``gain *
+    sample + bias`` with ``lf * lf[line, c]`` plus each border's weighted offset (``side_offset``) added or
+    as a relative change of the gain (``gains.relative``, ``with_offset``), mixed by ``a``."""
+    if r.kind == KIND_FILL:
+        return wp.uint8(fill[c])
+    steps = planes.steps
+    if r.a >= 1.0:
+        off = side_offset(r.lf, seam.lf_src, r.lo + c, r.bw, border.src, r.bo + c, border.second)
+        v = with_offset(sample_fixed(planes.src, r.p + c, r.fx, r.fy, steps[0], steps[1]), gains.gain_src[c],
+                        gains.bias_src[c], off, gains.tone, gains.relative)
+        return grey_level(v)
+    if r.a <= 0.0:
+        off = side_offset(r.lf, seam.lf_tgt, r.lo + c, r.bw, border.tgt, r.bo + c, border.second)
+        v = with_offset(sample_fixed(planes.tgt, r.p + c, r.fx, r.fy, steps[2], steps[3]), gains.gain_tgt[c],
+                        gains.bias_tgt[c], off, gains.tone, gains.relative)
+        return grey_level(v)
+    vs = with_offset(sample_fixed(planes.src, r.p + c, r.fx, r.fy, steps[0], steps[1]), gains.gain_src[c],
+                     gains.bias_src[c], side_offset(r.lf, seam.lf_src, r.lo + c, r.bw, border.src, r.bo + c, border.second),
+                     gains.tone, gains.relative)
+    vt = with_offset(sample_fixed(planes.tgt, r.p_t + c, r.fx_t, r.fy_t, steps[2], steps[3]), gains.gain_tgt[c],
+                     gains.bias_tgt[c], side_offset(r.lf, seam.lf_tgt, r.lo + c, r.bw, border.tgt, r.bo + c, border.second),
+                     gains.tone, gains.relative)
+    return grey_level(int(r.a * float(vs) + (1.0 - r.a) * float(vt)))
+
+
 def _composite_frame_kernel(channels: int):
-    """The frame kernel for images of ``channels`` (1 to 4) channels, its channel loops unrolled.
+    """The row-run frame kernel for images of ``channels`` (1 to 4) channels, its channel loops unrolled.
 
     A compile-time channel count matters on the CPU: a dynamic per-pixel channel loop doubled the
     kernel's time at 1080p. Integer arithmetic throughout; the low-frequency offsets only cost a
@@ -382,51 +544,25 @@ def _composite_frame_kernel(channels: int):
         row0: int,
         col_step: int,
         width: int,
-        img_src: wp.array(dtype=wp.uint8),
-        img_tgt: wp.array(dtype=wp.uint8),
-        steps: wp.vec4i,
-        plan: wp.array(dtype=wp.int64),
-        plan_tgt: wp.array(dtype=wp.int64),
-        runs: wp.array(dtype=RowRuns),
-        table: wp.array(dtype=wp.uint8),
-        seam: wp.array(dtype=float),
-        lines_are_rows: int,
-        transition_px: float,
-        smooth_sigma_px: float,
-        lf_px: float,
-        lf_src: wp.array(dtype=int),
-        lf_tgt: wp.array(dtype=int),
-        border_on: int,
-        border_lines: wp.vec2,
-        second: int,
-        border_src: wp.array(dtype=int),
-        border_tgt: wp.array(dtype=int),
-        gain_src: wp.vec4i,
-        bias_src: wp.vec4i,
-        gain_tgt: wp.vec4i,
-        bias_tgt: wp.vec4i,
-        tone: wp.vec2i,
-        relative: int,
-        fill: wp.vec4i,
+        planes: Planes,
+        plan: Plan,
+        seam: SeamState,
+        layout: Layout,
+        border: Border,
+        gains: Gains,
         out: wp.array(dtype=wp.uint8),
     ):
-        """out[y, x, c] from the plan; per side ``gain * sample + bias + lf_weight * lf[line, c]`` plus,
-        with ``border_on``, ``lf_weight(line - border_lines[k]) * border[k, position, c]`` for both borders
-        (``second``: the element offset of border 1, positions x C); with ``relative``, those offsets
-        change the gain relatively instead (:func:`with_offset`).
-
-        Flat arrays: ``img_*`` (H, W, C), ``out`` (Hc, Wc, C), ``plan*`` (Hc, Wc), ``lf_*`` (lines, C) and
-        ``border_*`` (2, positions, C) in 1/2**20 grey levels; gains in 1/2**12, biases in 1/2**20 grey
-        levels. ``steps`` = (src x step, src y step, tgt x step, tgt y step) in elements. ``runs``: each
-        row's runs for this frame (``frame_runs_kernel``): the copy run's pixels through ``table`` (``gain_table_kernel``
-        of the target's gains), the sample run's with the source's gains alone. Thread (i, j) does row
-        ``row0 + i``, columns j, j + col_step, ... (see ``runtime.launch_row_loops``), five parts of
-        the row in turn: before the first run, the first, between them, the second, after it.
+        """out[y, x, c] (flat (Hc, Wc, C)) by the full rule (``pixel_rule``, ``rule_channel``), and along
+        each row's runs for this frame (``plan.runs``, ``frame_runs_kernel``) by their shortcuts: the
+        copy run's pixels through ``gains.table`` (``gain_table_kernel``), the sample run's with the
+        source's gains alone. Thread (i, j) does row ``row0 + i``, columns j, j + col_step, ... (see
+        ``runtime.launch_row_loops``), five parts of the row in turn: before the first run, the first,
+        between them, the second, after it.
         """
         i, j = wp.tid()
         y = row0 + i
-        bw_row = border_weights(y, border_lines, border_on, lf_px)  # a row's, where the lines are rows
-        run = runs[y]
+        bw_row = border_weights(y, border.lines, border.on, layout.lf_px)  # a row's, where the lines are rows
+        run = plan.runs[y]
         first = placed_run(run[0], run[1], RUN_COPY, width)
         later = placed_run(run[3], run[4], RUN_SAMPLE, width)
         if later[0] < first[0]:
@@ -455,86 +591,63 @@ def _composite_frame_kernel(channels: int):
                     o = (y * width + x) * wp.static(channels)
                     p = run[2] + x * wp.static(channels)
                     for c in range(wp.static(channels)):
-                        out[o + c] = table[c * 256 + int(img_tgt[p + c])]
+                        out[o + c] = gains.table[c * 256 + int(planes.tgt[p + c])]
                 continue
             if how == RUN_SAMPLE:
                 for x in range(first_column(j, begin, col_step), end, col_step):
                     q = y * width + x
-                    word = plan[q]
+                    word = plan.words[q]
                     p = word_offset(word)
                     fx = word_fx(word)
                     fy = word_fy(word)
                     for c in range(wp.static(channels)):
-                        v = adjusted(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], 0, tone)
+                        v = adjusted(sample_fixed(planes.src, p + c, fx, fy, planes.steps[0], planes.steps[1]),
+                                     gains.gain_src[c], gains.bias_src[c], 0, gains.tone)
                         out[q * wp.static(channels) + c] = grey_level(v)
                 continue
             for x in range(first_column(j, begin, col_step), end, col_step):
                 q = y * width + x
                 o = q * wp.static(channels)
-                word = plan[q]
-                kind = int(word & wp.int64(3))
-                if kind == KIND_FILL:
-                    for c in range(wp.static(channels)):
-                        out[o + c] = wp.uint8(fill[c])
-                    continue
-                lp = line_and_position(x, y, lines_are_rows)
-                d = float(lp[1]) - seam[lp[0]]
-                lf = lf_weight(d, lf_px)
-                lo = lp[0] * wp.static(channels)
-                bw = bw_row
-                if lines_are_rows == 0:
-                    bw = border_weights(lp[0], border_lines, border_on, lf_px)
-                bo = lp[1] * wp.static(channels)
-                a = float(1.0)
-                if kind == KIND_TARGET:
-                    a = 0.0
-                elif kind == KIND_BAND:
-                    # The smoothed ramp's tails never reach 0 or 1 exactly: one side alone beyond 1e-4, which
-                    # they pass well within ALPHA_TAIL_SIGMAS of the ramp's ends (no erf or exp there).
-                    if wp.abs(d) >= 0.5 * transition_px + ALPHA_TAIL_SIGMAS * smooth_sigma_px:
-                        a = wp.where(d > 0.0, 0.0, 1.0)
-                    else:
-                        a = source_alpha(d, transition_px, smooth_sigma_px)
-                        a = wp.where(a > 0.9999, 1.0, wp.where(a < 0.0001, 0.0, a))
-                p = word_offset(word)
-                fx = word_fx(word)
-                fy = word_fy(word)
-                if a >= 1.0:
-                    for c in range(wp.static(channels)):
-                        off = side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second)
-                        v = with_offset(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c], off,
-                                        tone, relative)
-                        out[o + c] = grey_level(v)
-                elif a <= 0.0:
-                    if kind == KIND_BAND:
-                        word = plan_tgt[q]
-                        p = word_offset(word)
-                        fx = word_fx(word)
-                        fy = word_fy(word)
-                    for c in range(wp.static(channels)):
-                        off = side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second)
-                        v = with_offset(sample_fixed(img_tgt, p + c, fx, fy, steps[2], steps[3]), gain_tgt[c], bias_tgt[c], off,
-                                        tone, relative)
-                        out[o + c] = grey_level(v)
-                else:
-                    word_t = plan_tgt[q]
-                    p_t = word_offset(word_t)
-                    fx_t = word_fx(word_t)
-                    fy_t = word_fy(word_t)
-                    for c in range(wp.static(channels)):
-                        vs = with_offset(sample_fixed(img_src, p + c, fx, fy, steps[0], steps[1]), gain_src[c], bias_src[c],
-                                         side_offset(lf, lf_src, lo + c, bw, border_src, bo + c, second), tone, relative)
-                        vt = with_offset(sample_fixed(img_tgt, p_t + c, fx_t, fy_t, steps[2], steps[3]), gain_tgt[c],
-                                         bias_tgt[c], side_offset(lf, lf_tgt, lo + c, bw, border_tgt, bo + c, second), tone,
-                                         relative)
-                        out[o + c] = grey_level(int(a * float(vs) + (1.0 - a) * float(vt)))
+                r = pixel_rule(x, y, q, plan, seam, layout, border, bw_row, wp.static(channels))
+                for c in range(wp.static(channels)):
+                    out[o + c] = rule_channel(r, c, planes, seam, border, gains, plan.fill)
 
     return composite_frame
 
 
+def _composite_pixel_kernel(channels: int):
+    """The per-pixel frame kernel (CUDA's) for images of ``channels`` (1 to 4) channels: the full rule at
+    every pixel, no runs; the same planes as the row-run kernel's."""
+
+    @wp.kernel(module="unique", module_options=MODULE_OPTIONS)
+    def composite_pixels(
+        row0: int,
+        planes: Planes,
+        plan: Plan,
+        seam: SeamState,
+        layout: Layout,
+        border: Border,
+        gains: Gains,
+        out: wp.array(dtype=wp.uint8),
+    ):
+        """out[y, x, c] (flat (Hc, Wc, C)) of pixel (x, y = row0 + i) by the full rule; thread (i, x)
+        (``runtime.launch_rows``)."""
+        i, x = wp.tid()
+        y = row0 + i
+        q = y * plan.size[0] + x
+        o = q * wp.static(channels)
+        bw_row = border_weights(y, border.lines, border.on, layout.lf_px)
+        r = pixel_rule(x, y, q, plan, seam, layout, border, bw_row, wp.static(channels))
+        for c in range(wp.static(channels)):
+            out[o + c] = rule_channel(r, c, planes, seam, border, gains, plan.fill)
+
+    return composite_pixels
+
+
 MAX_CHANNELS = 4  # gains, biases and fill values travel as one vec4 each
-# The frame kernel per channel count, built at import so that ``runtime.prewarm`` loads them all.
+# The frame kernels per channel count, built at import so that ``runtime.prewarm`` loads them all.
 COMPOSITE_FRAME_KERNELS = {channels: _composite_frame_kernel(channels) for channels in range(1, MAX_CHANNELS + 1)}
+COMPOSITE_PIXEL_KERNELS = {channels: _composite_pixel_kernel(channels) for channels in range(1, MAX_CHANNELS + 1)}
 
 
 NOT_BOTH = wp.constant(1.0e9)  # band_difference_kernel: the cell is not a band pixel (a view is missing)
@@ -546,64 +659,65 @@ def holds_both(diff: float) -> bool:
     return diff < 0.5 * NOT_BOTH
 
 
+@wp.struct
+class BandCells:
+    """The per-frame seam's band of cells: band line k is seam line ``lines[k]``; its cell j is at
+    position ``x0[k] + cell j`` along the line (canvas pixels)."""
+
+    lines: wp.array(dtype=int)
+    x0: wp.array(dtype=int)
+    cell: int
+
+
 @wp.kernel
 def band_difference_kernel(
     row0: int,
     col_step: int,
     width: int,
-    img_src: wp.array(dtype=wp.uint8),
-    img_tgt: wp.array(dtype=wp.uint8),
-    steps: wp.vec4i,
-    plan: wp.array(dtype=wp.int64),
-    plan_tgt: wp.array(dtype=wp.int64),
-    canvas_width: int,
-    canvas_height: int,
-    lines_are_rows: int,
-    lines: wp.array(dtype=int),
-    band_x0: wp.array(dtype=int),
-    cell: int,
-    gain_src: wp.vec4i,
-    bias_src: wp.vec4i,
-    gain_tgt: wp.vec4i,
-    bias_tgt: wp.vec4i,
-    tone: wp.vec2i,
-    last_diff: wp.array2d(dtype=float),
+    planes: Planes,
+    plan: Plan,
+    layout: Layout,
+    band: BandCells,
+    gains: Gains,
     diff: wp.array2d(dtype=float),
     total: wp.array2d(dtype=float),
     delta: wp.array2d(dtype=float),
 ):
-    """Per solved line k = row0 + i (seam line lines[k]) and band cell j (position band_x0[k] + j cell):
-    channel 0 of the source minus the target there (``diff``) and their sum (``total``), both with
-    their gains and knee (grey levels), or ``NOT_BOTH`` and 0 where the plan does not hold both taps
-    (outside the overlap or the band); ``delta``: how much ``diff`` changed from ``last_diff`` (the
-    last frame's), 0 where either lacks a view. The per-frame seam reads them. Thread (i, j) does
-    cells j, j + col_step, ... < width of its line (``runtime.launch_row_loops``)."""
+    """Per band line k = row0 + i and cell j < width: channel 0 of the source minus the target there
+    into ``diff`` and their sum into ``total``, both with their gains and knee (grey levels), or
+    ``NOT_BOTH`` and 0 where the plan does not hold both taps (outside the overlap or the band);
+    ``delta``: how much ``diff`` changed from the value it held (the last frame's), 0 where either lacks
+    a view. The per-frame seam reads them. Thread (i, j) does cells j, j + col_step, ... of its line
+    (``runtime.launch_row_loops``)."""
     i, j0 = wp.tid()
     k = row0 + i
-    line = lines[k]
+    line = band.lines[k]
+    canvas_width = plan.size[0]
+    canvas_height = plan.size[1]
+    steps = planes.steps
     for j in range(j0, width, col_step):
-        pos = band_x0[k] + j * cell
+        pos = band.x0[k] + j * band.cell
         x = pos
         y = line
-        if lines_are_rows == 0:
+        if layout.lines_are_rows == 0:
             x = line
             y = pos
         value = float(NOT_BOTH)
         both_sum = float(0.0)
         if x >= 0 and y >= 0 and x < canvas_width and y < canvas_height:
             q = y * canvas_width + x
-            word = plan[q]
+            word = plan.words[q]
             if int(word & wp.int64(3)) == KIND_BAND:
-                word_t = plan_tgt[q]
-                vs = adjusted(sample_fixed(img_src, word_offset(word), word_fx(word), word_fy(word), steps[0],
-                                           steps[1]), gain_src[0], bias_src[0], 0, tone)
-                vt = adjusted(sample_fixed(img_tgt, word_offset(word_t), word_fx(word_t), word_fy(word_t), steps[2],
-                                           steps[3]), gain_tgt[0], bias_tgt[0], 0, tone)
+                word_t = plan.words_tgt[q]
+                vs = adjusted(sample_fixed(planes.src, word_offset(word), word_fx(word), word_fy(word), steps[0],
+                                           steps[1]), gains.gain_src[0], gains.bias_src[0], 0, gains.tone)
+                vt = adjusted(sample_fixed(planes.tgt, word_offset(word_t), word_fx(word_t), word_fy(word_t), steps[2],
+                                           steps[3]), gains.gain_tgt[0], gains.bias_tgt[0], 0, gains.tone)
                 value = float(vs - vt) / float(ONE20)
                 both_sum = float(vs + vt) / float(ONE20)
+        last = diff[k, j]
         diff[k, j] = value
         total[k, j] = both_sum
-        last = last_diff[k, j]
         change = float(0.0)
         if holds_both(value) and holds_both(last):
             change = wp.abs(value - last)
@@ -614,10 +728,7 @@ def band_difference_kernel(
 def seam_weights_kernel(
     row0: int,
     seam: wp.array(dtype=float),
-    lines_are_rows: int,
-    transition_px: float,
-    smooth_sigma_px: float,
-    lf_px: float,
+    layout: Layout,
     alpha: wp.array2d(dtype=float),
     lf: wp.array2d(dtype=float),
 ):
@@ -625,7 +736,7 @@ def seam_weights_kernel(
     for the seam ``seam`` (where both views are valid), for figures and reference implementations."""
     i, x = wp.tid()
     y = row0 + i
-    lp = line_and_position(x, y, lines_are_rows)
+    lp = line_and_position(x, y, layout.lines_are_rows)
     d = float(lp[1]) - seam[lp[0]]
-    alpha[y, x] = source_alpha(d, transition_px, smooth_sigma_px)
-    lf[y, x] = lf_weight(d, lf_px)
+    alpha[y, x] = source_alpha(d, layout.transition_px, layout.smooth_sigma_px)
+    lf[y, x] = lf_weight(d, layout.lf_px)

@@ -1,4 +1,4 @@
-"""Confidence-weighted FFD blend on the lattice (SENA.md step 4).
+"""Confidence-weighted FFD blend on the lattice (docs/method.md step 4).
 
 For each lattice node ``u`` (canvas pixels): ``p_t = u - o``, ``p_base = A_glob^-1 p_t``,
 ``p_j = T_j^-1 p_t``, ``D_j = p_j - p_base`` and ``D = sum_j w_j D_j`` with

@@ -1,4 +1,4 @@
-"""Seam guard G and the guarded displacement G * D (SENA.md step 5).
+"""Seam guard G and the guarded displacement G * D (docs/method.md step 5).
 
 ``G = S(R)^gamma_p * (gamma_min + (1 - gamma_min) S(Dn))``, ``R = clip(sdf / b, 0, 1)``,
 ``S(t) = 6t^5 - 15t^4 + 10t^3`` (monotone on [0, 1], unlike the authors' .py).

@@ -1,4 +1,4 @@
-"""Bilinear remap of a uint8 (H, W, C) image by a canvas map (SENA.md step 6, "apply").
+"""Bilinear remap of a uint8 (H, W, C) image by a canvas map (docs/method.md step 6, "apply").
 
 A map holds, per canvas pixel, the (x, y) position to sample; pixel centres are at integer
 coordinates. A position is valid when all four bilinear taps lie inside the image

@@ -28,13 +28,13 @@ import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
-import numpy as np
 import warp as wp
 import warp._src.build  # init_kernel_cache: where Warp keeps compiled kernels
 
 from sena_warp.config import Config
 from sena_warp.errors import InputError
 from sena_warp import native_stderr
+from sena_warp.kernels import transfer
 from sena_warp.progress import LOGGER, Count, stage
 
 # The init banner would go to stdout of every CLI run; Warp reads the level when it initialises
@@ -91,6 +91,8 @@ SHIPPED_PTX_ARCH = 75  # the CUDA build shipped: PTX that the driver compiles on
 # The kernel modules in the order a stitch first launches them: the estimate's (the lattice, the gate, the warp
 # map and its samples, the seam), then the frames'. Loaded in this order, the estimate's come first.
 FIRST_LAUNCHED = ("ffd", "gate", "remap", "sampling", "seam", "seam_path", "composite", "frame_seam", "map_change")
+# The frame kernels built per channel count (by that count in a dict): a stitch loads those of its images only.
+PER_CHANNELS = ("COMPOSITE_FRAME_KERNELS", "COMPOSITE_PIXEL_KERNELS")
 
 
 def resolve_device(name: str) -> str:
@@ -235,16 +237,6 @@ def _in_kernel_cache(module, device: str) -> bool:
     return os.path.isdir(os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(_block_dim(module, device))))
 
 
-def readonly_array(values, dtype, device: str) -> wp.array:
-    """A Warp array of the float32 numpy ``values`` for a kernel that only reads it.
-
-    On the CPU it shares the numpy memory (a canvas map is 8 bytes a pixel: no copy of it); on CUDA
-    it is a copy on the device. The caller must not change ``values`` while the array is in use.
-    """
-    values = np.ascontiguousarray(values, dtype=np.float32)
-    return wp.array(values, dtype=dtype, device=device, copy=device != "cpu")
-
-
 def row_bands(height: int, bands: int) -> list[tuple[int, int]]:
     """Split rows [0, height) into at most ``bands`` contiguous (row0, rows) pieces of near-equal size."""
     bands = max(1, min(bands, height))
@@ -253,18 +245,19 @@ def row_bands(height: int, bands: int) -> list[tuple[int, int]]:
 
 
 def launch_rows(kernel, height: int, width: int, inputs: list, device: str, threads: int) -> None:
-    """Run ``kernel(row0, *inputs)`` over a (height, width) grid and wait until it has finished.
+    """Run ``kernel(row0, *inputs)`` over a (height, width) grid.
 
     ``device``: a resolved Warp device ("cpu" or "cuda", :func:`resolve_device`). On "cpu" the rows
-    are split into ``cpu_threads(threads)`` bands launched in parallel; on "cuda" one launch of dim
-    (height, width). Arrays in ``inputs`` must live on ``device``.
+    are split into ``cpu_threads(threads)`` bands launched in parallel, done when this returns; on
+    "cuda" one launch of dim (height, width), queued on the thread's stream (``transfer.stream``)
+    without waiting: a download waits for it (``transfer.py``). Arrays in ``inputs`` must live on
+    ``device``.
     """
     if height <= 0 or width <= 0:
         return
     _ensure_loaded(kernel, device)
     if device != "cpu":
-        wp.launch(kernel, dim=(height, width), inputs=[0, *inputs], device=device)
-        wp.synchronize_device(device)
+        wp.launch(kernel, dim=(height, width), inputs=[0, *inputs], device=device, stream=transfer.stream(device))
         return
     bands = row_bands(height, cpu_threads(threads))
     if len(bands) == 1:
@@ -278,17 +271,8 @@ def launch_rows(kernel, height: int, width: int, inputs: list, device: str, thre
         future.result()
 
 
-def upload(array: wp.array, values) -> None:
-    """Copy ``values`` (array-like of ``array``'s shape) into the Warp ``array``: in place through its
-    numpy view on the CPU (no staging array), by ``assign`` on a GPU."""
-    if array.device.is_cpu:
-        np.copyto(array.numpy(), values, casting="unsafe")
-    else:
-        array.assign(np.ascontiguousarray(values, wp.dtype_to_numpy(array.dtype)))
-
-
 def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str, threads: int) -> None:
-    """Run ``kernel(row0, col_step, width, *inputs)`` over rows [0, height) and wait until it has finished.
+    """Run ``kernel(row0, col_step, width, *inputs)`` over rows [0, height) (as :func:`launch_rows`).
 
     For kernels whose thread (i, j) loops over columns ``j, j + col_step, ... < width`` of row
     ``row0 + i``: on "cpu" one thread per row (``col_step`` 1), rows split into parallel bands as in
@@ -299,8 +283,8 @@ def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str,
         return
     _ensure_loaded(kernel, device)
     if device != "cpu":
-        wp.launch(kernel, dim=(height, width), inputs=[0, width, width, *inputs], device=device)
-        wp.synchronize_device(device)
+        wp.launch(kernel, dim=(height, width), inputs=[0, width, width, *inputs], device=device,
+                  stream=transfer.stream(device))
         return
     bands = row_bands(height, cpu_threads(threads))
     if len(bands) == 1:
@@ -322,8 +306,8 @@ def loaded() -> frozenset[tuple[str, str]]:
 def kernel_modules(device: str, channels: tuple[int, ...] | None = None) -> dict[str, list[wp.Module]]:
     """Per Warp device, the modules of ``sena_warp.kernels``, in the order a stitch first launches them (the
     estimate's, then the frames'): those at module level and the variants a module builds with a factory and
-    lists in a dict (of the frame kernels only those for ``channels``; None: all). On ``device``, or where a
-    module says its kernels always run (its ``DEVICE``: work on host arrays)."""
+    lists in a dict (of the frame kernels only those for ``channels``; None: all), each where it is defined. On
+    ``device``, or where a module says its kernels always run (its ``DEVICE``: work on host arrays)."""
     package = importlib.import_module("sena_warp.kernels")
     found: dict[str, dict[str, wp.Module]] = {}
     names = sorted((info.name for info in pkgutil.iter_modules(package.__path__)),
@@ -334,9 +318,9 @@ def kernel_modules(device: str, channels: tuple[int, ...] | None = None) -> dict
         for attribute, obj in vars(module).items():
             kernels = obj.items() if isinstance(obj, dict) else ((None, obj),)
             for key, kernel in kernels:
-                if attribute == "COMPOSITE_FRAME_KERNELS" and channels is not None and key not in channels:
+                if attribute in PER_CHANNELS and channels is not None and key not in channels:
                     continue
-                if isinstance(kernel, wp.Kernel):
+                if isinstance(kernel, wp.Kernel) and kernel.func.__module__ == module.__name__:
                     found.setdefault(on, {}).setdefault(kernel.module.name, kernel.module)
     return {on: list(modules.values()) for on, modules in found.items()}
 

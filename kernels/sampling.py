@@ -1,4 +1,4 @@
-"""Full-resolution source sampling map (SENA.md step 6).
+"""Full-resolution source sampling map (docs/method.md step 6).
 
 ``M_s(u) = A_glob^-1 (u - o) + D_guarded(u)``: for each canvas pixel u = (x, y), the (x, y)
 position in the source image to sample. Affine math in float64, map stored as float32.

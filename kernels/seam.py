@@ -1,4 +1,4 @@
-"""Seam maps: per-pixel source map, target map and alpha around the seam (SENA.md step 9, paper
+"""Seam maps: per-pixel source map, target map and alpha around the seam (docs/method.md step 9, paper
 "Partitioning and Reconstruction").
 
 Per canvas row y the host gives the seam x ``s(y)`` (interpolated between target anchors), the

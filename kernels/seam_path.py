@@ -16,6 +16,8 @@ from sena_warp.kernels import MODULE_OPTIONS
 
 wp.set_module_options(MODULE_OPTIONS)  # see the package docstring
 
+DEVICE = "cpu"  # a path is a sequential walk per segment: the DP runs on the host, where its cost is
+
 INF = wp.constant(1.0e30)
 
 

@@ -7,7 +7,7 @@ From Python, files in and files out (``sena_warp.api``)::
     report = stitch_images("a.jpg", "b.jpg", "pano.png", Config(grid_x=8), crop=True)
     report = stitch_videos("left.mp4", "right.mp4", "pano.mp4", Config(video_crf=18), offset=0.2)
 
-Pipeline (SENA.md): features -> global affine -> overlap and cells -> local affines -> FFD field ->
+Pipeline (``docs/method.md``): features -> global affine -> overlap and cells -> local affines -> FFD field ->
 gate -> source map -> adequate zone -> keypoint chain -> seam maps -> composite. Per-pixel work runs
 in NVIDIA Warp kernels (``sena_warp.kernels``); paired video I/O lives in ``sena_warp.video``.
 """

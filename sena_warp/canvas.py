@@ -1,4 +1,4 @@
-"""The output canvas: its size and where the target image sits on it (SENA.md step 2).
+"""The output canvas: its size and where the target image sits on it (docs/method.md step 2).
 
 A target pixel ``p_tgt`` (x, y) sits at ``u = p_tgt + o`` on the canvas, ``o = offset_tgt``. The
 canvas grid is indexed ``canvas_img[y, x]`` like every image in the package.

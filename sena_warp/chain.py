@@ -1,4 +1,4 @@
-"""Step 8: the keypoint chain that the seam follows (SENA.md step 8, paper "Keypoint Chain Refinement"
+"""Step 8: the keypoint chain that the seam follows (docs/method.md step 8, paper "Keypoint Chain Refinement"
 and the directional validation of "Image Partitioning").
 
 Inside the adequate zone: keep matches whose warped-source and target patches have the same

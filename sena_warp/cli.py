@@ -103,7 +103,7 @@ def _clip_seconds(text: str) -> float:
 
 
 def _add_messages(parser: argparse.ArgumentParser) -> None:
-    """Options every subcommand takes: verbosity, progress style, version (last in its help)."""
+    """Options every subcommand takes: verbosity and progress style (last in its help)."""
     p = parser.add_argument_group("messages on stderr")
     loud = p.add_mutually_exclusive_group()
     loud.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors, no summary line")
@@ -111,7 +111,6 @@ def _add_messages(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--progress", choices=PROGRESS_MODES, default="auto",
                    help="a redrawn line (bar), whole lines (plain) or one JSON object per line (json, its events "
                         "in the README); auto = bar on a terminal, else plain (default: %(default)s)")
-    p.add_argument("--version", action="version", version=f"sena-warp {__version__}")
 
 
 def _add_settings(parser: argparse.ArgumentParser) -> None:
@@ -149,10 +148,12 @@ def _add_video(parser: argparse.ArgumentParser) -> None:
                      help="seconds the right video started after the left one, or auto: estimated from the "
                           "audio of both (else their motion), refused when unclear (default: 0)")
     rig.add_argument("--rig", choices=CHOICES["video_rig"],
-                     help=f"static: maps estimated once (and moved with a camera that drifts); moving: "
-                          f"re-estimated every --reestimate seconds (default: {Config.video_rig})")
+                     help=f"auto: decided from the first second and watched (a line on stderr says what and why); "
+                          f"static: maps estimated once (and moved with a camera that drifts); moving: aligned "
+                          f"every frame (default: {Config.video_rig})")
     rig.add_argument("--reestimate", type=float, metavar="S",
-                     help=f"seconds between re-estimations of a moving rig (default: {Config.video_reestimate_s:g})")
+                     help=f"a moving rig is re-estimated when its alignment falls behind, at most every S seconds "
+                          f"(default: {Config.video_reestimate_s:g})")
     picture = parser.add_argument_group("picture")
     picture.add_argument("--crop", action="store_true",
                          help="crop to the largest rectangle the first estimate covers (a video: for all of it)")
@@ -244,8 +245,8 @@ def cmd_image(args: argparse.Namespace) -> int:
 def cmd_video(args: argparse.Namespace) -> int:
     from .jobs import Job
 
-    if args.reestimate is not None and args.settings.get("video_rig") != "moving":
-        raise InputError("--reestimate re-estimates a moving rig; add --rig moving")
+    if args.reestimate is not None and args.settings.get("video_rig") == "static":
+        raise InputError("--reestimate re-estimates a moving rig; a static rig is estimated once (drop --rig static)")
     return _run_job(Job("video", (args.left, args.right), args.output, args.settings, report=args.report,
                         reference=args.reference, crop=args.crop, offset_s=args.offset, strict=args.strict,
                         figures=args.figures, debug=args.debug, overwrite=args.overwrite))
@@ -281,7 +282,8 @@ def build_parser() -> argparse.ArgumentParser:
         return sub.add_parser(name, help=help_text, description=help_text[0].upper() + help_text[1:] + ".")
 
     def sections(p: argparse.ArgumentParser, *adders) -> None:
-        """The shared option groups, after the command's own options, then the messages."""
+        """--version among the command's own options, the shared option groups after them, then the messages."""
+        p.add_argument("--version", action="version", version=f"sena-warp {__version__}")
         for add in (*adders, _add_messages):
             add(p)
 
@@ -294,7 +296,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--debug", metavar="DIR", help="write a picture of each stage into DIR")
     p.add_argument("--crop", action="store_true", help="crop to the largest fully covered rectangle")
     p.add_argument("--reference", choices=("auto", "a", "b"), default="auto",
-                   help="the photo kept unwarped (default: auto = the right or bottom view)")
+                   help="photo kept unwarped: a = image_a, b = image_b (default: auto = the right or bottom view)")
     sections(p, _add_overwrite, _add_settings)
     p.set_defaults(run=cmd_image)
 
@@ -330,9 +332,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=_lazy("batch", "cmd_batch"))
 
     p = command("match", "find and match features between two photos")
-    p.add_argument("image_a")
-    p.add_argument("image_b")
-    p.add_argument("-o", "--output", help="write a picture of the matches (.jpg/.png)")
+    p.add_argument("image_a", help="one photo")
+    p.add_argument("image_b", help="the other photo")
+    p.add_argument("-o", "--output", help="also write a picture of the matches (.jpg/.png)")
     sections(p, _add_overwrite, _add_settings)
     p.set_defaults(run=cmd_match)
 
@@ -352,10 +354,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=_clip_seconds, default=10.0,
                    help=f"clip length in seconds, at most {MAX_BENCH_SECONDS:g} (default: %(default)s)")
     p.add_argument("--markdown", metavar="FILE", help="also write the table with every column as Markdown")
-    p.add_argument("--work", default="bench_work", help="folder for the clips and outputs (default: %(default)s)")
+    p.add_argument("--work", default="bench_work", metavar="DIR",
+                   help="folder for the clips and outputs, kept and reused by the next run (default: %(default)s)")
     p.add_argument("--data", metavar="DIR",
-                   help="the shared data set holding pairs/rew_lawn_2160 (default: ../shared/data beside the source "
-                        "tree where it is there, else a pair the package ships)")
+                   help="a data set holding pairs/rew_lawn_2160 to make the clips from (default: ../shared/data "
+                        "beside the source tree if it is there, else the pair the package ships)")
     p.add_argument("--rss", type=_clip_seconds, nargs="*", default=[], metavar="S",
                    help="also measure the peak RSS of 1080p stitches of these lengths in seconds (e.g. 10 60)")
     p.add_argument("--device", choices=CHOICES["device"], default=Config.device,

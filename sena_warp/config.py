@@ -2,12 +2,12 @@
 
 Fields are grouped by stage (features, warp, seam, exposure, video, sync, encoding, runtime); in each
 group the settings a user changes first come first, the fine tuning after them. Each field carries
-the paper's symbol (``docs/paper/sena_paper.tex``, summarised in SENA.md), its unit and a one-line
+the paper's symbol (``docs/method.md`` lists them by stage), its unit and a one-line
 meaning; pixel quantities are in input-image pixels unless the name says otherwise. ``RANGES`` below
 the class holds every number's range and ``CHOICES`` every text setting's values; a ``Config`` is
 checked against them (and the fields that bound each other against each other) when it is made, so
-``Config(video_crf=99)`` or ``Config(grid_x="8")`` raise InputError. Defaults are the starting points
-of SENA.md; each departure is measured in ``docs/evaluation.md``.
+``Config(video_crf=99)`` or ``Config(grid_x="8")`` raise InputError. Where a default departs from the
+paper, ``docs/method.md`` says why and ``docs/evaluation.md`` what it buys.
 """
 
 from __future__ import annotations
@@ -93,7 +93,7 @@ class Config:
     ramp_diag_ratio: float = 0.10  # b as a fraction of the larger image diagonal
     sigma_d_ratio: float = 24.0 / 512.0  # sigma_d: density blur, as a fraction of the image's long side
     gamma_p: float = 1.2  # gamma_p: ramp steepness exponent
-    gamma_min: float = 0.9  # gamma_min: gate floor where matches are sparse (SENA.md: 0.30; sweep)
+    gamma_min: float = 0.9  # gamma_min: gate floor where matches are sparse (paper: 0.30; sweep in evaluation.md)
     sigma_g_px: float = 1.1  # sigma_g: blur of the guarded field
     # --- warp, fine tuning: warp map (step 6) -------------------------------------------------
     forward_tol_px: float = 0.01  # stop inverting M_s once |M_s(u) - s| is below this (source px)
@@ -172,7 +172,8 @@ class Config:
     video_gain_step_grey: float = 0.5  # video: gains alone change the picture by at most this per frame
 
     # --- video: the rig over time, estimates and the per-frame seam ---------------------------
-    video_rig: str = "static"  # "static": estimated once, moved with a drifting camera; "moving": every video_reestimate_s
+    video_rig: str = "auto"  # "auto": decided from the first second and watched (video/rig_motion.py); "static":
+    # estimated once, moved with a drifting camera; "moving": aligned every frame (video/align.py)
     video_reestimate_s: float = 1.0  # seconds of video between re-estimations of a moving rig
     video_crop: bool = False  # crop the output to the largest rectangle the first estimate covers, for the whole video
     video_start_s: float = 0.0  # the output starts at this time of the left input (s, after the offset); reached by seeking
@@ -183,19 +184,35 @@ class Config:
     video_estimate_spacing: int = 5  # frame pairs between two of those tries
     video_screen_max_side: int = 640  # those tries are ranked by XFeat at this long side at most; the best is estimated at xfeat_max_side
     video_estimate_max_side: int = 1920  # an estimate runs on the frames made this small (long side) and is scaled up
+    video_rig_moving_share: float = 0.004  # auto: a view drifting this x its width a second or more moves (first second)
+    video_rig_switch_share: float = 0.015  # auto: ... and a static rig whose view drifts this much later becomes moving
+    video_rig_still_share: float = 0.001  # auto: a moving rig whose views both drift less than this ...
+    video_rig_still_s: float = 2.0  # auto: ... for this long becomes static
     video_min_inlier_ratio: float = 0.5  # reject a re-estimate with fewer inliers than this x the first's
     video_max_median_change_px: float = 40.0  # reject a re-estimate moving M_s by more (median over the overlap)
     video_drift_check_s: float = 0.25  # static rig: how often each view is compared with its view at the estimate (0: never)
     video_drift_px: float = 2.0  # static rig: a view's move (input px) beyond this from what the maps follow moves them
     video_drift_speed_px: float = 0.5  # static rig: a drift move is blended in at this many px a frame (faster jolts)
-    video_blend_frames: int = 10  # frames over which accepted maps are blended in linearly (at least)
+    video_blend_frames: int = 10  # frames over which new maps are blended in linearly (at least): a drift's, a moving rig's new key
     video_seam_speed_px: float = 2.0  # the seam moves at most this (or one cell) per frame (a blend lasts long enough), but for jumps
-    video_warp_follow: float = 0.65  # moving rig: an accepted estimate moves the maps this share of the way (causal
-    # exponential smoothing of the warp across estimates: estimation noise averages out; 1: all the way)
     video_estimate_lookahead_s: float = 1.5  # moving rig, worker: a re-estimate starts on the frame this far ahead of
     # the one composited (those decoded frames are held), so it is ready when the loop reaches its frame; 0: none
     seam_prior_weight: float = 0.5  # moving rig: cost per px (per row) of a new seam's distance from the current one
     video_blank_max_std: float = 2.0  # luma standard deviation below which a frame is blank (e.g. a black start)
+    # --- video, fine tuning: a moving rig's alignment every frame (video/align.py) ------------
+    video_align_short_px: int = 360  # the planes are aligned made smaller, their short side about this (1 up to 540 rows)
+    video_align_points: int = 300  # target corners tracked in the overlap
+    video_align_min_share: float = 0.7  # topped up with new corners when fewer than this share remain
+    video_align_min_points: int = 20  # fewer points measured: the frame keeps the predicted warp
+    video_align_window_px: int = 15  # Lucas-Kanade window (tracks and the warp's residual flow), reduced px
+    video_align_lattice_nodes: float = 12.0  # correction lattice: nodes the canvas diagonal / this apart
+    video_align_seam_px: float = 32.0  # points within this of the seam (canvas px) are the ones that show ...
+    video_align_seam_weight: float = 4.0  # ... and weigh this many times as much; half the new corners are sought there
+    video_align_bend: float = 1e-6  # the fit's bending weight (lambda_b of the correction: ffd's, scale-free)
+    video_align_tukey_px: float = 3.0  # the fit's Tukey scale (source px): points farther off do not pull
+    video_align_prior: float = 1e-4  # the fit's pull towards the predicted lattice (per node, against the mean data term)
+    video_align_follow: float = 0.3  # the filter takes this share of a measured change at once (alpha)
+    video_align_max_lag_px: float = 1.0  # ... and never lags the measured lattice by more than this
     # --- video, fine tuning: the per-frame seam -----------------------------------------------
     video_seam_band_ratio: float = 0.05  # band half-width, x the canvas diagonal (room to go round an object)
     video_seam_band_min_px: int = 8  # band half-width at least this
@@ -275,7 +292,7 @@ CHOICES: dict[str, tuple[str, ...]] = {
                      "veryslow", "placebo"),
     "video_audio": ("left", "right", "none"),
     "video_encoder_thread_type": ("slice", "frame"),
-    "video_rig": ("static", "moving"),
+    "video_rig": ("auto", "static", "moving"),
     "ffd_model": ("fit", "blend"),
     "gate_model": ("none", "paper"),
     "seam_model": ("path", "paper"),
@@ -358,7 +375,13 @@ RANGES: dict[str, Range] = {
     "video_screen_max_side": Range(32, 4096), "video_estimate_max_side": Range(64, 8192),
     "video_min_inlier_ratio": Range(0, 1), "video_max_median_change_px": Range(0, 10000),
     "video_drift_check_s": Range(0, 3600), "video_drift_px": _above(0, 10000), "video_drift_speed_px": _above(0, 10000),
-    "video_blend_frames": Range(0, 10000), "video_seam_speed_px": _above(0, 10000), "video_warp_follow": _above(0, 1),
+    "video_blend_frames": Range(0, 10000), "video_seam_speed_px": _above(0, 10000), "video_rig_moving_share": _above(0, 1),
+    "video_rig_switch_share": _above(0, 1), "video_rig_still_share": _above(0, 1), "video_rig_still_s": _above(0, 3600),
+    "video_align_short_px": Range(32, 4096), "video_align_points": Range(1, 10000), "video_align_min_share": Range(0, 1),
+    "video_align_min_points": Range(3, 10000), "video_align_window_px": Range(3, 99),
+    "video_align_lattice_nodes": _above(1, 200), "video_align_seam_px": Range(0, 10000),
+    "video_align_seam_weight": Range(1, 1000), "video_align_bend": Range(0, 1000), "video_align_tukey_px": _above(0, 1000),
+    "video_align_prior": Range(0, 1000), "video_align_follow": _above(0, 1), "video_align_max_lag_px": _above(0, 10000),
     "video_estimate_lookahead_s": Range(0, 60), "seam_prior_weight": Range(0, 1000), "video_blank_max_std": Range(0, 255),
     "video_seam_band_ratio": _above(0, 1), "video_seam_band_min_px": Range(1, 4096), "video_seam_line_step": Range(1, 64),
     "video_seam_frame_cells": Range(8, 8192), "video_seam_noise": Range(0, 255), "video_seam_still_box_px": Range(1, 64),

@@ -1,5 +1,5 @@
-"""Optional crop of a panorama to the largest axis-aligned rectangle that is fully covered (SENA.md
-step 9: "cropping to the largest inner rectangle is optional")."""
+"""Optional crop of a panorama to the largest axis-aligned rectangle that is fully covered (the
+paper, step 9: "cropping to the largest inner rectangle is optional")."""
 
 from __future__ import annotations
 

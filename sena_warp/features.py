@@ -1,4 +1,4 @@
-"""Keypoints, descriptors and matches between two images (SENA.md step 0).
+"""Keypoints, descriptors and matches between two images (docs/method.md step 0).
 
 ``cfg.features`` picks the detector: "xfeat" (sparse XFeat on onnxruntime, ``xfeat.py``) matched by
 mutual nearest neighbour on cosine similarity, or "sift" (OpenCV) matched with Lowe's ratio test.
@@ -137,7 +137,7 @@ def drop_transparent(found: tuple[np.ndarray, np.ndarray, np.ndarray], transpare
 
 def match_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config,
                  transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> Matches:
-    """Detect keypoints in two BGR uint8 images and match them (SENA.md step 0).
+    """Detect keypoints in two BGR uint8 images and match them (docs/method.md step 0).
 
     The images may differ in size. ``transparent``: per image, (H, W) bool masks of pixels that are
     not content (alpha 0) or None; no keypoint is kept there (see :func:`drop_transparent`). An

@@ -1,4 +1,4 @@
-"""Step 4: the FFD displacement field over the canvas (SENA.md step 4, paper "Locally adaptive image warping").
+"""Step 4: the FFD displacement field over the canvas (docs/method.md step 4, paper "Locally adaptive image warping").
 
 The field D (source pixels) lives on a lattice over the canvas and is upsampled bicubically
 (``cv2.resize``, Keys a = -0.75) to every canvas pixel. Two ways to get the lattice (``cfg.ffd_model``):
@@ -7,7 +7,7 @@ The field D (source pixels) lives on a lattice over the canvas and is upsampled 
   node (Warp kernel ``kernels/ffd.py``), clipped to d_max and smoothed on the lattice.
 * ``"fit"``, ours: the lattice is fitted to the matches by regularised least squares. Where
   neighbouring T_j disagree the paper's blend bends straight lines (paving rows S-kinked, columns
-  bent: issue 13), and the gate that keeps the source's global shape outside the overlap ramps the
+  bent), and the gate that keeps the source's global shape outside the overlap ramps the
   correction in over a band that eats into the overlap, so alignment suffers there. The fitted D
   minimises
 
@@ -35,7 +35,7 @@ from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.affine import apply_affine, invert_affine
 from sena_warp.errors import GeometryError
-from sena_warp.kernels import runtime
+from sena_warp.kernels import runtime, transfer
 from sena_warp.kernels.ffd import ffd_lattice_kernel
 
 CUBIC_A = -0.75  # cv2.resize's INTER_CUBIC kernel: the fit samples the lattice as the upsampling does
@@ -84,16 +84,16 @@ def blended_lattice(
         wp.vec2d(*canvas.offset_tgt),
         wp.mat22d(glob_tgt_to_src[:, :2]),
         wp.vec2d(glob_tgt_to_src[:, 2]),
-        wp.array(np.ascontiguousarray(local_tgt_to_src[:, :, :2]), dtype=wp.mat22d, device=device),
-        wp.array(np.ascontiguousarray(local_tgt_to_src[:, :, 2]), dtype=wp.vec2d, device=device),
-        wp.array(np.asarray(centres_tgt, dtype=np.float64).reshape(-1, 2), dtype=wp.vec2d, device=device),
-        wp.array(np.asarray(conf, dtype=np.float64).reshape(-1), dtype=wp.float64, device=device),
+        transfer.to_device(np.ascontiguousarray(local_tgt_to_src[:, :, :2]), wp.mat22d, device, "ffd"),
+        transfer.to_device(np.ascontiguousarray(local_tgt_to_src[:, :, 2]), wp.vec2d, device, "ffd"),
+        transfer.to_device(np.asarray(centres_tgt, dtype=np.float64).reshape(-1, 2), wp.vec2d, device, "ffd"),
+        transfer.to_device(np.asarray(conf, dtype=np.float64).reshape(-1), wp.float64, device, "ffd"),
         float(sigma_f),
         float(cfg.d_max_px),
         field,
     ]
     runtime.launch_rows(ffd_lattice_kernel, cfg.lattice_ny, cfg.lattice_nx, inputs, device, cfg.cpu_threads)
-    return field.numpy().reshape(cfg.lattice_ny, cfg.lattice_nx, 2)
+    return transfer.download(field, "ffd").reshape(cfg.lattice_ny, cfg.lattice_nx, 2)
 
 
 def smoothed_blend_lattice(
@@ -170,30 +170,61 @@ def bending_matrix(ny: int, nx: int, step_x: float, step_y: float) -> np.ndarray
     return matrix.reshape(n, n)
 
 
+def bending_regulariser(canvas: Canvas, shape: tuple[int, int], diag_px: float, lambda_bend: float) -> np.ndarray:
+    """(n, n) the fit's regulariser for a (Ny, Nx) lattice over ``canvas``: ``lambda_bend`` L^4 / area x the
+    thin-plate energy (``bending_matrix``), plus :data:`RIDGE` on the diagonal (L = ``diag_px``)."""
+    ny, nx = shape
+    bending = bending_matrix(ny, nx, canvas.width / nx, canvas.height / ny)
+    return lambda_bend * diag_px**4 / (canvas.width * canvas.height) * bending + RIDGE * np.eye(ny * nx)
+
+
+class LatticeTerms:
+    """The data term of a lattice fit at canvas points (N, 2) (x, y): each point's 16 bicubic taps
+    (``lattice_taps``) on a (Ny, Nx) lattice over ``canvas``, and the normal equations they give for
+    any per-point weights and values (:meth:`normal`)."""
+
+    def __init__(self, pts_canvas: np.ndarray, canvas: Canvas, shape: tuple[int, int]):
+        self.nodes = shape[0] * shape[1]
+        self.index, self.weight = lattice_taps(pts_canvas, canvas, shape)
+        n = self.nodes
+        self._pairs = (self.index[:, :, None] * n + self.index[:, None, :]).reshape(len(self.index), -1)
+        self._outer = (self.weight[:, :, None] * self.weight[:, None, :]).reshape(len(self.index), -1)
+
+    def normal(self, w: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, n) sum_i w_i b_i b_i^T and (n, 2) sum_i w_i b_i v_i for weights ``w`` (N,) and values (N, 2),
+        b_i the point's taps."""
+        n = self.nodes
+        normal = np.bincount(self._pairs.ravel(), weights=(w[:, None] * self._outer).ravel(), minlength=n * n)
+        rhs = np.stack([np.bincount(self.index.ravel(), weights=(w[:, None] * self.weight * values[:, k:k + 1]).ravel(),
+                                    minlength=n) for k in range(2)], axis=1)
+        return normal.reshape(n, n), rhs
+
+    def values(self, solution: np.ndarray) -> np.ndarray:
+        """(N, 2) the lattice ``solution`` (n, 2) at the points."""
+        return np.einsum("nk,nkc->nc", self.weight, solution[self.index])
+
+
+def tukey_weights(error: np.ndarray, scale_px: float) -> np.ndarray:
+    """Tukey biweights of errors (N,) at ``scale_px``."""
+    return np.clip(1.0 - (error / scale_px) ** 2, 0.0, None) ** 2
+
+
 def fit_lattice(pts_canvas: np.ndarray, residual_src: np.ndarray, canvas: Canvas, shape: tuple[int, int],
                 diag_px: float, cfg: Config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """IRLS fit of the lattice (Ny, Nx, 2) to residuals (N, 2) at canvas points (N, 2); see the module
     docstring. Returns (lattice float32, |fit - residual| (N,), Tukey weights (N,))."""
     ny, nx = shape
-    n = ny * nx
-    index, weight = lattice_taps(pts_canvas, canvas, shape)
-    step_x, step_y = canvas.width / nx, canvas.height / ny
-    regulariser = cfg.lambda_bend * diag_px**4 / (canvas.width * canvas.height) * bending_matrix(ny, nx, step_x, step_y)
-    regulariser = regulariser + RIDGE * np.eye(n)
-    pairs = (index[:, :, None] * n + index[:, None, :]).reshape(len(index), -1)
-    outer = (weight[:, :, None] * weight[:, None, :]).reshape(len(index), -1)
+    terms = LatticeTerms(pts_canvas, canvas, shape)
+    regulariser = bending_regulariser(canvas, shape, diag_px, cfg.lambda_bend)
     tukey = np.ones(len(pts_canvas))
     for _ in range(max(1, cfg.fit_iterations)):
         w = tukey / max(tukey.sum(), 1e-12)
-        normal = np.bincount(pairs.ravel(), weights=(w[:, None] * outer).ravel(), minlength=n * n).reshape(n, n)
-        rhs = np.stack([np.bincount(index.ravel(), weights=(w[:, None] * weight * residual_src[:, k:k + 1]).ravel(),
-                                    minlength=n) for k in range(2)], axis=1)
+        normal, rhs = terms.normal(w, residual_src)
         ok, solution = cv2.solve(normal + regulariser, rhs, flags=cv2.DECOMP_CHOLESKY)
         if not ok:
             raise GeometryError("the FFD lattice fit is singular; check that the images overlap")
-        fitted = np.einsum("nk,nkc->nc", weight, solution[index])
-        error = np.hypot(*(fitted - residual_src).T)
-        tukey = np.clip(1.0 - (error / cfg.fit_tukey_px) ** 2, 0.0, None) ** 2
+        error = np.hypot(*(terms.values(solution) - residual_src).T)
+        tukey = tukey_weights(error, cfg.fit_tukey_px)
         if tukey.sum() <= 0:
             break
     return solution.reshape(ny, nx, 2).astype(np.float32), error, tukey

@@ -1,7 +1,7 @@
 """Exposure compensation: one gain per channel and view (Brown & Lowe, IJCV 2007, section 6).
 
 The two views of a pair rarely share one exposure and white balance, and without compensation the
-seam shows a brightness or colour step (issue 13). Over the overlap, with mean intensities mu_s and
+seam shows a brightness or colour step. Over the overlap, with mean intensities mu_s and
 mu_t of the warped source and the placed target (per channel), the gains minimise
 
     (g_s mu_s - g_t mu_t)^2 / sigma_n^2 + ((1 - g_s)^2 + (1 - g_t)^2) / sigma_g^2,
@@ -14,7 +14,7 @@ differences (misalignment, parallax, moving objects) and near-saturated pixels a
 is measured is the exposure, not the content.
 
 A gain below 1 turns a view's saturated white grey, one above 1 clips its highlights flat: either way
-the two views' skies disagree however well their mid-tones are matched (issue 13, rew_theater). So a
+the two views' skies disagree however well their mid-tones are matched (rew_theater's sky). So a
 gain applies in full up to a knee (``Config.gain_knee_ratio`` x white) and above it the line runs
 straight on to white (``tone_curve``; the compositor's kernel applies the same rule).
 """

@@ -1,4 +1,4 @@
-"""Step 5: the seam guard G and the guarded field (SENA.md step 5).
+"""Step 5: the seam guard G and the guarded field (docs/method.md step 5).
 
 G is 0 where the source is shown alone (outside the overlap), so the source keeps its global affine
 shape there; it rises over a ramp of width b from that region's border into the overlap, and is
@@ -16,7 +16,7 @@ import numpy as np
 import warp as wp
 
 from sena_warp.config import Config
-from sena_warp.kernels import runtime
+from sena_warp.kernels import runtime, transfer
 from sena_warp.kernels.gate import gate_kernel, gated_field_kernel
 
 DENSITY_CELLS_PER_SIGMA = 4.0  # coarse-grid cells per sigma_d of the density blur (see inlier_density)
@@ -86,22 +86,22 @@ def gate_canvas(
     """
     shape = np.asarray(source_only_canvas).shape
     device = cfg.device
-    sdf = wp.array(open_border_distance_px(source_only_canvas), dtype=float, device=device)
+    sdf = transfer.to_device(open_border_distance_px(source_only_canvas), float, device, "gate")
     density_np = inlier_density(shape, inliers_canvas, cfg.sigma_d_ratio * long_side_px)
-    density = wp.array(density_np, dtype=float, device=device)
+    density = transfer.to_device(density_np, float, device, "gate")
     gate = wp.zeros(shape, dtype=float, device=device)
     inputs = [sdf, density, ramp_width_px(diag_px, cfg), cfg.gamma_p, cfg.gamma_min, gate]
     runtime.launch_rows(gate_kernel, shape[0], shape[1], inputs, device, cfg.cpu_threads)
-    return gate.numpy()
+    return transfer.download(gate, "gate")
 
 
 def guard_field(field: np.ndarray, gate: np.ndarray, cfg: Config) -> np.ndarray:
     """D_guarded = GaussianBlur_{sigma_g}(G * D) on x and y: (H, W, 2) float32 from field (H, W, 2), gate (H, W)."""
     height, width = gate.shape
     device = cfg.device
-    field_wp = wp.array(np.ascontiguousarray(field, dtype=np.float32), dtype=wp.vec2, device=device)
-    gate_wp = wp.array(np.ascontiguousarray(gate, dtype=np.float32), dtype=float, device=device)
+    field_wp = transfer.to_device(np.ascontiguousarray(field, dtype=np.float32), wp.vec2, device, "gate")
+    gate_wp = transfer.to_device(np.ascontiguousarray(gate, dtype=np.float32), float, device, "gate")
     gated = wp.zeros((height, width), dtype=wp.vec2, device=device)
     runtime.launch_rows(gated_field_kernel, height, width, [field_wp, gate_wp, gated], device, cfg.cpu_threads)
-    gated_np = gated.numpy().reshape(height, width, 2)
+    gated_np = transfer.download(gated, "gate").reshape(height, width, 2)
     return cv2.GaussianBlur(gated_np, (0, 0), cfg.sigma_g_px)

@@ -1,7 +1,7 @@
 """SENA step 1: the global affine ``A_glob`` (source -> target) by RANSAC.
 
 Two models are tried on the same matches, OpenCV's full affine (6 dof) and its partial affine
-(similarity: rotation, uniform scale, translation; 4 dof). SENA.md step 1 keeps the one with more
+(similarity: rotation, uniform scale, translation; 4 dof). docs/method.md step 1 keeps the one with more
 RANSAC inliers (``global_model_choice = "inliers"``); ours keeps the one more matches lie within
 ``fit_match_px`` of ("support"): the fitted lattice follows all of those, so that is the model it can
 best correct, where a 3 px inlier count only says which single scene plane the model fits. On a
@@ -84,7 +84,7 @@ def _similarity_kept(affine_sim: np.ndarray, inliers_sim: np.ndarray, affine_ful
                      inliers_full: np.ndarray, pts_src: np.ndarray, pts_tgt: np.ndarray, cfg: Config) -> bool:
     """Whether the similarity is kept over the full affine (module docstring).
 
-    By RANSAC inliers (``global_model_choice`` "inliers", SENA.md step 1), a tie going to the similarity,
+    By RANSAC inliers (``global_model_choice`` "inliers", docs/method.md step 1), a tie going to the similarity,
     the more rigid model. By "support", the model with more matches within ``fit_match_px`` wins, and
     where the two are within ``global_model_margin`` of each other (every match near both: a sheared
     view, or a grey copy of an image that flips a near tie) the inliers decide as above.
@@ -100,7 +100,7 @@ def _similarity_kept(affine_sim: np.ndarray, inliers_sim: np.ndarray, affine_ful
 
 
 def fit_global_affine(pts_src: np.ndarray, pts_tgt: np.ndarray, cfg: Config) -> GlobalAffine:
-    """Fit ``A_glob`` (src -> tgt) to matches with RANSAC, affine vs similarity (SENA.md step 1).
+    """Fit ``A_glob`` (src -> tgt) to matches with RANSAC, affine vs similarity (docs/method.md step 1).
 
     ``pts_src``, ``pts_tgt``: float64 ``(N, 2)`` ``(x, y)`` pixel positions of the same matches.
     Raises ``MatchError`` when fewer than ``cfg.min_inliers`` matches or inliers are available.

@@ -9,7 +9,7 @@ inlier takes part with its Gaussian weight: with alpha = 0.35 a match one cell d
 exp(-1 / (2 * 0.35^2)) ~ 0.017, so the fit is in effect the cell and its neighbours, without a hard
 border that would make T_j jump when a match crosses it.
 
-Normalisation (SENA.md step 3; the authors regress raw pixels, which makes lambda depend on image
+Normalisation (docs/method.md step 3; the authors regress raw pixels, which makes lambda depend on image
 size and position): the fit runs in Hartley-style coordinates built from the cell's Gaussian,
 target ``(p - c_j) / sigma_j`` and source ``(p - A_glob^-1 c_j) sqrt|det A_glob| / sigma_j``, with
 weights normalised to sum 1. There ``A_glob`` becomes ``[L / sqrt|det L| | 0]`` (unit determinant,
@@ -162,7 +162,7 @@ def confidence(weights: np.ndarray, cfg: Config) -> float:
 def fit_local_affines(
     pts_src: np.ndarray, pts_tgt: np.ndarray, affine_src_to_tgt: np.ndarray, cells: list[Cell], cfg: Config
 ) -> LocalAffines:
-    """Fit T_j for every cell (SENA.md step 3).
+    """Fit T_j for every cell (docs/method.md step 3).
 
     ``pts_src``, ``pts_tgt``: float64 ``(N, 2)`` ``(x, y)`` of the RANSAC INLIER matches only;
     ``affine_src_to_tgt``: ``(2, 3)`` A_glob; ``cells``: from ``grid_cells``. A cell whose matches

@@ -1,4 +1,4 @@
-"""Step 9: partition the canvas at the seam and build the seam maps (SENA.md step 9, paper
+"""Step 9: partition the canvas at the seam and build the seam maps (docs/method.md step 9, paper
 "Partitioning and Reconstruction").
 
 The seam (``seam_path.SeamPath``: one x per canvas row, through the anchors) splits every row: the
@@ -9,7 +9,7 @@ target anchor: per row, the anchor residual (dx, dy) = anchor_src - anchor_tgt i
 the rows, applied in full inside the transition and faded out (smootherstep) over
 ``cfg.seam_fade_px`` beyond it, so the source far from the seam keeps its step-6 shape. The paper
 interpolates the residual linearly between anchors, which kinks lines that cross the seam at every
-anchor (issue 13); with ``cfg.seam_model == "path"`` it is a smoothing spline through them
+anchor; with ``cfg.seam_model == "path"`` it is a smoothing spline through them
 (``smooth_curve``). The per-pixel part is ``kernels/seam.py``.
 
 What is left of an exposure difference after the gains is hidden by the seam blend's low-frequency
@@ -33,7 +33,7 @@ from sena_warp.composite import lf_weights
 from sena_warp.config import Config
 from sena_warp.errors import InputError
 from sena_warp.ffd import cubic_weights
-from sena_warp.kernels import runtime
+from sena_warp.kernels import runtime, transfer
 from sena_warp.kernels.seam import seam_maps_kernel
 from sena_warp.seam_path import SeamPath
 from sena_warp.warp_map import CanvasViews
@@ -141,10 +141,10 @@ def seam_maps(map_src_canvas: np.ndarray, canvas: Canvas, path: SeamPath, cfg: C
     map_tgt_out = wp.empty(shape, dtype=wp.vec2, device=device)
     alpha_out = wp.empty(shape, dtype=float, device=device)
     inputs = [
-        wp.array(np.ascontiguousarray(map_src_canvas, np.float32), dtype=wp.vec2, device=device),
-        wp.array(rows.seam_x, dtype=float, device=device),
-        wp.array(rows.src_row_y, dtype=float, device=device),
-        wp.array(rows.shift_x, dtype=float, device=device),
+        transfer.to_device(np.ascontiguousarray(map_src_canvas, np.float32), wp.vec2, device, "seam_maps"),
+        transfer.to_device(rows.seam_x, float, device, "seam_maps"),
+        transfer.to_device(rows.src_row_y, float, device, "seam_maps"),
+        transfer.to_device(rows.shift_x, float, device, "seam_maps"),
         wp.vec2(*canvas.offset_tgt),
         float(cfg.transition_px),
         float(cfg.seam_smooth_sigma_px),
@@ -155,9 +155,9 @@ def seam_maps(map_src_canvas: np.ndarray, canvas: Canvas, path: SeamPath, cfg: C
     ]
     runtime.launch_rows(seam_maps_kernel, canvas.height, canvas.width, inputs, device, cfg.cpu_threads)
     return SeamMaps(
-        map_src_canvas=map_src_out.numpy().reshape(*shape, 2),
-        map_tgt_canvas=map_tgt_out.numpy().reshape(*shape, 2),
-        alpha_canvas=alpha_out.numpy(),
+        map_src_canvas=transfer.download(map_src_out, "seam_maps").reshape(*shape, 2),
+        map_tgt_canvas=transfer.download(map_tgt_out, "seam_maps").reshape(*shape, 2),
+        alpha_canvas=transfer.download(alpha_out, "seam_maps"),
         seam_x_canvas=rows.seam_x,
         anchors_src_canvas=np.asarray(path.anchors_src_canvas, np.float64),
         anchors_tgt_canvas=np.asarray(path.anchors_tgt_canvas, np.float64),
@@ -213,7 +213,7 @@ class SeamOffsets:
 
     def relative(self) -> tuple[np.ndarray, np.ndarray]:
         """The offsets as relative changes of each view's gain ((H, C) float32 each): the offset over the
-        level it was measured at (at least ``LEVEL_MIN_GREY``), what ``Compositor(relative_offsets=True)``
+        level it was measured at (at least ``LEVEL_MIN_GREY``), what a ``FrameState`` with ``relative_offsets``
         applies."""
         return relative_to(self.src, self.level_src), relative_to(self.tgt, self.level_tgt)
 

@@ -1,5 +1,5 @@
 """What a stitch did, as a JSON-ready dict (``--report``): the run (tool, device, settings), counts,
-models, zone, anchors, the figures of SENA.md "Measuring" and the time per stage. Every key is
+models, zone, anchors, the quality figures (``docs/evaluation.md``) and the time per stage. Every key is
 explained in ``docs/report.md``.
 
 The pipeline does not measure itself: the figures are computed by the caller (the CLI, with

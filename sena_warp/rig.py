@@ -1,6 +1,6 @@
 """Which input is the source (warped, left) and which the target (reference), and rig orientation.
 
-SENA.md "Roles": source = left view, target = right view; which input is left is found from the
+Roles (``docs/method.md``): source = left view, target = right view; which input is left is found from the
 sign of the median x-disparity of the matches, and a vertical rig (|dy| > |dx|) is handled by
 transposing internally. The pipeline works in a *working frame* where the source is always left;
 for a vertical rig that frame is the transpose of the input (x and y swapped). Maps built in the
@@ -69,7 +69,7 @@ def matches_to_working(pts_a: np.ndarray, pts_b: np.ndarray, rig: Rig) -> tuple[
     canonical order: by source x, then source y, then target x and y.
 
     The order of the matches depends on which input came first (``image a b`` vs ``image b a``), and
-    RANSAC samples in that order: sorted, both orders give the same model and the same maps (issue 13).
+    RANSAC samples in that order: sorted, both orders give the same model and the same maps.
     """
     pts_src, pts_tgt = (points_to_working(pts, rig) for pts in rig.pick(pts_a, pts_b))
     order = np.lexsort((pts_tgt[:, 1], pts_tgt[:, 0], pts_src[:, 1], pts_src[:, 0]))

@@ -1,9 +1,9 @@
 """Steps 8-9 (ours): the seam follows the cheapest path through the overlap, pinned at keypoint anchors.
 
 Between anchors the paper's seam is a straight line; where it crosses something at another depth the
-two halves come from different parallax, and objects are doubled or cut (issue 13). Here the seam is
+two halves come from different parallax, and objects are doubled or cut. Here the seam is
 a path, one x per canvas row of the working frame (source left), that minimises a cost summed along
-it (dynamic programming, Warp kernel ``kernels/seam_path.py``):
+it (dynamic programming, Warp kernel ``kernels/seam_path.py``, on the host where the cost is):
 
 * the colour and gradient difference of the warped source and the target (both gain-compensated),
   so it runs where the two agree;
@@ -36,7 +36,8 @@ from .errors import GeometryError, InputError
 from .warp_map import CanvasViews
 from .zone import Zone
 from sena_warp.kernels import runtime
-from sena_warp.kernels.seam_path import seam_dp_kernel
+from sena_warp.kernels.seam_path import DEVICE, seam_dp_kernel
+from sena_warp.kernels.transfer import host_array
 
 BLOCKED = 1.0e4  # cost of a pixel outside the overlap: a path crosses one only where nothing else is possible
 
@@ -67,27 +68,35 @@ def _gradient(grey: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3) / 8.0, cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3) / 8.0
 
 
-def separation_cost(shape: tuple[int, int], copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray,
-                    cfg: Config) -> np.ndarray:
-    """(H, W) float32: for every match whose two copies land apart on the canvas, a seam between them
-    shows the point twice (both copies visible) or not at all, so every x between the copies, and within
-    a quarter transition plus the smoothing beyond them, costs ``cfg.seam_separation_weight`` on the rows
-    within ``cfg.seam_separation_rows`` of the match.
-
-    copies_*_canvas: (N, 2) float64 canvas (x, y) of each match's source copy (warped) and target copy
-    (NaN where undefined). Copies closer than ``cfg.seam_separation_min_px`` count as one point;
-    farther than ``cfg.seam_separation_max_px``, as a wrong match.
-    """
-    height, width = shape
+def separation_spans(copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray, cfg: Config
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(row, lo, hi) float64 (M,) of every match whose two copies land apart on the canvas: the row between
+    them and the x span a seam must not cross (module ``separation_cost``). copies_*_canvas: (N, 2)
+    float64 canvas (x, y) of each match's source copy (warped) and target copy (NaN where undefined).
+    Copies closer than ``cfg.seam_separation_min_px`` count as one point; farther than
+    ``cfg.seam_separation_max_px``, as a wrong match."""
     copies_src_canvas = np.asarray(copies_src_canvas, np.float64)
     copies_tgt_canvas = np.asarray(copies_tgt_canvas, np.float64)
     apart = np.hypot(*(copies_src_canvas - copies_tgt_canvas).T)
     use = np.isfinite(apart) & (apart > cfg.seam_separation_min_px) & (apart <= cfg.seam_separation_max_px)
     # A seam within a quarter transition (and the smoothing) of a copy mixes it in at a quarter or more: a ghost.
     reach = 0.25 * cfg.transition_px + cfg.seam_smooth_sigma_px
-    lo = np.clip(np.floor(np.minimum(copies_src_canvas[use, 0], copies_tgt_canvas[use, 0]) - reach), 0, width).astype(np.int64)
-    hi = np.clip(np.ceil(np.maximum(copies_src_canvas[use, 0], copies_tgt_canvas[use, 0]) + reach), 0, width).astype(np.int64)
-    row = np.rint(0.5 * (copies_src_canvas[use, 1] + copies_tgt_canvas[use, 1])).astype(np.int64)
+    lo = np.minimum(copies_src_canvas[use, 0], copies_tgt_canvas[use, 0]) - reach
+    hi = np.maximum(copies_src_canvas[use, 0], copies_tgt_canvas[use, 0]) + reach
+    return 0.5 * (copies_src_canvas[use, 1] + copies_tgt_canvas[use, 1]), lo, hi
+
+
+def separation_cost(shape: tuple[int, int], copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray,
+                    cfg: Config) -> np.ndarray:
+    """(H, W) float32: for every match whose two copies land apart on the canvas, a seam between them
+    shows the point twice (both copies visible) or not at all, so every x between the copies, and within
+    a quarter transition plus the smoothing beyond them, costs ``cfg.seam_separation_weight`` on the rows
+    within ``cfg.seam_separation_rows`` of the match (:func:`separation_spans`)."""
+    height, width = shape
+    mid, lo_x, hi_x = separation_spans(copies_src_canvas, copies_tgt_canvas, cfg)
+    lo = np.clip(np.floor(lo_x), 0, width).astype(np.int64)
+    hi = np.clip(np.ceil(hi_x), 0, width).astype(np.int64)
+    row = np.rint(mid).astype(np.int64)
     edges = np.zeros((height, width + 1), np.float32)
     for dy in range(-cfg.seam_separation_rows, cfg.seam_separation_rows + 1):
         r = row + dy
@@ -154,27 +163,29 @@ def seam_cost_canvas(warped_src: np.ndarray, placed_tgt: np.ndarray, both: np.nd
 
 class BandPath:
     """The DP of ``kernels/seam_path.py`` for a band of fixed shape and fixed ``segments`` (S, 4) (see
-    :func:`dp_segments`), its device arrays allocated and its segments uploaded once (a video solves
-    the same band every frame)."""
+    :func:`dp_segments`), its arrays allocated and its segments set once (a video solves the same band
+    every frame), on the host (Warp's CPU device, :data:`~sena_warp.kernels.seam_path.DEVICE`) with
+    ``threads`` launch threads: a path is one sequential walk per segment, work for a CPU thread."""
 
-    def __init__(self, rows: int, width: int, segments: np.ndarray, cfg: Config):
-        device = cfg.device
-        self.cfg = cfg
+    def __init__(self, rows: int, width: int, segments: np.ndarray, threads: int):
+        self.threads = threads
         self.shape = (rows, width)
         segments = np.asarray(segments, np.int32).reshape(-1, 4)
-        self.segments = [wp.array(np.ascontiguousarray(segments[:, k]), dtype=int, device=device) for k in range(4)]
-        self.band_x0 = wp.zeros(rows, dtype=int, device=device)
-        self.acc = wp.zeros((len(segments), 2, width), dtype=float, device=device)
-        self.back = wp.zeros((rows, width), dtype=wp.int8, device=device)
-        self.path = wp.zeros(rows, dtype=int, device=device)
+        self.segments = [host_array(np.ascontiguousarray(segments[:, k]), int) for k in range(4)]
+        self.band_x0 = np.zeros(rows, np.int32)
+        self.acc = wp.zeros((len(segments), 2, width), dtype=float, device=DEVICE)
+        self.back = wp.zeros((rows, width), dtype=wp.int8, device=DEVICE)
+        self.path = np.zeros(rows, np.int32)
+        self._arrays = [host_array(self.band_x0, int), host_array(self.path, int)]
 
     def solve(self, cost_band: wp.array, band_x0: np.ndarray, max_step: int, step_cost: float) -> np.ndarray:
-        """See :func:`dp_segments`; ``cost_band``: a (rows, width) float Warp array on this device."""
-        runtime.upload(self.band_x0, band_x0)
-        inputs = [cost_band, self.band_x0, *self.segments, int(max_step), float(step_cost), self.acc, self.back,
-                  self.path]
-        runtime.launch_rows(seam_dp_kernel, self.acc.shape[0], 1, inputs, self.cfg.device, self.cfg.cpu_threads)
-        return self.path.numpy()
+        """See :func:`dp_segments`; ``cost_band``: a (rows, width) float Warp array on the CPU device.
+        The path returned is this solver's own array, overwritten by the next solve."""
+        np.copyto(self.band_x0, band_x0, casting="unsafe")
+        x0, path = self._arrays
+        inputs = [cost_band, x0, *self.segments, int(max_step), float(step_cost), self.acc, self.back, path]
+        runtime.launch_rows(seam_dp_kernel, self.acc.shape[0], 1, inputs, DEVICE, self.threads)
+        return self.path
 
 
 def dp_segments(cost_band: np.ndarray, band_x0: np.ndarray, segments: np.ndarray, max_step: int, step_cost: float,
@@ -183,12 +194,12 @@ def dp_segments(cost_band: np.ndarray, band_x0: np.ndarray, segments: np.ndarray
 
     cost_band: (R, B) float32, column j of band row r is canvas x = band_x0[r] + j; band_x0: (R,) int.
     segments: (S, 4) int (first row, last row, start x or -1 = free, end x or -1 = free); segments may
-    share their end rows. Returns (R,) int32 canvas x of the path per band row. Runs on ``cfg.device``
-    (resolved) with ``cfg.cpu_threads``.
+    share their end rows. Returns (R,) int32 canvas x of the path per band row. Runs on the host with
+    ``cfg.cpu_threads``.
     """
     rows, width = cost_band.shape
-    cost = wp.array(np.ascontiguousarray(cost_band, np.float32), dtype=float, device=cfg.device)
-    return BandPath(rows, width, segments, cfg).solve(cost, band_x0, max_step, step_cost)
+    cost = host_array(np.ascontiguousarray(cost_band, np.float32), float)
+    return BandPath(rows, width, segments, cfg.cpu_threads).solve(cost, band_x0, max_step, step_cost).copy()
 
 
 def overlap_rows(both: np.ndarray) -> tuple[int, int]:

@@ -1,4 +1,4 @@
-"""The SENA stitch, one stage per line (SENA.md steps 0-9).
+"""The SENA stitch, one stage per line (docs/method.md, steps 0-9).
 
 ``estimate_maps`` turns two images into what the compositor needs over the output canvas: where to
 sample the source, where to sample the target, the seam between them (and so the alpha), each view's
@@ -10,8 +10,8 @@ every ``*_canvas`` array here is on the working-frame canvas. The final maps are
 the input frame (``*_input``: the same canvas, transposed back for a vertical rig) so the
 compositor never transposes frames.
 
-Where this departs from the paper (issue 13, ``docs/evaluation.md``), the paper's version stays one
-setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
+Where this departs from the paper (``docs/method.md``; what each departure buys: ``docs/evaluation.md``),
+the paper's version stays one setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
 ``seam_model="paper"`` (steps 8-9), ``switch_align=False``, ``thin_strip_ratio=0``, ``gain_model="none"``,
 ``seam_blend_ratio=0``, ``border_blend=False``, ``transition_px=24``.
 """
@@ -27,7 +27,8 @@ import cv2
 import numpy as np
 
 from .cells import grid_cells
-from .composite import Compositor, SeamLayout
+from .composite import (BorderBlend, CompositePlan, FrameState, SeamLayout, composite_image, composite_plan,
+                        coverage)
 from .config import CHOICES, Config, require_config
 from .errors import GeometryError, InputError, MatchError
 from .features import Matches, match_images, neighbour_supported
@@ -287,22 +288,27 @@ def seam_layout(seam: Seam, rig: Rig, cfg: Config, band_px: float | None = None)
                       smooth_sigma_px=float(cfg.seam_smooth_sigma_px), lf_px=seam.offsets.fade_px)
 
 
-def panorama_compositor(maps: StitchMaps, cfg: Config,
-                        transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> Compositor:
-    """A compositor for BGR images of the two inputs: the maps, the seam, both views' gains and offsets
-    (with ``cfg.seam_blend_gain`` as relative gains: a smooth gain changes no contrast).
+def panorama_plan(maps: StitchMaps, shapes: tuple[tuple[int, ...], tuple[int, ...]], cfg: Config,
+                  transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> CompositePlan:
+    """The compositing plan for BGR images of the two inputs of (H, W, C) ``shapes`` (source, target):
+    the maps, the seam and the border blend (relative changes of the gains with ``cfg.seam_blend_gain``).
     ``transparent``: per input (a, b), (H, W) bool pixels it must not sample (``without_transparent``)."""
     transparent_src, transparent_tgt = maps.rig.pick(*transparent)
+    border = maps.seam.border
+    offsets = border.relative() if cfg.seam_blend_gain else (border.src, border.tgt)
+    blend = BorderBlend(border.lines, *offsets) if border.on else None
+    return composite_plan(without_transparent(maps.map_src_input, transparent_src),
+                          without_transparent(maps.map_tgt_input, transparent_tgt), maps.seam_input, shapes, cfg,
+                          border=blend)
+
+
+def panorama_state(maps: StitchMaps, cfg: Config) -> FrameState:
+    """What the panorama is composited with: the estimate's seam, both views' gains and the seam blend's
+    offsets (with ``cfg.seam_blend_gain`` as relative gains: a smooth gain changes no colour or contrast)."""
+    gains, offsets = maps.seam.gains, maps.seam.offsets
     relative = cfg.seam_blend_gain
-    compositor = Compositor(without_transparent(maps.map_src_input, transparent_src),
-                            without_transparent(maps.map_tgt_input, transparent_tgt), maps.seam_input, cfg,
-                            relative_offsets=relative)
-    gains, offsets, border = maps.seam.gains, maps.seam.offsets, maps.seam.border
-    compositor.set_gains(len(gains.gain_src), gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt)
-    compositor.set_offsets(*(offsets.relative() if relative else (offsets.src, offsets.tgt)))
-    if border.on:
-        compositor.set_border_offsets(border.lines, *(border.relative() if relative else (border.src, border.tgt)))
-    return compositor
+    return FrameState(maps.seam_input.positions, (gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt),
+                      offsets.relative() if relative else (offsets.src, offsets.tgt), relative)
 
 
 def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
@@ -339,8 +345,8 @@ def panorama_image(img_a: np.ndarray, img_b: np.ndarray, maps: StitchMaps, cfg: 
     """The BGRA panorama of BGR images ``img_a``, ``img_b`` composited with ``maps`` (alpha 0 where
     neither covers the canvas); ``transparent`` as :func:`stitch_images`'."""
     img_src, img_tgt = maps.rig.pick(img_a, img_b)
-    compositor = panorama_compositor(maps, cfg, transparent)
-    return np.dstack([compositor.apply(img_src, img_tgt), compositor.coverage(img_src.shape, img_tgt.shape)])
+    plan = panorama_plan(maps, (img_src.shape, img_tgt.shape), cfg, transparent)
+    return np.dstack([composite_image(img_src, img_tgt, plan, panorama_state(maps, cfg), cfg), coverage(plan)])
 
 
 def _prior_on_canvas(prior_seam_tgt: np.ndarray | None, canvas) -> np.ndarray | None:
@@ -395,5 +401,5 @@ def _diagonal_px(img_src: np.ndarray, img_tgt: np.ndarray) -> float:
 
 
 def _long_side_px(img_src: np.ndarray, img_tgt: np.ndarray) -> int:
-    """The longest image side, the scale of the gate's density blur sigma_d (SENA.md step 5)."""
+    """The longest image side, the scale of the gate's density blur sigma_d (docs/method.md step 5)."""
     return max(*img_src.shape[:2], *img_tgt.shape[:2])

@@ -31,7 +31,7 @@ import numpy as np
 import warp as wp
 
 from sena_warp.config import Config
-from sena_warp.kernels import runtime
+from sena_warp.kernels import runtime, transfer
 from sena_warp.kernels.seam import displaced_map_kernel
 
 CONSISTENT_PX = 1.5  # the flow is followed where the flow back returns within this
@@ -233,10 +233,10 @@ def displaced_map(map_src_canvas: np.ndarray, field_canvas: np.ndarray, cfg: Con
     height, width = map_src_canvas.shape[:2]
     device = cfg.device
     out = wp.empty((height, width), dtype=wp.vec2, device=device)
-    inputs = [runtime.readonly_array(map_src_canvas, wp.vec2, device), runtime.readonly_array(field_canvas, wp.vec2, device),
-              out]
+    inputs = [transfer.to_device(np.ascontiguousarray(map_src_canvas, np.float32), wp.vec2, device, "switch_align"),
+              transfer.to_device(np.ascontiguousarray(field_canvas, np.float32), wp.vec2, device, "switch_align"), out]
     runtime.launch_rows(displaced_map_kernel, height, width, inputs, device, cfg.cpu_threads)
-    return out.numpy().reshape(height, width, 2)
+    return transfer.download(out, "switch_align").reshape(height, width, 2)
 
 
 def aligned_source_map(map_src_canvas: np.ndarray, grey_src: np.ndarray, grey_tgt: np.ndarray, valid_src: np.ndarray,

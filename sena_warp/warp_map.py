@@ -1,7 +1,7 @@
 """Step 6: the source sampling map, its numeric inverse for points, and warping an image by it.
 
 ``M_s(u) = A_glob^-1 (u - o) + D_guarded(u)`` gives, for canvas pixel u, the source (x, y) to
-sample (SENA.md step 6). Forward positions of source points are found by inverting M_s
+sample (docs/method.md step 6). Forward positions of source points are found by inverting M_s
 numerically, never as ``A s + o + d`` (d is defined at u, not at s).
 """
 
@@ -17,7 +17,7 @@ from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.affine import invert_affine
 from sena_warp.bilinear import sample_bilinear
-from sena_warp.kernels import runtime
+from sena_warp.kernels import runtime, transfer
 from sena_warp.kernels.remap import remap_kernel
 from sena_warp.kernels.sampling import source_map_kernel
 
@@ -31,7 +31,7 @@ def source_map_canvas(canvas: Canvas, affine_src_to_tgt: np.ndarray, field_guard
     """
     device = cfg.device
     glob_tgt_to_src = invert_affine(affine_src_to_tgt)
-    field = wp.array(np.ascontiguousarray(field_guarded, dtype=np.float32), dtype=wp.vec2, device=device)
+    field = transfer.to_device(np.ascontiguousarray(field_guarded, dtype=np.float32), wp.vec2, device, "warp_map")
     map_src = wp.zeros(canvas.shape, dtype=wp.vec2, device=device)
     inputs = [
         wp.vec2d(*canvas.offset_tgt),
@@ -41,7 +41,7 @@ def source_map_canvas(canvas: Canvas, affine_src_to_tgt: np.ndarray, field_guard
         map_src,
     ]
     runtime.launch_rows(source_map_kernel, canvas.height, canvas.width, inputs, device, cfg.cpu_threads)
-    return map_src.numpy().reshape(canvas.height, canvas.width, 2)
+    return transfer.download(map_src, "warp_map").reshape(canvas.height, canvas.width, 2)
 
 
 def forward_points(
@@ -138,10 +138,10 @@ def remap_image(img: np.ndarray, map_canvas: np.ndarray, cfg: Config) -> tuple[n
     img3 = as_channels(img)
     height, width = map_canvas.shape[:2]
     device = cfg.device
-    img_wp = wp.array(img3, dtype=wp.uint8, device=device)
-    map_wp = runtime.readonly_array(map_canvas, wp.vec2, device)
+    img_wp = transfer.to_device(img3, wp.uint8, device, "remap")
+    map_wp = transfer.for_reading(map_canvas, wp.vec2, device, "remap")
     out = wp.zeros((height, width, img3.shape[2]), dtype=wp.uint8, device=device)
     valid = wp.zeros((height, width), dtype=wp.uint8, device=device)
     runtime.launch_rows(remap_kernel, height, width, [img_wp, map_wp, out, valid], device, cfg.cpu_threads)
-    warped = out.numpy()
-    return (warped[:, :, 0] if img.ndim == 2 else warped), valid.numpy().astype(bool)
+    warped = transfer.download(out, "remap")
+    return (warped[:, :, 0] if img.ndim == 2 else warped), transfer.download(valid, "remap").astype(bool)

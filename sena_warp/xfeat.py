@@ -1,4 +1,4 @@
-"""Sparse XFeat keypoints and descriptors on onnxruntime + numpy (SENA.md step 0).
+"""Sparse XFeat keypoints and descriptors on onnxruntime + numpy (docs/method.md step 0).
 
 XFeat (Potje et al., CVPR 2024): the shipped ONNX backbone (``models/xfeat.onnx``, made by
 ``tools/export_xfeat.py``) gives, at 1/8 of the working resolution, 64-channel dense descriptors,

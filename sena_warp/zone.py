@@ -1,4 +1,4 @@
-"""Step 7: the adequate (parallax-minimised) zone of the overlap (SENA.md step 7, paper Algorithm 1).
+"""Step 7: the adequate (parallax-minimised) zone of the overlap (docs/method.md step 7, paper Algorithm 1).
 
 Inlier matches after the warp give a residual disparity ``d = x_src' - x_tgt'`` on the canvas. Points
 in flat regions are dropped, the rest are binned by canvas x into ``cfg.zone_classes`` classes across

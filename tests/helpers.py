@@ -320,3 +320,31 @@ def claiming_more(fmt: str, width: int, height: int, img: np.ndarray) -> bytes:
         first, second = data.find(b"\n"), data.find(b"\n", data.find(b"\n") + 1)
         data[first + 1:second] = b"%d %d" % (width, height)
     return bytes(data)
+
+
+def one_mjpeg_frame(path: Path, width: int, height: int) -> Path:
+    """A .mov holding one black MJPEG frame of ``width`` x ``height``: a small file with a large frame."""
+    with av.open(str(path), "w") as c:
+        stream = c.add_stream("mjpeg", rate=1)
+        stream.width, stream.height, stream.pix_fmt = width, height, "yuvj420p"
+        frame = av.VideoFrame(width, height, "yuvj420p")
+        frame.pts, frame.time_base = 0, Fraction(1, 1)
+        c.mux(stream.encode(frame))
+        c.mux(stream.encode(None))
+    return path
+
+
+def joined_ts_files(left, right, folder: Path) -> Path:
+    """TS files made from two 60-frame 30 fps clips' frames (YuvFrame lists) in ``folder``: the left
+    joined to itself (its time stamps go back to 0 at 2 s: back.ts), with four repeated pts
+    (repeated.ts), and joined to itself at twice the size with times going on (resized.ts); the right
+    joined to itself with times going on (right_4s.ts, to pair with the latter)."""
+    ts_clip(left, folder / "left.ts")
+    ts_clip(left, folder / "left_2x.ts", first_pts=3000 * len(left), size=(540, 960))
+    ts_clip(right[:60], folder / "right_a.ts")
+    ts_clip(right[:60], folder / "right_b.ts", first_pts=3000 * 60)
+    (folder / "back.ts").write_bytes((folder / "left.ts").read_bytes() * 2)
+    (folder / "resized.ts").write_bytes((folder / "left.ts").read_bytes() + (folder / "left_2x.ts").read_bytes())
+    (folder / "right_4s.ts").write_bytes((folder / "right_a.ts").read_bytes() + (folder / "right_b.ts").read_bytes())
+    with_repeated_pts(folder / "left.ts", folder / "repeated.ts", range(10, 14))
+    return folder

@@ -1,4 +1,4 @@
-"""Layering: the evaluation subpackage imports the pipeline, never the reverse (issue 12).
+"""Layering: the evaluation subpackage imports the pipeline, never the reverse.
 
 Only the front end may reach ``sena_warp.evaluation``: the command line (lazily, for ``eval`` and
 ``bench``) and the jobs it and ``batch`` run (the figures of an image's report, and those of
@@ -59,3 +59,64 @@ def test_every_benchmark_script_imports_and_answers_help():
     for script in scripts:
         done = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=120)
         assert done.returncode == 0 and "usage" in done.stdout.lower(), (script.name, done.stderr[-500:])
+
+
+def class_attributes(node: ast.ClassDef) -> set[str]:
+    """The attributes a class's instances hold: its annotated fields (a dataclass's) and every
+    ``self.NAME`` its methods assign."""
+    names = {stmt.target.id for stmt in node.body if isinstance(stmt, ast.AnnAssign) and isinstance(stmt.target, ast.Name)
+             and "ClassVar" not in ast.unparse(stmt.annotation)}
+    for method in (stmt for stmt in node.body if isinstance(stmt, ast.FunctionDef)):
+        for sub in ast.walk(method):
+            targets = sub.targets if isinstance(sub, ast.Assign) else [sub.target] if isinstance(
+                sub, (ast.AnnAssign, ast.AugAssign)) else []
+            for target in targets:
+                for leaf in ast.walk(target):
+                    if isinstance(leaf, ast.Attribute) and isinstance(leaf.value, ast.Name) and leaf.value.id == "self":
+                        names.add(leaf.attr)
+    return names
+
+
+def test_no_class_of_the_frame_path_holds_more_than_15_attributes():
+    """The video path is values and small parts, not an object that remembers everything (a compositor
+    once held 37 attributes, its per-frame seam 46)."""
+    io = {"reader.py", "writer.py"}  # the decoders and the encoder the frame loop hands frames through
+    paths = [*sorted(p for p in (REPO / "video").glob("*.py") if p.name not in io), REPO / "sena_warp" / "composite.py"]
+    sizes = {f"{path.name}:{node.name}": len(class_attributes(node)) for path in paths
+             for node in ast.walk(ast.parse(path.read_text())) if isinstance(node, ast.ClassDef)}
+    assert len(sizes) > 20 and sizes["stitch.py:SenaFrameCompositor"] > 10  # the count sees them
+    assert {name: size for name, size in sizes.items() if size > 15} == {}
+
+
+def test_no_kernel_takes_more_than_12_parameters():
+    """What travels together is one typed argument (``@wp.struct``): a frame kernel once took 29."""
+    import warp as wp
+
+    from sena_warp.kernels import runtime
+
+    kernels = [kernel for modules in runtime.kernel_modules("cuda").values() for module in modules
+               for kernel in module.kernels.values()]
+    assert len(kernels) >= 25
+    assert {kernel.key: len(kernel.adj.args) for kernel in kernels if len(kernel.adj.args) > 12} == {}
+    assert all(isinstance(kernel, wp.Kernel) for kernel in kernels)
+
+
+TRANSFER_CALLS = {"numpy", "assign", "synchronize", "synchronize_device", "synchronize_stream", "copy", "clone",
+                  "from_numpy", "array", "to"}
+
+
+def test_every_transfer_and_wait_goes_through_the_counting_module():
+    """A copy between the host and the device, or a wait for the device, anywhere in the pipeline but
+    ``kernels/transfer.py`` would be one the per-frame counts do not see (``test_video_stitch.py``)."""
+    found = {}
+    for path in PIPELINE:
+        if path.name == "transfer.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in TRANSFER_CALLS:
+                owner = ast.unparse(node.func.value)
+                annotation = node.func.attr == "array" and not node.args and {k.arg for k in node.keywords} <= {
+                    "dtype", "ndim"}  # a kernel's parameter type
+                if (node.func.attr in ("numpy", "assign", "to") or owner in ("wp", "warp")) and not annotation:
+                    found.setdefault(path.relative_to(REPO).as_posix(), []).append(ast.unparse(node)[:60])
+    assert found == {}

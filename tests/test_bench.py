@@ -15,7 +15,7 @@ import pytest
 
 from sena_warp.evaluation.bench import (BUNDLED_PAIR, COLUMNS, BenchPair, OpenCVReference, bench_pair, format_table,
                                        make_clip_pair, pan_window, parse_size, run_bench)
-from sena_warp.composite import Compositor
+from sena_warp.composite import BorderBlend, FrameState, composite_image, composite_plan, coverage
 from sena_warp.config import Config
 from sena_warp.errors import InputError
 from sena_warp.video.reader import FrameReader, probe_video
@@ -104,19 +104,23 @@ def test_opencv_reference_agrees_with_warp_compositor(scene, channels, warp_devi
     plane_src = np.ascontiguousarray(img_src[:, :, :channels])
     plane_tgt = np.ascontiguousarray(img_tgt[:, :, :channels])
     fill = (16, 128)[:channels]
-    comp = Compositor(map_src, map_tgt, layout(scene), Config(device=warp_device, cpu_threads=2))
-    comp.set_gains(channels, [1.1, 1.0][:channels], [-4.0, 2.0][:channels], [0.9, 1.0][:channels], [3.0, -2.0][:channels])
-    lines = comp.lines
-    comp.set_offsets(np.full((lines, channels), -5.0, np.float32), np.full((lines, channels), 5.0, np.float32))
+    cfg = Config(device=warp_device, cpu_threads=2)
+    seam = layout(scene)
+    lines = len(seam.positions)
     along = np.linspace(-8.0, 8.0, map_src.shape[1], dtype=np.float32)[:, None].repeat(channels, 1)
-    comp.set_border_offsets((12.5, lines - 15.5), np.stack([along, -along]), np.stack([-along, along]))
-    out = comp.apply(plane_src, plane_tgt, fill).reshape(*map_src.shape[:2], channels)
-    reference = OpenCVReference(PlanePass.of(comp, map_src, map_tgt, fill), plane_src.shape[:2], plane_tgt.shape[:2])
+    border = BorderBlend((12.5, lines - 15.5), np.stack([along, -along]), np.stack([-along, along]))
+    plan = composite_plan(map_src, map_tgt, seam, (plane_src.shape, plane_tgt.shape), cfg, border=border, fill=fill)
+    gains = ([1.1, 1.0][:channels], [-4.0, 2.0][:channels], [0.9, 1.0][:channels], [3.0, -2.0][:channels])
+    state = FrameState(seam.positions, gains, (np.full((lines, channels), -5.0, np.float32),
+                                               np.full((lines, channels), 5.0, np.float32)))
+    out = composite_image(plane_src, plane_tgt, plan, state, cfg).reshape(*map_src.shape[:2], channels)
+    reference = OpenCVReference(PlanePass.of(plan, state, map_src, map_tgt, cfg), plane_src.shape[:2],
+                                plane_tgt.shape[:2])
     expected = reference.apply(plane_src, plane_tgt).reshape(*map_src.shape[:2], channels)
-    coverage = comp.coverage(plane_src.shape[:2] + (channels,), plane_tgt.shape[:2] + (channels,))
-    assert (coverage == 0).any() and (coverage > 0).any()
+    covered = coverage(plan)
+    assert (covered == 0).any() and (covered > 0).any()
     assert np.abs(out.astype(int) - expected).max() <= 1
-    np.testing.assert_array_equal(out[coverage == 0], np.broadcast_to(fill, out[coverage == 0].shape))
+    np.testing.assert_array_equal(out[covered == 0], np.broadcast_to(fill, out[covered == 0].shape))
 
 
 def test_bench_refuses_a_bad_size_before_making_its_work_folder(tmp_path, capfd):

@@ -1,6 +1,6 @@
-"""Compositor: the per-frame path along a seam, against a numpy reference, for images and planes.
+"""The compositing step: plans, frame states, both frame kernels, against a numpy reference.
 
-The reference takes the seam's weights from ``Compositor.seam_weights`` (the kernels' one rule, itself
+The reference takes the seam's weights from ``composite.seam_weights`` (the kernels' one rule, itself
 checked against its closed form below), samples both views with the host's bilinear rule and applies
 each side's gains (with their highlight knee) and offsets in float64.
 """
@@ -8,18 +8,25 @@ each side's gains (with their highlight knee) and offsets in float64.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import warp as wp
 
-from sena_warp.composite import Compositor, SeamLayout
+from sena_warp.composite import (LEVEL, BorderBlend, FrameArrays, FrameState, SeamLayout, band_difference, clipped_seam,
+                                 composite_image, composite_plan, coverage, kernel_gains, applied_gains, row_runs,
+                                 seam_weights, with_runs)
 from sena_warp.config import Config
 from sena_warp.gains import tone_curve
-from sena_warp.kernels.composite import ALPHA_TAIL_SIGMAS, NOT_BOTH
+from sena_warp.kernels import transfer
+from sena_warp.kernels.composite import ALPHA_TAIL_SIGMAS, NOT_BOTH, BandCells
 from sena_warp.kernels.seam import source_alpha
 from test_kernels_maps import DEVICES
 from test_kernels_remap import remap_reference, scene  # noqa: F401  (scene is a fixture)
+
+GAINS = ([1.1, 0.9, 1.0], [-3.0, 2.0, 0.0], [0.95, 1.05, 1.0], [1.0, -1.0, 4.0])
+STRONG_GAINS = ([1.1, 0.9, 1.0], [-3.0, 2.0, 0.0], [1.3, 0.8, 1.0], [6.0, -5.0, 4.0])
 
 
 def layout(scene_arrays, lines_are_rows=True, band_px=12.0, lf_px=40.0, wobble=15.0) -> SeamLayout:
@@ -31,33 +38,45 @@ def layout(scene_arrays, lines_are_rows=True, band_px=12.0, lf_px=40.0, wobble=1
     return SeamLayout(positions.astype(np.float32), lines_are_rows, band_px, 8.0, 1.5, lf_px)
 
 
-def reference(comp: Compositor, img_src, img_tgt, map_src, map_tgt, border=None):
-    """(values (Hc, Wc, C) float64, covered (Hc, Wc) bool) of the compositing rule; ``border``: the
-    (lines, src, tgt) given to ``set_border_offsets``, or None."""
+def plan_for(scene, seam: SeamLayout, cfg: Config, channels: int = 3, **options):  # noqa: F811
+    """The scene's plan for images of ``channels`` channels."""
+    img_src, img_tgt, map_src, map_tgt, _ = scene
+    shapes = ((*img_src.shape[:2], channels), (*img_tgt.shape[:2], channels))
+    return composite_plan(map_src, map_tgt, seam, shapes, cfg, **options)
+
+
+def ramp_offsets(lines: int, channels: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    ramp = np.linspace(-6, 6, lines, dtype=np.float32)[:, None]
+    src, tgt = np.hstack([ramp, -ramp, ramp * 0]), np.hstack([-ramp, ramp, ramp * 0 + 2])
+    return src[:, :channels], tgt[:, :channels]
+
+
+def reference(plan, state: FrameState, img_src, img_tgt, map_src, map_tgt, cfg: Config):
+    """(values (Hc, Wc, C) float64, covered (Hc, Wc) bool) of the compositing rule for ``state`` on
+    ``plan`` (its border blend included), the gains and offsets as the kernels hold them."""
     img_src = img_src if img_src.ndim == 3 else img_src[:, :, None]
     img_tgt = img_tgt if img_tgt.ndim == 3 else img_tgt[:, :, None]
     channels = img_src.shape[2]
     v_src, ok_src = remap_reference(img_src, map_src)
     v_tgt, ok_tgt = remap_reference(img_tgt, map_tgt)
-    alpha, lf = comp.seam_weights()
-    gain_src, bias_src, gain_tgt, bias_tgt = comp.gains(channels)
-    off_src, off_tgt = comp.offsets(channels)
-    if not comp.layout.lines_are_rows:
-        off_src, off_tgt = off_src[None, :, :], off_tgt[None, :, :]
-    else:
-        off_src, off_tgt = off_src[:, None, :], off_tgt[:, None, :]
-    knee, white = comp.knee() or (math.inf, math.inf)
+    alpha, lf = seam_weights(state.seam, plan.layout, plan.canvas_shape, cfg)
+    gain_src, bias_src, gain_tgt, bias_tgt = applied_gains(
+        kernel_gains(state.gains, channels, plan.tone, wp.empty(1, dtype=wp.uint8, device="cpu")), channels)
+    offsets = state.offsets if state.offsets is not None else (np.zeros((plan.lines, channels)),) * 2
+    off_src, off_tgt = (np.rint(np.asarray(v, np.float64) * LEVEL) / LEVEL for v in offsets)
+    rows = plan.layout.lines_are_rows
+    off_src, off_tgt = (o[:, None, :] if rows else o[None, :, :] for o in (off_src, off_tgt))
+    knee, white = plan.knee or (math.inf, math.inf)
     total_src, total_tgt = lf[..., None] * off_src, lf[..., None] * off_tgt
+    border = plan.border_source
     if border is not None:
-        lines, border_src, border_tgt = border
         height, width = alpha.shape
-        line = np.arange(height)[:, None] if comp.layout.lines_are_rows else np.arange(width)[None, :]
+        line = np.arange(height)[:, None] if rows else np.arange(width)[None, :]
         for k in range(2):
-            weight = np.clip(1 - np.abs(line - lines[k]) / comp.layout.lf_px, 0, None)[..., None]
-            along_src, along_tgt = (b[k][None, :, :] if comp.layout.lines_are_rows else b[k][:, None, :]
-                                    for b in (border_src, border_tgt))
+            weight = np.clip(1 - np.abs(line - border.lines[k]) / plan.layout.lf_px, 0, None)[..., None]
+            along_src, along_tgt = (b[k][None, :, :] if rows else b[k][:, None, :] for b in (border.src, border.tgt))
             total_src, total_tgt = total_src + weight * along_src, total_tgt + weight * along_tgt
-    if comp.relative_offsets:  # a relative change of the gain, before the knee
+    if state.relative_offsets:  # a relative change of the gain, before the knee
         src = tone_curve(v_src, gain_src * (1 + total_src), bias_src, knee, white)
         tgt = tone_curve(v_tgt, gain_tgt * (1 + total_tgt), bias_tgt, knee, white)
     else:
@@ -70,10 +89,9 @@ def reference(comp: Compositor, img_src, img_tgt, map_src, map_tgt, border=None)
 
 def test_seam_weights_follow_the_smoothed_ramp(scene, warp_device):  # noqa: F811
     """The source weight is the linear ramp across T convolved with a Gaussian of sigma (closed form)."""
-    _, _, map_src, map_tgt, _ = scene
+    _, _, map_src, _, _ = scene
     seam = layout(scene)
-    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device))
-    alpha, lf = comp.seam_weights()
+    alpha, lf = seam_weights(seam.positions, seam, map_src.shape[:2], Config(device=warp_device))
     y = 40
     d = np.arange(map_src.shape[1]) - seam.positions[y]
     t, s, half = seam.transition_px, seam.smooth_sigma_px, 0.5 * seam.transition_px
@@ -87,44 +105,62 @@ def test_seam_weights_follow_the_smoothed_ramp(scene, warp_device):  # noqa: F81
 
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("lines_are_rows", [True, False])
-def test_compositor_matches_reference_with_gains_and_offsets(scene, device, lines_are_rows, warp_device):  # noqa: F811
+def test_composite_matches_reference_with_gains_and_offsets(scene, device, lines_are_rows, warp_device):  # noqa: F811
     img_src, img_tgt, map_src, map_tgt, _ = scene
+    cfg = Config(device=device, cpu_threads=2)
     seam = layout(scene, lines_are_rows)
-    comp = Compositor(map_src, map_tgt, seam, Config(device=device, cpu_threads=2))
-    comp.set_gains(3, [1.1, 0.9, 1.0], [-3.0, 2.0, 0.0], [0.95, 1.05, 1.0], [1.0, -1.0, 4.0])
-    lines = len(seam.positions)
-    ramp = np.linspace(-6, 6, lines, dtype=np.float32)[:, None]
-    comp.set_offsets(np.hstack([ramp, -ramp, ramp * 0]), np.hstack([-ramp, ramp, ramp * 0 + 2]))
-    out = comp.apply(img_src, img_tgt)
-    expected, covered = reference(comp, img_src, img_tgt, map_src, map_tgt)
-    coverage = comp.coverage(img_src.shape, img_tgt.shape)
+    plan = plan_for(scene, seam, cfg)
+    state = FrameState(seam.positions, GAINS, ramp_offsets(plan.lines))
+    out = composite_image(img_src, img_tgt, plan, state, cfg)
+    expected, covered = reference(plan, state, img_src, img_tgt, map_src, map_tgt, cfg)
     assert out.shape == (*map_src.shape[:2], 3) and out.dtype == np.uint8
-    np.testing.assert_array_equal(coverage, np.where(covered, 255, 0))
+    np.testing.assert_array_equal(coverage(plan), np.where(covered, 255, 0))
     assert np.abs(out.astype(np.float64) - expected).max() <= 1.0
     assert 0.3 < covered.mean() < 1.0
 
 
 @pytest.mark.parametrize("lines_are_rows", [True, False])
-def test_border_offsets_fade_from_both_borders_on_each_side(scene, lines_are_rows, warp_device):  # noqa: F811
+@pytest.mark.parametrize("channels", [1, 2, 3])
+def test_both_frame_kernels_give_the_same_planes(scene, lines_are_rows, channels, warp_device):  # noqa: F811
+    """The per-pixel kernel (CUDA's) and the row-run kernel (the CPU's, with its runs) give the same
+    pixels, with gains, knee, seam and border offsets all in play."""
+    img_src, img_tgt, map_src, _, _ = scene
+    cfg = Config(device=warp_device, cpu_threads=2)
+    seam = layout(scene, lines_are_rows, band_px=20.0)
+    positions = map_src.shape[1] if lines_are_rows else map_src.shape[0]
+    along = np.linspace(-9, 9, positions, dtype=np.float32)[:, None] * np.array([1.0, -0.5, 0.25], np.float32)
+    border = BorderBlend((10.5, len(seam.positions) - 20.5), np.stack([along, -along])[:, :, :channels],
+                         np.stack([-along, 2 * along + 3])[:, :, :channels])
+    plan = with_runs(plan_for(scene, seam, cfg, channels, border=border), cfg)
+    state = FrameState(clipped_seam(seam.positions + 5.0, seam), tuple(np.asarray(g)[:channels] for g in STRONG_GAINS),
+                       ramp_offsets(plan.lines, channels))
+    pair = [np.ascontiguousarray(img[:, :, :channels]) for img in (img_src, img_tgt)]
+    rows = composite_image(*pair, plan, state, cfg, per_pixel=False)
+    pixels = composite_image(*pair, plan, state, cfg, per_pixel=True)
+    np.testing.assert_array_equal(rows, pixels)
+    assert (row_runs(plan, state.seam, cfg)[:, [1, 4]] > 0).mean() > 0.5  # the runs were there to take
+
+
+def test_border_offsets_fade_from_both_borders_on_each_side(scene, warp_device):  # noqa: F811
     """The border blend adds each side's offsets per position along the two borders, fading over lf_px
     across them, on top of the seam's offsets (the reference adds them in float64)."""
     img_src, img_tgt, map_src, map_tgt, _ = scene
-    seam = layout(scene, lines_are_rows)
-    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
-    lines = len(seam.positions)
-    ramp = np.linspace(-6, 6, lines, dtype=np.float32)[:, None]
-    comp.set_offsets(np.hstack([ramp, -ramp, ramp * 0]), np.hstack([-ramp, ramp, ramp * 0 + 2]))
-    positions = map_src.shape[1] if lines_are_rows else map_src.shape[0]
-    along = np.linspace(-9, 9, positions, dtype=np.float32)[:, None] * np.array([1.0, -0.5, 0.25], np.float32)
-    border = ((10.5, lines - 20.5), np.stack([along, -along]), np.stack([-along, 2 * along + 3]))
-    plain = comp.apply(img_src, img_tgt)
-    comp.set_border_offsets(*border)
-    out = comp.apply(img_src, img_tgt)
-    expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt, border)
-    assert np.abs(out.astype(np.float64) - expected).max() <= 1.0
-    near = np.abs(np.arange(lines) - 10.5) < 0.5 * seam.lf_px
-    changed = np.abs(out.astype(int) - plain.astype(int)).max(axis=2)
-    assert (changed[near] if lines_are_rows else changed[:, near]).max() >= 4  # the offsets are there to see
+    cfg = Config(device=warp_device, cpu_threads=2)
+    for lines_are_rows in (True, False):
+        seam = layout(scene, lines_are_rows)
+        lines = len(seam.positions)
+        state = FrameState(seam.positions, GAINS, ramp_offsets(lines))
+        positions = map_src.shape[1] if lines_are_rows else map_src.shape[0]
+        along = np.linspace(-9, 9, positions, dtype=np.float32)[:, None] * np.array([1.0, -0.5, 0.25], np.float32)
+        border = BorderBlend((10.5, lines - 20.5), np.stack([along, -along]), np.stack([-along, 2 * along + 3]))
+        plain = composite_image(img_src, img_tgt, plan_for(scene, seam, cfg), state, cfg)
+        plan = plan_for(scene, seam, cfg, border=border)
+        out = composite_image(img_src, img_tgt, plan, state, cfg)
+        expected, _ = reference(plan, state, img_src, img_tgt, map_src, map_tgt, cfg)
+        assert np.abs(out.astype(np.float64) - expected).max() <= 1.0
+        near = np.abs(np.arange(lines) - 10.5) < 0.5 * seam.lf_px
+        changed = np.abs(out.astype(int) - plain.astype(int)).max(axis=2)
+        assert (changed[near] if lines_are_rows else changed[:, near]).max() >= 4  # the offsets are there to see
 
 
 @pytest.mark.parametrize("lines_are_rows", [True, False])
@@ -136,74 +172,81 @@ def test_relative_offsets_are_a_gain_that_keeps_white_white(scene, lines_are_row
     rows, cols = np.indices(img_src.shape[:2])
     img_src = np.where((((rows // 24) + (cols // 24)) % 2 == 0)[..., None], np.uint8(255), img_src)  # white squares
     seam = layout(scene, lines_are_rows)
-    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2), relative_offsets=True)
-    comp.set_gains(3, [1.1, 0.9, 1.0], [0.0, 0.0, 0.0], [0.95, 1.05, 1.0], [0.0, 0.0, 0.0])
+    cfg = Config(device=warp_device, cpu_threads=2)
+    gains = ([1.1, 0.9, 1.0], [0.0, 0.0, 0.0], [0.95, 1.05, 1.0], [0.0, 0.0, 0.0])
     lines = len(seam.positions)
-    comp.set_offsets(np.full((lines, 3), -0.2, np.float32), np.full((lines, 3), 0.1, np.float32))
+    offsets = (np.full((lines, 3), -0.2, np.float32), np.full((lines, 3), 0.1, np.float32))
+    state = FrameState(seam.positions, gains, offsets, relative_offsets=True)
     positions = map_src.shape[1] if lines_are_rows else map_src.shape[0]
     along = np.linspace(-0.1, 0.1, positions, dtype=np.float32)[:, None] * np.ones(3, np.float32)
-    border = ((10.5, lines - 20.5), np.stack([along, -along]), np.stack([-along, along]))
-    comp.set_border_offsets(*border)
-    out = comp.apply(img_src, img_tgt)
-    expected, covered = reference(comp, img_src, img_tgt, map_src, map_tgt, border)
+    border = BorderBlend((10.5, lines - 20.5), np.stack([along, -along]), np.stack([-along, along]))
+    plan = plan_for(scene, seam, cfg, border=border)
+    out = composite_image(img_src, img_tgt, plan, state, cfg)
+    expected, covered = reference(plan, state, img_src, img_tgt, map_src, map_tgt, cfg)
     assert np.abs(out.astype(np.float64) - expected).max() <= 1.0
     white_src, _ = remap_reference(img_src, map_src)
-    alpha, lf = comp.seam_weights()
+    alpha, lf = seam_weights(state.seam, plan.layout, plan.canvas_shape, cfg)
     shown_white = (white_src.min(axis=2) >= 254.5) & (alpha > 0.999) & (lf > 0.3) & covered
     assert shown_white.sum() > 50 and out[shown_white].min() >= 254  # fixed point: within a level
     darkened = (white_src.max(axis=2) < 150) & (white_src.min(axis=2) > 40) & (alpha > 0.999) & (lf > 0.8) & covered
-    plain = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
-    plain.set_gains(3, [1.1, 0.9, 1.0], [0.0, 0.0, 0.0], [0.95, 1.05, 1.0], [0.0, 0.0, 0.0])
-    ratio = (out[darkened].astype(np.float64) + 0.5) / (plain.apply(img_src, img_tgt)[darkened] + 0.5)
+    plain = composite_image(img_src, img_tgt, plan_for(scene, seam, cfg), FrameState(seam.positions, gains), cfg)
+    ratio = (out[darkened].astype(np.float64) + 0.5) / (plain[darkened] + 0.5)
     assert darkened.sum() > 50 and 0.7 < np.median(ratio) < 0.9
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_the_frame_seam_moves_within_its_band_without_a_new_plan(scene, device, warp_device):  # noqa: F811
+def test_the_frame_seam_moves_within_its_band_on_one_plan(scene, device, warp_device):  # noqa: F811
     img_src, img_tgt, map_src, map_tgt, _ = scene
+    cfg = Config(device=device)
     plane_src, plane_tgt = np.ascontiguousarray(img_src[:, :, 1]), np.ascontiguousarray(img_tgt[:, :, 1])
     seam = layout(scene, band_px=20.0, lf_px=0.0)
-    comp = Compositor(map_src, map_tgt, seam, Config(device=device))
-    first = comp.apply(plane_src, plane_tgt)
-    comp.set_seam(seam.positions + 10.0)  # inside the band: moves
-    moved = comp.apply(plane_src, plane_tgt)
-    expected, _ = reference(comp, plane_src, plane_tgt, map_src, map_tgt)
+    plan = plan_for(scene, seam, cfg, channels=1)
+    gains = ([1.0], [0.0], [1.0], [0.0])
+    first = composite_image(plane_src, plane_tgt, plan, FrameState(seam.positions, gains), cfg)
+    moved_state = FrameState(clipped_seam(seam.positions + 10.0, seam), gains)  # inside the band: moves
+    moved = composite_image(plane_src, plane_tgt, plan, moved_state, cfg)
+    expected, _ = reference(plan, moved_state, plane_src, plane_tgt, map_src, map_tgt, cfg)
     assert np.abs(moved.astype(np.float64) - expected[:, :, 0]).max() <= 1.0
-    assert not np.array_equal(first, moved) and comp.planned_shapes == ((plane_src.shape + (1,), plane_tgt.shape + (1,)),)
-    comp.set_seam(seam.positions + 100.0)  # beyond the band: held at its edge
-    alpha, _ = comp.seam_weights()
+    assert not np.array_equal(first, moved)
+    held = clipped_seam(seam.positions + 100.0, seam)  # beyond the band: held at its edge
+    alpha, _ = seam_weights(held, seam, plan.canvas_shape, cfg)
     rows = np.arange(len(seam.positions))
     edge = np.rint(seam.positions + seam.band_px - 0.5 * seam.transition_px).astype(int)
     assert np.all(alpha[rows, edge - 12] > 0.99) and np.all(alpha[rows, edge + 12] < 0.01)
 
 
-def run_masks(comp: Compositor, shape_src: tuple, shape_tgt: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def test_a_plan_does_not_follow_its_callers_maps(scene, warp_device):  # noqa: F811
+    """A plan is made of the maps as they were: a caller that changes its (writeable) map array after
+    changes nothing, on the CPU as on a GPU; a read-only map (a video's) is used where it is."""
+    img_src, img_tgt, map_src, map_tgt, _ = scene
+    cfg = Config(device=warp_device)
+    seam = layout(scene)
+    state = FrameState(seam.positions, GAINS, ramp_offsets(len(seam.positions)))
+    mine = map_src.copy()
+    plan = composite_plan(mine, map_tgt, seam, (img_src.shape, img_tgt.shape), cfg)
+    before = composite_image(img_src, img_tgt, plan, state, cfg)
+    mine += np.float32(7.0)
+    np.testing.assert_array_equal(composite_image(img_src, img_tgt, plan, state, cfg), before)
+    frozen = map_src.copy()
+    frozen.flags.writeable = False
+    counted = transfer.tally()
+    composite_plan(frozen, map_tgt, seam, (img_src.shape, img_tgt.shape), cfg)
+    assert (transfer.tally() - counted)[("upload", "plan")] == 3  # the static seam and both maps
+
+
+def run_masks(plan, seam: np.ndarray, cfg: Config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """((Hc, Wc) bool the pixels in their row's copy run, the same of its sample run, (Hc, 5) the runs)."""
-    runs = comp.row_runs(shape_src, shape_tgt)
-    cols = np.arange(comp.canvas_shape[1])[None, :]
+    runs = row_runs(plan, seam, cfg)
+    cols = np.arange(plan.canvas_shape[1])[None, :]
     return ((cols >= runs[:, :1]) & (cols < runs[:, 1:2]), (cols >= runs[:, 3:4]) & (cols < runs[:, 4:5]), runs)
 
 
-def copied_mask(comp: Compositor, shape_src: tuple, shape_tgt: tuple) -> np.ndarray:
-    return run_masks(comp, shape_src, shape_tgt)[0]
-
-
-def with_runs(comp: Compositor, img_src, img_tgt) -> np.ndarray:
-    """The pair composited with its runs (once the plan has served a frame), checked to be the same as
-    the pair composited by the full rule everywhere (the compositor with every row's runs empty)."""
-    comp.apply(img_src, img_tgt)
-    out = comp.apply(img_src, img_tgt)
-    assert (comp.row_runs(img_src.shape, img_tgt.shape)[:, [1, 4]] > 0).any()
-
-    def no_runs(buf, channels, at_once=False):
-        buf.frame_runs.zero_()
-        return buf.frame_runs
-
-    comp._frame_runs = no_runs
-    try:
-        full_rule = comp.apply(img_src, img_tgt)
-    finally:
-        del comp._frame_runs
+def with_runs_checked(img_src, img_tgt, plan, state: FrameState, cfg: Config) -> np.ndarray:
+    """The pair composited with the plan's runs, checked to be the same as the pair composited by the
+    full rule everywhere (the plan without its runs)."""
+    out = composite_image(img_src, img_tgt, plan, state, cfg)
+    assert (row_runs(plan, state.seam, cfg)[:, [1, 4]] > 0).any()
+    full_rule = composite_image(img_src, img_tgt, replace(plan, runs=None), state, cfg)
     np.testing.assert_array_equal(out, full_rule)
     return out
 
@@ -213,16 +256,15 @@ def test_runs_hold_one_side_alone_beyond_the_seams_reach(scene, lines_are_rows, 
     """Each row's copy run is target pixels at whole positions, consecutive, and its sample run source
     pixels, where neither the frame's seam nor a border's offsets reach; most such pixels are in one."""
     img_src, img_tgt, map_src, map_tgt, _ = scene
+    cfg = Config(device=warp_device, cpu_threads=2)
     seam = layout(scene, lines_are_rows)
-    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
-    lines = len(seam.positions)
-    comp.set_offsets(np.full((lines, 3), 30.0, np.float32), np.full((lines, 3), -30.0, np.float32))
-    comp.set_seam(seam.positions + 7.0)
-    copied, sampled, runs = run_masks(comp, img_src.shape, img_tgt.shape)
-    height, width = comp.canvas_shape
+    plan = with_runs(plan_for(scene, seam, cfg), cfg)
+    frame_seam = clipped_seam(seam.positions + 7.0, seam)
+    copied, sampled, runs = run_masks(plan, frame_seam, cfg)
+    height, width = plan.canvas_shape
     line, position = np.mgrid[:height, :width] if lines_are_rows else np.mgrid[:height, :width][::-1]
     distance = position - seam.positions[line]
-    distance_frame = position - comp.seam_positions()[line]
+    distance_frame = position - frame_seam[line]
     _, ok_src = remap_reference(img_src, map_src)
     _, ok_tgt = remap_reference(img_tgt, map_tgt)
     shown_tgt = ok_tgt & (~ok_src | (distance > seam.band_px))  # the target alone, whatever the frame's seam
@@ -246,21 +288,21 @@ def test_runs_leave_the_borders_offsets_and_a_resampled_target_to_the_full_rule(
     """Where a border's nonzero offsets reach, rows copy and sample nothing; a target map off whole pixels
     copies nothing."""
     img_src, img_tgt, map_src, map_tgt, _ = scene
+    cfg = Config(device=warp_device, cpu_threads=2)
     seam = layout(scene)
-    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
     lines = len(seam.positions)
-    before = np.stack(run_masks(comp, img_src.shape, img_tgt.shape)[:2])
+    before = np.stack(run_masks(with_runs(plan_for(scene, seam, cfg), cfg), seam.positions, cfg)[:2])
     along = np.zeros((2, map_src.shape[1], 3), np.float32)
     along[0, : map_src.shape[1] * 3 // 4] = 5.0  # border 0 has offsets on the left three quarters
-    comp.set_border_offsets((10.5, lines - 20.5), along, along)
-    after = np.stack(run_masks(comp, img_src.shape, img_tgt.shape)[:2])
+    plan = with_runs(plan_for(scene, seam, cfg, border=BorderBlend((10.5, lines - 20.5), along, along)), cfg)
+    after = np.stack(run_masks(plan, seam.positions, cfg)[:2])
     near = np.abs(np.arange(lines) - 10.5) < seam.lf_px
     offset_cols = np.arange(map_src.shape[1]) < map_src.shape[1] * 3 // 4
     assert before[0][near][:, offset_cols].any() and before[1][near][:, offset_cols].any()
     assert not after[:, near][:, :, offset_cols].any()
     assert np.array_equal(after[:, ~near], before[:, ~near])
-    shifted = Compositor(map_src, map_tgt + np.float32(0.25), seam, Config(device=warp_device, cpu_threads=2))
-    assert not copied_mask(shifted, img_src.shape, img_tgt.shape).any()
+    shifted = composite_plan(map_src, map_tgt + np.float32(0.25), seam, (img_src.shape, img_tgt.shape), cfg)
+    assert not run_masks(with_runs(shifted, cfg), seam.positions, cfg)[0].any()
 
 
 @pytest.mark.parametrize("device", DEVICES)
@@ -268,80 +310,88 @@ def test_run_pixels_take_the_gains_and_knee_as_the_full_rule_does(scene, device,
     """With the frame's seam at the edge of its band on either side and strong offsets, the runs still
     match the reference (copies to its rounding): the offsets never reach them, the gains and knee do."""
     img_src, img_tgt, map_src, map_tgt, _ = scene
+    cfg = Config(device=device, cpu_threads=2)
     seam = layout(scene, band_px=20.0)
-    comp = Compositor(map_src, map_tgt, seam, Config(device=device, cpu_threads=2))
-    comp.set_gains(3, [1.1, 0.9, 1.0], [-3.0, 2.0, 0.0], [1.3, 0.8, 1.0], [6.0, -5.0, 4.0])
-    comp.set_seam(seam.positions + 100.0)
+    plan = with_runs(plan_for(scene, seam, cfg), cfg)
     lines = len(seam.positions)
-    comp.set_offsets(np.full((lines, 3), 30.0, np.float32), np.full((lines, 3), -30.0, np.float32))
-    out = with_runs(comp, img_src, img_tgt)
-    expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt)
-    copied, sampled, _ = run_masks(comp, img_src.shape, img_tgt.shape)
+    offsets = (np.full((lines, 3), 30.0, np.float32), np.full((lines, 3), -30.0, np.float32))
+    state = FrameState(clipped_seam(seam.positions + 100.0, seam), STRONG_GAINS, offsets)
+    out = with_runs_checked(img_src, img_tgt, plan, state, cfg)
+    expected, _ = reference(plan, state, img_src, img_tgt, map_src, map_tgt, cfg)
+    copied, sampled, _ = run_masks(plan, state.seam, cfg)
     assert copied.mean() > 0.2 and sampled.mean() > 0.2
     assert np.abs(out[copied].astype(np.float64) - expected[copied]).max() <= 0.5 + 1e-6
     assert (out[copied] == 255).any()  # the knee is met: the gain of 1.3 would clip
-    comp.set_seam(seam.positions - 100.0)  # the source's side: its sample runs keep the gains alone
-    out = with_runs(comp, img_src, img_tgt)
-    expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt)
+    state = FrameState(clipped_seam(seam.positions - 100.0, seam), STRONG_GAINS, offsets)  # the source's side
+    out = with_runs_checked(img_src, img_tgt, plan, state, cfg)
+    expected, _ = reference(plan, state, img_src, img_tgt, map_src, map_tgt, cfg)
+    _, sampled, _ = run_masks(plan, state.seam, cfg)
     assert np.abs(out[sampled].astype(np.float64) - expected[sampled]).max() <= 1.0
 
 
-def test_runs_reach_the_band_while_the_seam_offsets_are_zero(scene, warp_device):  # noqa: F811
-    """Without seam offsets (a chroma pass) nothing of the seam reaches beyond the band, so the runs go
-    up to it; once offsets are set they keep their reach, and both composite as the reference does."""
+def test_runs_reach_the_band_where_frames_carry_no_seam_offsets(scene, warp_device):  # noqa: F811
+    """A pass whose frames carry no seam offsets (a chroma pass) has nothing of the seam reaching beyond
+    the band, so its runs go up to it; a pass with offsets keeps their reach; both composite as the
+    reference does."""
     img_src, img_tgt, map_src, map_tgt, _ = scene
+    cfg = Config(device=warp_device, cpu_threads=2)
     seam = layout(scene, band_px=20.0)
-    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device, cpu_threads=2))
-    comp.set_gains(3, [1.1, 0.9, 1.0], [-3.0, 2.0, 0.0], [1.3, 0.8, 1.0], [6.0, -5.0, 4.0])
-    comp.set_seam(seam.positions + 100.0)
-    out = with_runs(comp, img_src, img_tgt)
-    expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt)
-    copied, sampled, runs = run_masks(comp, img_src.shape, img_tgt.shape)
-    distance = np.arange(map_src.shape[1])[None, :] - comp.seam_positions()[:, None]
+    lines = len(seam.positions)
+    frame_seam = clipped_seam(seam.positions + 100.0, seam)
+    plan = with_runs(plan_for(scene, seam, cfg, offsets=False), cfg)
+    state = FrameState(frame_seam, STRONG_GAINS)
+    out = with_runs_checked(img_src, img_tgt, plan, state, cfg)
+    expected, _ = reference(plan, state, img_src, img_tgt, map_src, map_tgt, cfg)
+    copied, sampled, _ = run_masks(plan, frame_seam, cfg)
+    distance = np.arange(map_src.shape[1])[None, :] - frame_seam[:, None]
     near = np.abs(distance) < seam.lf_px
     assert copied[near].any() and sampled[near].any()  # within the offsets' reach, had there been any
     # Beyond the band the plan shows one side where the reference's smoothed ramp has a tail left.
-    alpha, _ = comp.seam_weights()
+    alpha, _ = seam_weights(frame_seam, seam, plan.canvas_shape, cfg)
     both = (copied | sampled) & ((alpha < 1e-4) | (alpha > 1 - 1e-4))
     assert both.mean() > 0.5
     assert np.abs(out[both].astype(np.float64) - expected[both]).max() <= 1.0
-    lines = len(seam.positions)
-    comp.set_offsets(np.full((lines, 3), 30.0, np.float32), np.full((lines, 3), -30.0, np.float32))
-    out = with_runs(comp, img_src, img_tgt)
-    expected, _ = reference(comp, img_src, img_tgt, map_src, map_tgt)
-    copied, sampled, _ = run_masks(comp, img_src.shape, img_tgt.shape)
+    plan = with_runs(plan_for(scene, seam, cfg), cfg)
+    offsets = (np.full((lines, 3), 30.0, np.float32), np.full((lines, 3), -30.0, np.float32))
+    state = FrameState(frame_seam, STRONG_GAINS, offsets)
+    out = with_runs_checked(img_src, img_tgt, plan, state, cfg)
+    expected, _ = reference(plan, state, img_src, img_tgt, map_src, map_tgt, cfg)
+    copied, sampled, _ = run_masks(plan, frame_seam, cfg)
     assert not (copied | sampled)[near].any()
     both = copied | sampled
     assert np.abs(out[both].astype(np.float64) - expected[both]).max() <= 1.0
-    comp.set_offsets(*np.zeros((2, lines, 3), np.float32))  # zero again: the runs keep their reach
-    np.testing.assert_array_equal(run_masks(comp, img_src.shape, img_tgt.shape)[0], copied)
 
 
 @pytest.mark.parametrize("cell", [1, 2])
 def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_device, cell):  # noqa: F811
     img_src, img_tgt, map_src, map_tgt, _ = scene
+    cfg = Config(device=warp_device)
     plane_src, plane_tgt = np.ascontiguousarray(img_src[:, :, 0]), np.ascontiguousarray(img_tgt[:, :, 0])
     seam = layout(scene, band_px=10.0)
-    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device))
-    comp.set_gains(1, [1.2], [-5.0], [1.0], [0.0])
-    comp.load(plane_src, plane_tgt)
+    plan = plan_for(scene, seam, cfg, channels=1)
+    frame = FrameArrays.on(transfer.to_device(plane_src.ravel(), wp.uint8, cfg.device, "planes"),
+                           transfer.to_device(plane_tgt.ravel(), wp.uint8, cfg.device, "planes"),
+                           wp.empty(plane_src.size, dtype=wp.uint8, device=cfg.device), plan)
+    gains = kernel_gains(([1.2], [-5.0], [1.0], [0.0]), 1, plan.tone, frame.table)
     lines = np.arange(1, len(seam.positions), 3, dtype=np.int32)  # every third line, as the frame seam solves
     count = 2 * (8 // cell) + 1  # cells of ``cell`` px 8 px each side of the seam, inside the plan's band
     band_x0 = (np.rint(seam.positions[lines]) - 8).astype(np.int32)
     cells = (len(lines), count)
     last = np.full(cells, 3.0, np.float32)
     last[:, 0] = NOT_BOTH  # the last frame lacked a view there
-    out = [wp.zeros(cells, dtype=float, device=warp_device) for _ in range(3)]
-    comp.band_difference(wp.array(lines, dtype=int, device=warp_device),
-                         wp.array(band_x0, dtype=int, device=warp_device), count, cell,
-                         wp.array(last, dtype=float, device=warp_device), *out)
+    band = BandCells()
+    band.lines, band.x0, band.cell = (wp.array(lines, dtype=int, device=cfg.device),
+                                      wp.array(band_x0, dtype=int, device=cfg.device), cell)
+    out = (wp.array(last, dtype=float, device=cfg.device), *(wp.zeros(cells, dtype=float, device=cfg.device)
+                                                             for _ in range(2)))
+    band_difference(frame, plan, band, gains, count, out)
     diff, total, delta = (array.numpy() for array in out)
     v_src, ok_src = remap_reference(plane_src[:, :, None], map_src)
     v_tgt, ok_tgt = remap_reference(plane_tgt[:, :, None], map_tgt)
     rows = lines[:, None]
     cols = band_x0[:, None] + cell * np.arange(count)[None, :]
     both = ok_src[rows, cols] & ok_tgt[rows, cols]
-    knee, white = comp.knee()
+    knee, white = plan.knee
     adjusted_src = tone_curve(v_src[rows, cols, 0], 1.2, -5.0, knee, white)
     adjusted_tgt = tone_curve(v_tgt[rows, cols, 0], 1.0, 0.0, knee, white)
     np.testing.assert_array_equal(diff < 0.5 * NOT_BOTH, both)
@@ -354,33 +404,21 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     assert np.all(delta[~changed] == 0.0)
 
 
-def test_compositor_rejects_mismatched_inputs(scene, warp_device):  # noqa: F811
+def test_a_plan_refuses_inputs_it_cannot_serve(scene, warp_device):  # noqa: F811
     img_src, img_tgt, map_src, map_tgt, _ = scene
+    cfg = Config(device=warp_device)
     seam = layout(scene)
+    shapes = (img_src.shape, img_tgt.shape)
     with pytest.raises(ValueError, match="share one"):
-        Compositor(map_src[:-1], map_tgt, seam, Config(device=warp_device))
+        composite_plan(map_src[:-1], map_tgt, seam, shapes, cfg)
     with pytest.raises(ValueError, match="one position per line"):
-        Compositor(map_src, map_tgt, SeamLayout(seam.positions[:-1], True, 12.0, 8.0, 1.5, 0.0), Config(device=warp_device))
-    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device))
+        composite_plan(map_src, map_tgt, SeamLayout(seam.positions[:-1], True, 12.0, 8.0, 1.5, 0.0), shapes, cfg)
     with pytest.raises(ValueError, match="channels"):
-        comp.apply(img_src, np.ascontiguousarray(img_tgt[:, :, 0]))
-
-
-def test_planes_load_as_their_interleaved_image(scene, warp_device):  # noqa: F811
-    # A frame's U and V planes go straight into the compositor's channels: the same output as the
-    # interleaved (H, W, 2) image, without making it.
-    img_src, img_tgt, map_src, map_tgt, _ = scene
-    seam = layout(scene)
-    planes_src = [np.ascontiguousarray(img_src[:, :, c]) for c in (0, 1)]
-    planes_tgt = [np.ascontiguousarray(img_tgt[:, :, c]) for c in (0, 1)]
-    comp = Compositor(map_src, map_tgt, seam, Config(device=warp_device))
-    comp.load(np.dstack(planes_src), np.dstack(planes_tgt))
-    interleaved = comp.composite().copy()
-    comp.load_planes(planes_src, planes_tgt)
-    np.testing.assert_array_equal(comp.composite(), interleaved)
-    assert interleaved.shape[2] == 2 and interleaved.std() > 10
-    with pytest.raises(ValueError, match="planes"):
-        comp.load_planes(planes_src, [planes_tgt[0], planes_tgt[1][:-1]])
+        composite_plan(map_src, map_tgt, seam, (img_src.shape, (*img_tgt.shape[:2], 1)), cfg)
+    plan = composite_plan(map_src, map_tgt, seam, shapes, cfg)
+    with pytest.raises(ValueError, match="plan of"):
+        composite_image(img_src, np.ascontiguousarray(img_tgt[:, :, 0]), plan,
+                        FrameState(seam.positions, GAINS), cfg)
 
 
 @wp.kernel

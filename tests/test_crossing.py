@@ -1,4 +1,4 @@
-"""The crossing test of issue 14 (``sena_warp.evaluation.crossing``): an object that crosses the seam
+"""The crossing test (``sena_warp.evaluation.crossing``): an object that crosses the seam
 of a static rig is shown once in every frame, neither twice nor cut.
 
 The clip: the bundled udisd_test_000001 pair as a fixed background (b is the left view), a 48 px

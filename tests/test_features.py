@@ -1,4 +1,4 @@
-"""Step 0 (SENA.md): detection, matching, the Matches record, the match picture and the CLI."""
+"""Step 0 (docs/method.md): detection, matching, the Matches record, the match picture and the CLI."""
 
 from __future__ import annotations
 

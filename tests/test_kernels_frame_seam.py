@@ -10,7 +10,8 @@ import warp as wp
 
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.kernels.frame_seam import background_kernel, band_cost_kernel, strip_mean_kernel
+from sena_warp.kernels.frame_seam import (BackgroundModel, CellCosts, LastSeam, SeamCosts, background_kernel,
+                                          band_cost_kernel, strip_mean_kernel)
 from test_kernels_maps import DEVICES
 
 LINES, WIDTH = 60, 41  # solved lines and cells of the band
@@ -60,10 +61,17 @@ def test_band_cost_is_the_seams_cost_rule(band, device, cell, warp_device):
     out = [wp.zeros(diff.shape, dtype=float, device=device) for _ in range(2)]
     glide = wp.zeros((LINES, glide_width), dtype=float, device=device)
     line_min = wp.zeros(LINES, dtype=float, device=device)
+    seam = LastSeam()
+    seam.last, seam.still, seam.glide_first = (on(device, last, int), on(device, still.astype(np.uint8), wp.uint8),
+                                               on(device, first, int))
+    costs = SeamCosts()
+    costs.speed, costs.noise, costs.motion_cost, costs.blocked_cost, costs.stay_cost, costs.block_cost = (
+        speed, NOISE, MOTION, BLOCKED, STAY, BLOCK)
+    cell_costs = CellCosts()
+    cell_costs.change, cell_costs.free, cell_costs.glide, cell_costs.line_min = *out, glide, line_min
     runtime.launch_rows(band_cost_kernel, LINES, 1, [
-        on(device, diff), on(device, moving, wp.uint8), on(device, home_term), on(device, x0, int), cell,
-        on(device, last, int), on(device, still.astype(np.uint8), wp.uint8), on(device, first, int), speed,
-        NOISE, MOTION, BLOCKED, STAY, BLOCK, *out, glide, line_min], device, runtime.BAND_THREADS)
+        on(device, diff), on(device, moving, wp.uint8), on(device, home_term), on(device, x0, int), cell, seam, costs,
+        cell_costs], device, runtime.BAND_THREADS)
 
     change = np.maximum(np.abs(diff) - np.float32(NOISE), np.float32(0.0)) + np.float32(MOTION) * moving
     change[~both] = BLOCKED
@@ -92,9 +100,11 @@ def test_background_model_flags_what_its_spread_and_the_bands_gain_do_not_explai
     now[30:40, 12:20] += 90.0  # ... and something in front
     gain_less_one, offset, noise, learn = np.float32(0.05), np.float32(4.0), np.float32(12.0), np.float32(1 / 60)
     arrays = [on(device, background), on(device, spread), wp.zeros(total.shape, dtype=wp.uint8, device=device)]
+    model = BackgroundModel()
+    model.background, model.spread, model.off = arrays
+    model.noise, model.spread_factor, model.learn = float(noise), 3.0, float(learn)
     runtime.launch_row_loops(background_kernel, LINES, WIDTH, [
-        on(device, diff), on(device, now), float(gain_less_one), float(offset), float(noise), 3.0, float(learn),
-        *arrays], device, runtime.BAND_THREADS)
+        on(device, diff), on(device, now), float(gain_less_one), float(offset), model], device, runtime.BAND_THREADS)
 
     change = np.where(both, now - background, np.float32(0.0))
     deviation = np.abs(change - (gain_less_one * background + offset))

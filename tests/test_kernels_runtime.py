@@ -53,12 +53,12 @@ def test_threaded_launch_equals_single_launch(udisd_pair, warp_device):
 
 
 # Run in a fresh process, where nothing is loaded yet, with an empty kernel cache (a first run): prewarm,
-# then an image stitch and the video compositor's Y (1 channel) and UV (2 channels) passes; print what
-# was loaded before and after.
+# then an image stitch and both frame kernels (row runs, per pixel) of the video's Y (1 channel) and UV
+# (2 channels) passes; print what was loaded before and after.
 PREWARM_PROBE = """
 import json, sys
 import numpy as np
-from sena_warp.composite import Compositor
+from sena_warp.composite import FrameState, composite_image, composite_plan
 from sena_warp.config import Config
 from sena_warp.imageio import read_image
 from sena_warp.kernels import runtime
@@ -70,9 +70,12 @@ warmed = runtime.loaded()
 cfg = Config(device="cpu")
 img_a, img_b = (read_image(sys.argv[1] + name) for name in ("/a.jpg", "/b.jpg"))
 maps = stitch_images(img_a, img_b, cfg).maps
-compositor = Compositor(maps.map_src_input, maps.map_tgt_input, maps.seam_input, cfg)
 for channels in (1, 2):
-    compositor.apply(np.ascontiguousarray(img_a[:, :, :channels]), np.ascontiguousarray(img_b[:, :, :channels]))
+    pair = [np.ascontiguousarray(img[:, :, :channels]) for img in maps.rig.pick(img_a, img_b)]
+    plan = composite_plan(maps.map_src_input, maps.map_tgt_input, maps.seam_input, (pair[0].shape, pair[1].shape), cfg)
+    gains = tuple(np.ones(channels) if k % 2 == 0 else np.zeros(channels) for k in range(4))
+    for per_pixel in (False, True):
+        composite_image(*pair, plan, FrameState(maps.seam_input.positions, gains), cfg, per_pixel)
 print(json.dumps({"before": sorted(before), "warmed": sorted(warmed), "after": sorted(runtime.loaded()),
                   "imported": sorted(m for m in sys.modules if m.startswith("sena_warp.kernels."))}))
 """
@@ -89,7 +92,7 @@ def test_a_first_run_loads_the_shipped_builds_and_compiles_nothing(bundled_dir, 
     assert seen["imported"] == sorted(f"sena_warp.kernels.{name}" for name in kernel_files)
     assert seen["before"] == []
     warmed_modules = {name for name, _ in seen["warmed"]}
-    for name in kernel_files - {"runtime"}:
+    for name in kernel_files - {"runtime", "transfer"}:  # where and how kernels run, and what they move: no kernels
         assert any(module.startswith(f"sena_warp.kernels.{name}") for module in warmed_modules), name
     # Nothing the stitch or the planes launched had to be loaded after the prewarm.
     assert seen["after"] == seen["warmed"]

@@ -1,4 +1,4 @@
-"""kernels/seam.py against a numpy reference of the same formulas (SENA.md step 9)."""
+"""kernels/seam.py against a numpy reference of the same formulas (docs/method.md step 9)."""
 
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ from sena_warp.evaluation import naturalness as nat
 
 
 def seam_step_per_row(pano, src, tgt, valid_src, valid_tgt, seam_x) -> tuple[float, int]:
-    """The seam step row by row as the module docstring defines it (issue 13's loop), and how many
+    """The seam step row by row as the module docstring defines it (a plain loop), and how many
     rows the views' disagreement left out."""
     height, width = pano.shape
     offsets = np.arange(nat.STEP_NEAR_PX, nat.STEP_FAR_PX + 1)

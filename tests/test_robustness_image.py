@@ -1,4 +1,4 @@
-"""Issue 7, image path: every bad input or output ends in ONE stderr line, the right exit code, no file left.
+"""The image path: every bad input or output ends in ONE stderr line, the right exit code, no file left.
 
 Each CLI case runs ``sena_warp.cli.main`` in-process with ``capfd`` (file-descriptor capture, so
 messages printed by C libraries such as libpng count too). Inputs are made in ``tmp_path/in`` from the

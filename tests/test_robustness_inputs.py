@@ -1,4 +1,4 @@
-"""Issue 15 items 2, 5, 6 and 8: inputs too large, turned by metadata, with alpha or float pixels,
+"""Inputs too large, turned by metadata, with alpha or float pixels,
 and failures that say what is the matter. Through the CLI where the promise is the CLI's (one stderr
 line, exit code, nothing left, inputs unchanged); on the reader where it is about pixels.
 """
@@ -20,7 +20,8 @@ from sena_warp.features import match_images
 from sena_warp.image_header import read_header
 from sena_warp.imageio import read_image, read_image_masked
 from sena_warp.video.loop import VideoOptions, run_video
-from helpers import (assert_one_line_error, claiming, claiming_more, decoded_frames, encoded, png_claiming,
+from helpers import (assert_one_line_error, claiming, claiming_more, decoded_frames, encoded, one_mjpeg_frame,
+                     png_claiming,
                      reencode_with_black_start, run_cli, with_orientation)
 from test_video_loop import SideBySide
 
@@ -108,14 +109,7 @@ def test_a_video_frame_too_large_is_refused_from_the_streams_coded_size_before_d
     from sena_warp.video import reader
 
     folder_in, folder_out = dirs
-    big = folder_in / "big.mov"
-    with av.open(str(big), "w") as c:
-        stream = c.add_stream("mjpeg", rate=1)
-        stream.width, stream.height, stream.pix_fmt = 1280, 1024, "yuvj420p"
-        frame = av.VideoFrame(1280, 1024, "yuvj420p")
-        frame.pts, frame.time_base = 0, Fraction(1, 1)
-        c.mux(stream.encode(frame))
-        c.mux(stream.encode(None))
+    big = one_mjpeg_frame(folder_in / "big.mov", 1280, 1024)
     monkeypatch.setattr(reader, "_first_frame_rotation", lambda container: pytest.fail("decoded a refused frame"))
     reader._probe_version.cache_clear()
     for offset in ("0", "auto"):

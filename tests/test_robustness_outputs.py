@@ -1,4 +1,5 @@
-"""Issue 15 items 1, 3 and 7, issue 16's overwrite rules: every output of every command, through the CLI.
+"""Outputs that collide, exist, or cannot be written, and the overwrite rules: every output of every command,
+through the CLI.
 
 Each class is tested over every command and output it applies to: the exit code, exactly one
 stderr line and no traceback, nothing left in the output folder (no output, no temporary), the
@@ -276,7 +277,7 @@ BAD_OPTIONS = [
     ("video", ["--rig", "moving", "--reestimate", "nan"], ("--reestimate: video_reestimate_s = nan must be a finite",)),
     ("video", ["--rig", "moving", "--reestimate", "0"], ("--reestimate: video_reestimate_s = 0.0 is out of range (0, 3600]",)),
     ("video", ["--rig", "moving", "--reestimate", "inf"], ("--reestimate: video_reestimate_s = inf must be a finite",)),
-    ("video", ["--reestimate", "2"], ("add --rig moving",)),
+    ("video", ["--rig", "static", "--reestimate", "2"], ("drop --rig static",)),
     ("video", ["--max-megapixels", "0"], ("--max-megapixels: max_input_megapixels = 0.0 is out of range (0, 10000]",)),
     ("image", ["--max-megapixels", "nan"], ("--max-megapixels: max_input_megapixels = nan",)),
     ("image", ["--reference", "c"], ("argument --reference: invalid choice",)),
@@ -352,7 +353,7 @@ def _onnxruntime_out_of_memory():
                 "node. Status Message: bfc_arena.cc:360 Failed to allocate memory for requested buffer of size 671088640")
 
 
-# Where a stitch runs out of memory, and how each library says so (measured under ulimit -v: docs/benchmarks.md).
+# Where a stitch runs out of memory, and how each library says so (each message as measured under ulimit -v).
 OUT_OF_MEMORY = {
     "numpy": ("sena_warp.stitch", "stitch_images", lambda: MemoryError("Unable to allocate 12.5 GiB for an array")),
     "warp": ("sena_warp.stitch", "source_map_canvas",

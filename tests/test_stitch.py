@@ -91,7 +91,7 @@ def test_vertical_rig_is_stitched_like_the_transposed_horizontal_one(pano, udisd
 
 
 def test_the_input_order_does_not_change_the_panorama(pano, udisd_pair, warp_device):
-    """'a b' and 'b a' give the same roles, the same maps and the same pixels (issue 13)."""
+    """'a b' and 'b a' give the same roles, the same maps and the same pixels."""
     swapped = stitch_images(udisd_pair[1], udisd_pair[0], Config(device=warp_device))
     assert swapped.maps.rig.source == "a"  # the same image (b of the original order) is the source
     np.testing.assert_array_equal(swapped.image, pano.image)

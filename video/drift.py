@@ -1,5 +1,4 @@
-"""Static rig: how far has each camera's view moved since its maps were made? (issue 14: "a floodlit
-pitch ... slight drift").
+"""Static rig: how far has each camera's view moved since its maps were made?
 
 A static rig's maps are estimated once, but a camera on a pole or a loose mount creeps: on the shared
 pitch one camera's view moves up by 25 px and the other's sideways by 10 px in 8 s, and maps made in

@@ -1,4 +1,4 @@
-"""Exposure over time (issue 14): both views' gains re-measured on the frames and smoothed.
+"""Exposure over time: both views' gains re-measured on the frames and smoothed.
 
 Cameras adjust their exposure while they record (and settle in their first half second), so a video
 cannot keep the first estimate's gains. Every ``video_gain_period_s`` the overlap of the current frame
@@ -46,7 +46,7 @@ def overlap_taps(maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[i
 
 
 class ExposureTracker:
-    """Smoothed per-plane gains of the two views of one fixed canvas.
+    """Smoothed per-plane gains of the two views of one fixed canvas, made with the first frame's maps.
 
     ``luma`` ((gain, bias) of the source, of the target) for the compositor's Y pass, ``chroma`` the
     same for the U/V pass (gain 1, offsets); ``history`` one dict per frame of what was applied.
@@ -65,12 +65,13 @@ class ExposureTracker:
         self._maps_shapes = (maps, shape_src, shape_tgt)  # the maps and the planes' (rows, cols) to sample
         self._taps: tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
 
-    def set_maps(self, maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[int, int]) -> None:
-        """New maps (a re-estimate, a blend step); the gains themselves carry on. Their sample positions
-        are worked out when the next measurement needs them: a blend sets maps on every frame, and a
-        measurement comes every ``period_frames``."""
-        self._maps_shapes = (maps, shape_src, shape_tgt)
-        self._taps = None
+    def _follow(self, maps: PlaneMaps) -> None:
+        """The maps of the frame (a re-estimate, a blend step: another object); the gains themselves carry
+        on. Their sample positions are worked out when the next measurement needs them: a blend changes
+        the maps on every frame, and a measurement comes every ``period_frames``."""
+        if maps is not self._maps_shapes[0]:
+            self._maps_shapes = (maps, *self._maps_shapes[1:])
+            self._taps = None
 
     def _current_taps(self) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
         """((luma source, luma target), (chroma source, chroma target)) flat plane indices of the
@@ -93,8 +94,9 @@ class ExposureTracker:
         self._level = float(ys[keep].mean() - BLACK_Y)
         return np.array([g_src, g_tgt, -0.5 * du, 0.5 * du, -0.5 * dv, 0.5 * dv])
 
-    def update(self, y_src, y_tgt, u_src, u_tgt, v_src, v_tgt) -> None:
-        """Before compositing a frame pair: measure on schedule, then move the applied gains."""
+    def update(self, maps: PlaneMaps, y_src, y_tgt, u_src, u_tgt, v_src, v_tgt) -> None:
+        """Before compositing a frame pair with ``maps``: measure on schedule, then move the applied gains."""
+        self._follow(maps)
         if self._frame % self.period_frames == 0:
             measured = self.measure(y_src, y_tgt, u_src, u_tgt, v_src, v_tgt)
             if measured is not None:

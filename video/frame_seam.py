@@ -1,9 +1,10 @@
-"""The seam of every video frame (issue 14): "cached warps, per-frame seam slicing".
+"""The seam of every video frame: "cached warps, per-frame seam slicing".
 
 The estimate fixes the maps and a seam; each frame the seam is re-optimised inside a band around it
 (``band`` cells each side, ``video_seam_band_ratio`` x the canvas diagonal: room to go round an
-object and its second copy) on that frame's luma difference (the compositor's ``band_difference``:
-source minus target, gains applied), by the dynamic programming of ``seam_path`` with a temporal term:
+object and its second copy) on that frame's luma difference (``composite.band_difference`` on the
+frame's device, source minus target, gains applied, downloaded as one small :class:`BandFrame`), by
+the dynamic programming of ``seam_path`` with a temporal term:
 a cell costs its difference beyond the noise floor, plus ``video_seam_stay_cost`` per pixel away from
 the last frame's seam and ``video_seam_home_cost`` per pixel away from the estimate's.
 
@@ -30,8 +31,10 @@ of a box twice ``video_seam_still_box_px`` wide (an object, not thin edges). Suc
 only round where the views differ: inside a smooth object its two copies differ little, and a seam
 through it would lose a strip of it.
 
-Only the compositor's seam positions and the seam blend's offsets change per frame; its plan stays.
-Positions are per seam line of the luma plane (canvas rows, or columns for a vertical rig). The seam is
+All of it runs on the host, on the band's few thousand cells (``kernels/frame_seam.py`` on Warp's
+CPU device, numpy, OpenCV); the frame's seam and the seam blend's offsets go back to the device in
+one small block, the plan stays. Positions are per seam line of the luma plane (canvas rows, or
+columns for a vertical rig). The seam is
 solved on a grid of square cells: along a line every ``cell`` px (:func:`cell_px`: 1 px for inputs
 up to 640x480, 2 px for 720p, 3 px for 1080p), on every ``video_seam_line_step``-th line or, where
 cells are wider, every cell-th (:func:`line_step`), and interpolated between the solved lines (the
@@ -41,17 +44,20 @@ little with the size; the boxes above are counted in cells and solved lines.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 import warp as wp
 
-from ..composite import Compositor
 from ..config import Config
 from ..partition import running_mean
-from ..seam_path import BandPath
+from ..seam_path import BandPath, separation_spans
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.kernels.frame_seam import background_kernel, band_cost_kernel, strip_mean_kernel
+from sena_warp.kernels.frame_seam import (DEVICE, BackgroundModel, CellCosts, LastSeam, SeamCosts, background_kernel,
+                                          band_cost_kernel, strip_mean_kernel)
+from sena_warp.kernels.transfer import host_array
 
 FIT_STRIDE = 4  # the whole band's gain and offset are fitted on every this-th line and cell
 SPREAD_FACTOR = 3.0  # a band cell is off its background beyond this x its mean absolute deviation there
@@ -76,69 +82,207 @@ def line_step(cell: int, cfg: Config) -> int:
     return max(1, cfg.video_seam_line_step, cell)
 
 
+@dataclass(frozen=True)
+class BandGrid:
+    """The band's cells, fixed for a video: ``lines`` (K,) int32 the solved seam lines (every ``step``-th
+    of the ``count`` lines, and the last), ``width`` cells of ``cell`` px each; a path moves at most
+    ``max_step`` cells between solved lines, at ``step_cost`` per cell; it glides at most ``speed`` px
+    a frame, on ``glide_width`` cells; ``box``: an object's box (``FrameSeam.foreground``), in cells."""
+
+    count: int
+    lines: np.ndarray
+    cell: int
+    width: int
+    step: int
+    max_step: int
+    step_cost: float
+    speed: float
+    glide_width: int
+    box: int
+
+    @staticmethod
+    def of(count: int, band: int, cell: int, cfg: Config) -> "BandGrid":
+        """The grid of ``count`` seam lines whose band reaches ``band`` px each side, cells ``cell`` px."""
+        width = 2 * int(np.ceil(band / cell)) + 1
+        step = line_step(cell, cfg)
+        lines = np.unique(np.append(np.arange(0, count, step), count - 1)).astype(np.int32)
+        speed = max(cfg.video_seam_speed_px, cell)  # px a frame: at least one cell, or it could not glide
+        return BandGrid(count, lines, cell, width, step, int(np.ceil(cfg.seam_max_step_px * step / cell)),
+                        cfg.seam_step_cost * cell, speed, min(width, 2 * int(np.ceil(speed / cell)) + 1),
+                        2 * max(1, cfg.video_seam_still_box_px) + 1)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(solved lines, cells): the shape of the band's per-cell arrays."""
+        return len(self.lines), self.width
+
+
+@dataclass(frozen=True)
+class BandPlace:
+    """Where the band lies for one estimate's seam ``home`` (L,) float32: each solved line's first cell
+    ``x0`` (K,) int32 px, on the grid of cells so that cells line up from line to line, every cell's
+    position ``cells`` (K, width), and the cost of leaving home per cell ``home_term`` (K, width)
+    float32 (with its Warp view on the host, as the kernels take it)."""
+
+    home: np.ndarray
+    x0: np.ndarray
+    cells: np.ndarray
+    home_term: np.ndarray
+    x0_wp: wp.array
+    home_term_wp: wp.array
+
+    @staticmethod
+    def of(home: np.ndarray, grid: BandGrid, cfg: Config) -> "BandPlace":
+        half = grid.width // 2
+        x0 = ((np.floor_divide(np.rint(home[grid.lines]).astype(np.int32), grid.cell) - half) * grid.cell
+              ).astype(np.int32)
+        cells = x0[:, None] + grid.cell * np.arange(grid.width, dtype=np.int32)[None, :]
+        home_term = np.empty(grid.shape, np.float32)
+        np.copyto(home_term, cfg.video_seam_home_cost * np.abs(cells - home[grid.lines, None]), casting="unsafe")
+        return BandPlace(home, x0, cells, home_term, host_array(x0, int), host_array(home_term, float))
+
+
+@dataclass(frozen=True)
+class BandFrame:
+    """One frame's band, as ``composite.band_difference`` gives it: per solved line and cell, the source
+    minus the target (``diff``, ``NOT_BOTH`` where a cell lacks a view), their sum (``total``) and how
+    much ``diff`` changed since the last frame (``delta``), each (K, width) float32 on the host, with
+    Warp views of the first two for the host kernels."""
+
+    diff: np.ndarray
+    total: np.ndarray
+    delta: np.ndarray
+    diff_wp: wp.array
+    total_wp: wp.array
+
+    @staticmethod
+    def of(diff: np.ndarray, total: np.ndarray, delta: np.ndarray) -> "BandFrame":
+        """The band over host arrays (float32, C-ordered), used in place."""
+        return BandFrame(diff, total, delta, host_array(diff, float), host_array(total, float))
+
+
+class BandModel:
+    """The band's background model (module docstring), for static rigs: per cell the source-plus-target
+    luma of the background and its mean absolute deviation (``kernels/frame_seam.py``'s
+    ``BackgroundModel``), learnt at the rate of ``video_seam_background_s`` at ``fps``."""
+
+    def __init__(self, grid: BandGrid, fps: float, cfg: Config):
+        self.noise = np.float32(2.0 * cfg.video_seam_noise)
+        self.modelled = False  # whether the model holds the band's current place
+        self._arrays = [np.zeros(grid.shape, np.float32), np.zeros(grid.shape, np.float32),
+                        np.zeros(grid.shape, np.uint8)]  # background, spread, off
+        model = BackgroundModel()
+        model.background, model.spread = (host_array(a, float) for a in self._arrays[:2])
+        model.off = host_array(self._arrays[2], wp.uint8)
+        model.noise, model.spread_factor = float(self.noise), SPREAD_FACTOR
+        model.learn = float(np.float32(1.0 / max(1.0, fps * cfg.video_seam_background_s)))
+        self.kernel = model
+        self._box = (grid.box, np.ones((grid.box, grid.box), np.uint8))
+
+    def foreground(self, band: BandFrame) -> np.ndarray:
+        """(K, width) uint8 1 on cells off the model in ``band`` (module docstring), grown by
+        ``video_seam_still_box_px``; none on the first frame of a place. Updates the model."""
+        background, spread, off = self._arrays
+        if band.diff.shape != background.shape or band.total.shape != background.shape:
+            raise ValueError(f"band of {band.diff.shape} / {band.total.shape} cells for a model of {background.shape}")
+        if not self.modelled:
+            np.copyto(background, band.total)
+            spread.fill(float(self.noise / SPREAD_FACTOR))
+            self.modelled = True
+        fit = (slice(None, None, FIT_STRIDE),) * 2
+        gain, offset = whole_band_fit(background[fit], band.total[fit], band.diff[fit] < 0.5 * NOT_BOTH,
+                                      float(self.noise))
+        runtime.launch_row_loops(background_kernel, background.shape[0], background.shape[1], [
+            band.diff_wp, band.total_wp, float(np.float32(gain - 1.0)), float(np.float32(offset)), self.kernel],
+            DEVICE, runtime.BAND_THREADS)
+        box, kernel = self._box
+        solid = (cv2.blur(off, (box, box)) > 0).view(np.uint8)
+        return cv2.dilate(solid, kernel)
+
+
+class BandCosts:
+    """The host arrays ``band_cost_kernel`` and ``strip_mean_kernel`` fill for the band's paths, and
+    what they cost (``SeamCosts`` of ``cfg``): a path's cells from the last seam (``last``, ``still``,
+    ``glide_first``), each cell's costs (``change``, ``free``, ``glide``, ``line_min``), the frame's
+    ``path`` and the difference next to it (``strip_mean``, ``strip_count``)."""
+
+    def __init__(self, grid: BandGrid, cfg: Config):
+        solved, width = grid.shape
+        self.host = {"last": np.zeros(solved, np.int32), "still": np.zeros(solved, np.uint8),
+                     "glide_first": np.zeros(solved, np.int32), "change": np.zeros(grid.shape, np.float32),
+                     "free": np.zeros(grid.shape, np.float32),
+                     "glide": np.zeros((solved, grid.glide_width), np.float32),
+                     "line_min": np.zeros(solved, np.float32), "path": np.zeros(solved, np.int32),
+                     "strip_mean": np.zeros(solved, np.float32), "strip_count": np.zeros(solved, np.int32),
+                     "moving": np.zeros(grid.shape, np.uint8)}
+        dtypes = {np.dtype(np.int32): int, np.dtype(np.float32): float, np.dtype(np.uint8): wp.uint8}
+        self.views = {name: host_array(a, dtypes[a.dtype]) for name, a in self.host.items()}
+        self.last = LastSeam()
+        self.last.last, self.last.still, self.last.glide_first = (
+            self.views[k] for k in ("last", "still", "glide_first"))
+        self.out = CellCosts()
+        self.out.change, self.out.free, self.out.glide, self.out.line_min = (
+            self.views[k] for k in ("change", "free", "glide", "line_min"))
+        self.costs = SeamCosts()
+        self.costs.speed, self.costs.noise = float(grid.speed), float(cfg.video_seam_noise)
+        self.costs.motion_cost = float(cfg.video_seam_motion_cost)
+        self.costs.blocked_cost = float(cfg.video_seam_blocked_cost)
+        self.costs.stay_cost = float(cfg.video_seam_stay_cost)
+        self.costs.block_cost = float(cfg.video_seam_blocked_cost * 10)  # a blocked cell; still lines keep their seam
+
+
 class FrameSeam:
-    """The per-frame seam of one luma compositor whose plan keeps both views within ``band`` of the
+    """The per-frame seam of a luma plane whose plan keeps both views within ``band`` px of the
     estimate's seam ``home`` (L,) float32 (positions per line), on cells ``cell`` px wide
     (:func:`cell_px`); ``jumps``: whether it may leave its gliding path and keeps a background model (a
     static rig); ``fps``: the video's frame rate.
 
-    The seam is solved on every ``step``-th line (:func:`line_step`, and the last) and interpolated
-    between them; ``positions``, ``shown`` and ``still`` are per line. The band's cells live in Warp
-    arrays (K solved lines, ``width`` cells) that the kernels of ``kernels/frame_seam.py`` fill (on
-    ``runtime.BAND_THREADS`` CPU threads)."""
+    The seam is solved on the grid's lines (:class:`BandGrid`) and interpolated between them;
+    ``positions``, ``shown`` and ``still`` are per line. :meth:`reset` follows a new estimate's seam,
+    :meth:`next` takes a frame's band (:class:`BandFrame`)."""
 
     def __init__(self, home: np.ndarray, band: int, cell: int, jumps: bool, fps: float, cfg: Config):
         self.cfg = cfg
-        self.jumps = jumps
         self.band = band
-        self.cell = cell
-        self.width = 2 * int(np.ceil(band / self.cell)) + 1  # cells
-        count = len(home)
-        self._every_line = np.arange(count)
-        box = 2 * max(1, cfg.video_seam_still_box_px) + 1
-        self._object_box = (box, np.ones((box, box), np.uint8))  # an object's box (``foreground``): size, kernel
-        self.step = line_step(self.cell, cfg)
-        step = self.step
-        self._lines = np.unique(np.append(np.arange(0, count, step), count - 1)).astype(np.int32)
-        solved = len(self._lines)
-        self._solved = np.arange(solved)
-        self._max_step = int(np.ceil(cfg.seam_max_step_px * step / self.cell))  # cells between solved lines
-        self._step_cost = cfg.seam_step_cost * self.cell  # per cell of sideways step
-        segment = np.array([[0, solved - 1, -1, -1]])  # one, free at both ends
-        self._solver = BandPath(solved, self.width, segment, cfg)
-        self._speed = max(cfg.video_seam_speed_px, self.cell)  # px a frame: at least one cell, or it could not glide
-        self._glide_width = min(self.width, 2 * int(np.ceil(self._speed / self.cell)) + 1)
-        self._glide_solver = BandPath(solved, self._glide_width, segment, cfg)
-        device, cells = cfg.device, (solved, self.width)
-        self._lines_wp = wp.array(self._lines, dtype=int, device=device)
-        self._x0_wp = wp.zeros(solved, dtype=int, device=device)  # the band's first cells, per reset
-        self._diff = wp.zeros(cells, dtype=float, device=device)  # this frame's difference and sum
-        self._total = wp.zeros(cells, dtype=float, device=device)
-        self._last_diff = wp.zeros(cells, dtype=float, device=device)  # the last frame's difference
-        self._delta = wp.zeros(cells, dtype=float, device=device)  # how much it changed since
-        self._learn = 1.0 / max(1.0, fps * cfg.video_seam_background_s)  # the background's update per frame
-        self._background = wp.zeros(cells, dtype=float, device=device)  # source-plus-target luma of the background
-        self._spread = wp.zeros(cells, dtype=float, device=device)  # its mean absolute deviation
-        self._off = wp.zeros(cells, dtype=wp.uint8, device=device)  # 1: off the background this frame
-        self._moving = wp.zeros(cells, dtype=wp.uint8, device=device)  # 1: something in front (a static rig's)
-        self._home_term = wp.zeros(cells, dtype=float, device=device)  # the cost of leaving home, per reset
-        self._last_wp = wp.zeros(solved, dtype=int, device=device)  # the last frame's seam, per solved line
-        self._still_wp = wp.zeros(solved, dtype=wp.uint8, device=device)
-        self._change = wp.zeros(cells, dtype=float, device=device)  # a cell's cost without the seam's terms
-        self._free_cost = wp.zeros(cells, dtype=float, device=device)  # ... with them: the free path's
-        self._glide_first = wp.zeros(solved, dtype=int, device=device)  # the glide's first cells
-        self._glide_cost = wp.zeros((solved, self._glide_width), dtype=float, device=device)  # ... its cost
-        self._line_min = wp.zeros(solved, dtype=float, device=device)  # each line's cheapest cell
-        self._path_wp = wp.zeros(solved, dtype=int, device=device)  # this frame's seam, for the strip's mean
-        self._strip_mean = wp.zeros(solved, dtype=float, device=device)  # the seam blend's difference by the seam
-        self._strip_count = wp.zeros(solved, dtype=int, device=device)
-        self._modelled = False  # whether the background model holds this estimate's band
-        self._shown: np.ndarray | None = None  # (K,) the solved lines' seam the last frame was composited with
-        self._has_last = False  # whether ``_last_diff`` holds the last frame's difference on this band
-        self._still = np.zeros(solved, bool)  # the solved lines the last frame found still (``still_lines``)
-        self.home: np.ndarray | None = None  # (L,) the estimate's seam, the band's centre (``reset``)
+        self.grid = BandGrid.of(len(home), band, cell, cfg)
+        self._fps = fps
+        self.model = BandModel(self.grid, fps, cfg) if jumps else None
+        self.work = BandCosts(self.grid, cfg)
+        # A frame's cost of leaving home with its separation cost added (``next``'s ``copies``).
+        self._home_frame = np.zeros(self.grid.shape, np.float32)
+        self._home_frame_wp = host_array(self._home_frame, float)
+        segment = np.array([[0, len(self.grid.lines) - 1, -1, -1]])  # one, free at both ends
+        self._solvers = (BandPath(len(self.grid.lines), self.grid.width, segment, cfg.cpu_threads),  # free
+                         BandPath(len(self.grid.lines), self.grid.glide_width, segment, cfg.cpu_threads))  # glide
+        self.place: BandPlace | None = None  # where the band lies (``reset``)
         self._path: np.ndarray | None = None  # (K,) the solved lines' seam (px, on the grid of cells)
+        self._shown: np.ndarray | None = None  # (K,) the solved lines' seam the last frame was composited with
+        self._still = np.zeros(len(self.grid.lines), bool)  # the solved lines the last frame found still
+        self._has_last = False  # whether the band's ``delta`` compares with the last frame on this place
         self.reset(home)
+
+    @property
+    def cell(self) -> int:
+        return self.grid.cell
+
+    @property
+    def step(self) -> int:
+        return self.grid.step
+
+    @property
+    def home(self) -> np.ndarray:
+        """(L,) float32 the estimate's seam, the band's centre."""
+        return self.place.home
+
+    @property
+    def jumps(self) -> bool:
+        return self.model is not None
+
+    def set_jumps(self, jumps: bool) -> None:
+        """Whether it may jump and keeps a background model from now on (a rig that stopped or started
+        moving); a new model learns the band from the next frame."""
+        if jumps != self.jumps:
+            self.model = BandModel(self.grid, self._fps, self.cfg) if jumps else None
 
     def reset(self, home: np.ndarray) -> None:
         """A new estimate's seam: the band follows it; the last path is kept where it still fits. The
@@ -147,30 +291,25 @@ class FrameSeam:
         camera's drift) keeps its band, its last difference and its background model: the band's
         content moved by a pixel or two, which the model's own learning follows."""
         home = np.asarray(home, np.float32)
-        if self.home is not None and np.array_equal(home, self.home):
+        if self.place is not None and np.array_equal(home, self.place.home):
             return
-        self.home = home
-        half = self.width // 2
-        self._x0 = ((np.floor_divide(np.rint(self.home[self._lines]).astype(np.int32), self.cell) - half)
-                    * self.cell).astype(np.int32)  # on the grid of cells, so cells line up from line to line
-        runtime.upload(self._x0_wp, self._x0)
-        self._cells = self._x0[:, None] + self.cell * np.arange(self.width, dtype=np.int32)[None, :]
-        runtime.upload(self._home_term, self.cfg.video_seam_home_cost
-                       * np.abs(self._cells - self.home[self._lines, None]))
+        self.place = BandPlace.of(home, self.grid, self.cfg)
         self._has_last = False  # the band's cells moved: the last difference no longer lines up
-        self._modelled = False
-        self._path = self._on_grid(self.home[self._lines] if self._path is None else self._path)
+        if self.model is not None:
+            self.model.modelled = False
+        self._path = self._on_grid(home[self.grid.lines] if self._path is None else self._path)
 
     def _on_grid(self, path: np.ndarray) -> np.ndarray:
         """(K,) int32 the band cells' positions nearest to ``path`` (K,) px on the solved lines."""
-        nearest = self._x0 + self.cell * np.rint((np.asarray(path, np.float64) - self._x0) / self.cell)
-        return np.clip(nearest, self._x0, self._cells[:, -1]).astype(np.int32)
+        x0, cell = self.place.x0, self.grid.cell
+        nearest = x0 + cell * np.rint((np.asarray(path, np.float64) - x0) / cell)
+        return np.clip(nearest, x0, self.place.cells[:, -1]).astype(np.int32)
 
     def _solve_band(self, solver: BandPath, cost: wp.array, x0: np.ndarray) -> np.ndarray:
-        """(K,) int32 positions (px) of the cheapest path through ``cost`` (K, cells; a Warp array) whose cells start
-        at ``x0`` (K,) px on the grid of cells."""
-        first = x0 // self.cell
-        return (solver.solve(cost, first, self._max_step, self._step_cost) * self.cell).astype(np.int32)
+        """(K,) int32 positions (px) of the cheapest path through ``cost`` (K, cells; a host Warp array)
+        whose cells start at ``x0`` (K,) px on the grid of cells."""
+        grid = self.grid
+        return (solver.solve(cost, x0 // grid.cell, grid.max_step, grid.step_cost) * grid.cell).astype(np.int32)
 
     @property
     def positions(self) -> np.ndarray:
@@ -185,99 +324,84 @@ class FrameSeam:
     @property
     def still(self) -> np.ndarray:
         """(L,) bool the lines the last frame found still (both solved lines around them still)."""
-        return np.interp(self._every_line, self._lines, self._still.astype(np.float64)) == 1.0
+        return np.interp(np.arange(self.grid.count), self.grid.lines, self._still.astype(np.float64)) == 1.0
 
     def _per_line(self, path: np.ndarray) -> np.ndarray:
-        return np.rint(np.interp(self._every_line, self._lines, path)).astype(np.int32)
+        return np.rint(np.interp(np.arange(self.grid.count), self.grid.lines, path)).astype(np.int32)
 
-    def next(self, luma: Compositor) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The seam of the frame loaded in ``luma`` and its seam blend's offsets (``band_offsets``):
-        (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32)."""
-        self._diff, self._last_diff = self._last_diff, self._diff  # this frame's fills the older
-        luma.band_difference(self._lines_wp, self._x0_wp, self.width, self.cell, self._last_diff, self._diff,
-                             self._total, self._delta)
-        self._still = self.still_lines()
+    def next(self, band: BandFrame, copies: tuple[np.ndarray, np.ndarray] | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The seam of the frame whose band is ``band`` and its seam blend's offsets (``band_offsets``):
+        (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32).
+        ``copies``: (target's, source's) (M, 2) (line, position) of points the warp leaves apart this
+        frame: the seam keeps each pair on one side (:func:`separation_band_cost`)."""
+        self._still = self.still_lines(band)
         self._has_last = True
         last = self._path if self._shown is None else self._shown
         if not self._still.all():  # else nothing changed on any line: the seam and the background model stay
-            moving = self.foreground(self._diff, self._total) if self.jumps else None
-            self._path = self._solve(moving, last)
+            moving = self.model.foreground(band) if self.model is not None else None
+            home_term = self.place.home_term_wp
+            if copies is not None and len(copies[0]):  # this frame's home term carries the separation's cost
+                separation = separation_band_cost(self.grid.lines, self.place.x0, self.grid.cell, self.grid.width,
+                                                  *copies, self.cfg)
+                np.add(self.place.home_term, separation, out=self._home_frame)
+                home_term = self._home_frame_wp
+            self._path = self._solve(band, moving, last, home_term)
         self._shown = self._path.copy()
-        runtime.upload(self._path_wp, self._path)
-        runtime.launch_rows(strip_mean_kernel, len(self._lines), 1, [
-            self._diff, self._x0_wp, self.cell, self._path_wp, self.cfg.seam_blend_strip_px // self.cell,
-            self._strip_mean, self._strip_count], self.cfg.device, runtime.BAND_THREADS)
-        offsets_src, offsets_tgt = band_offsets(self._strip_mean.numpy(), self._strip_count.numpy(), self._lines,
-                                                self.step, self.cfg)
+        work, grid = self.work, self.grid
+        np.copyto(work.host["path"], self._path, casting="unsafe")
+        runtime.launch_rows(strip_mean_kernel, len(grid.lines), 1, [
+            band.diff_wp, self.place.x0_wp, grid.cell, work.views["path"], self.cfg.seam_blend_strip_px // grid.cell,
+            work.views["strip_mean"], work.views["strip_count"]], DEVICE, runtime.BAND_THREADS)
+        offsets_src, offsets_tgt = band_offsets(work.host["strip_mean"], work.host["strip_count"], grid.lines,
+                                                grid.step, self.cfg)
         return self.positions, offsets_src, offsets_tgt
 
-    def _solve(self, moving: np.ndarray | None, last: np.ndarray) -> np.ndarray:
+    def _solve(self, band: BandFrame, moving: np.ndarray | None, last: np.ndarray, home_term: wp.array
+               ) -> np.ndarray:
         """The solved lines' new path (module docstring); ``moving``: the cells in front of the
-        background (``foreground``), None on a moving rig.
+        background (``BandModel.foreground``), None on a moving rig; ``home_term``: each cell's cost of
+        leaving home (with the frame's separation cost, if any).
 
         The glide moves at most ``video_seam_speed_px`` (or one cell) per solved line from ``last`` (K,)
         and not at all on still lines: it is solved on the few cells it may take, from ``first``."""
-        cfg = self.cfg
-        first = np.clip((last - self._x0) // self.cell - self._glide_width // 2, 0, self.width - self._glide_width)
-        runtime.upload(self._last_wp, last)
-        runtime.upload(self._still_wp, self._still)
-        runtime.upload(self._glide_first, first)
-        runtime.launch_rows(band_cost_kernel, len(self._lines), 1, [
-            self._diff, self._moving, self._home_term, self._x0_wp, self.cell, self._last_wp, self._still_wp,
-            self._glide_first, float(self._speed), float(cfg.video_seam_noise), float(cfg.video_seam_motion_cost),
-            float(cfg.video_seam_blocked_cost), float(cfg.video_seam_stay_cost),
-            float(cfg.video_seam_blocked_cost * 10),  # a blocked cell; still lines keep their seam
-            self._change, self._free_cost, self._glide_cost, self._line_min], cfg.device, runtime.BAND_THREADS)
-        change = self._change.numpy()
-        glide = self._solve_band(self._glide_solver, self._glide_cost, self._x0 + self.cell * first)
-        def along(path: np.ndarray) -> float:
-            return float(change[self._solved, (path - self._x0) // self.cell].sum())
+        cfg, grid, place, work = self.cfg, self.grid, self.place, self.work
+        first = np.clip((last - place.x0) // grid.cell - grid.glide_width // 2, 0, grid.width - grid.glide_width)
+        for name, values in (("last", last), ("still", self._still), ("glide_first", first)):
+            np.copyto(work.host[name], values, casting="unsafe")
+        if moving is not None:
+            np.copyto(work.host["moving"], moving)
+        runtime.launch_rows(band_cost_kernel, len(grid.lines), 1, [
+            band.diff_wp, work.views["moving"], home_term, place.x0_wp, grid.cell, work.last, work.costs,
+            work.out], DEVICE, runtime.BAND_THREADS)
+        change = work.host["change"]
+        free_solver, glide_solver = self._solvers
+        glide = self._solve_band(glide_solver, work.views["glide"], place.x0 + grid.cell * first)
+        solved = np.arange(len(grid.lines))
 
-        limit = len(self._lines)
+        def along(path: np.ndarray) -> float:
+            return float(change[solved, (path - place.x0) // grid.cell].sum())
+
+        limit = len(grid.lines)
         path = glide
         jump = cfg.video_seam_jump_cost * limit
         # Something in front of the background, and a path cheaper than the glide's by a jump may exist
         # (no path costs less than each line's cheapest cell): it may jump round it.
-        if moving is not None and moving.any() and along(glide) - float(self._line_min.numpy().sum()) > jump:
-            free = self._solve_band(self._solver, self._free_cost, self._x0)
+        if moving is not None and moving.any() and along(glide) - float(work.host["line_min"].sum()) > jump:
+            free = self._solve_band(free_solver, work.views["free"], place.x0)
             path = free if along(glide) - along(free) > jump else glide
         if along(self._path) - along(path) > cfg.video_seam_margin * limit:
             return path.astype(np.int32)
         return self._path
 
-    def foreground(self, diff: wp.array, total: wp.array) -> np.ndarray:
-        """(K, width) uint8 over the solved lines' band (its difference ``diff`` and source-plus-target
-        ``total``, Warp arrays as ``band_difference`` fills them), 1 on cells off the background model
-        (module docstring), grown by ``video_seam_still_box_px``; none on the first frame of an estimate.
-        Updates the model."""
-        if diff.shape != self._background.shape or total.shape != self._background.shape:
-            raise ValueError(f"band of {diff.shape} / {total.shape} cells for a model of {self._background.shape}")
-        noise = np.float32(2.0 * self.cfg.video_seam_noise)
-        if not self._modelled:
-            wp.copy(self._background, total)
-            self._spread.fill_(float(noise / SPREAD_FACTOR))
-            self._modelled = True
-        fit = (slice(None, None, FIT_STRIDE),) * 2
-        gain, offset = whole_band_fit(self._background.numpy()[fit], total.numpy()[fit],
-                                      diff.numpy()[fit] < 0.5 * NOT_BOTH, float(noise))
-        runtime.launch_row_loops(background_kernel, len(self._lines), self.width, [
-            diff, total, float(np.float32(gain - 1.0)), float(np.float32(offset)), float(noise), SPREAD_FACTOR,
-            float(np.float32(self._learn)), self._background, self._spread, self._off], self.cfg.device,
-            runtime.BAND_THREADS)
-        box, kernel = self._object_box
-        solid = (cv2.blur(self._off.numpy(), (box, box)) > 0).view(np.uint8)
-        moving = cv2.dilate(solid, kernel)
-        runtime.upload(self._moving, moving)
-        return moving
-
-    def still_lines(self) -> np.ndarray:
+    def still_lines(self, band: BandFrame) -> np.ndarray:
         """(K,) bool: solved lines where nothing changed since the last frame (module docstring), from the
-        band's difference loaded by ``band_difference``; none without a last frame."""
+        band's ``delta``; none without a last frame on this place."""
         if not self._has_last:
-            return np.zeros(len(self._lines), bool)
+            return np.zeros(len(self.grid.lines), bool)
         box = max(1, self.cfg.video_seam_still_box_px)
-        moved = (cv2.blur(self._delta.numpy(), (box, box)) > self.cfg.video_seam_noise).any(axis=1)
-        return ~lines_near(moved, int(np.ceil(self.width * self.cell / self.step)))
+        moved = (cv2.blur(band.delta, (box, box)) > self.cfg.video_seam_noise).any(axis=1)
+        return ~lines_near(moved, int(np.ceil(self.grid.width * self.grid.cell / self.grid.step)))
 
 
 def whole_band_fit(background: np.ndarray, total: np.ndarray, both: np.ndarray, noise: float) -> tuple[float, float]:
@@ -305,6 +429,31 @@ def _gain_offset(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
         return 1.0, float(y_mean - x_mean)
     gain = float(dx @ (y - y_mean)) / x.size / x_var
     return gain, float(y_mean - gain * x_mean)
+
+
+def separation_band_cost(lines: np.ndarray, x0: np.ndarray, cell: int, width: int, copies_tgt: np.ndarray,
+                         copies_src: np.ndarray, cfg: Config) -> np.ndarray:
+    """(K, width) float32 over a band's cells (solved lines ``lines`` (K,), their first cells at ``x0`` (K,)
+    px, cells ``cell`` px wide): ``seam_path.separation_cost`` for points whose two copies are
+    ``copies_tgt`` / ``copies_src`` (M, 2) (line, position): every cell between a pair's copies, and
+    within the transition's reach of them, costs ``seam_separation_weight`` on the solved lines within
+    ``seam_separation_rows`` of the pair's."""
+    solved = np.full(int(lines[-1]) + 1, -1, np.int64)
+    solved[lines] = np.arange(len(lines))
+    mid, lo, hi = separation_spans(np.asarray(copies_src, np.float64)[:, ::-1],
+                                   np.asarray(copies_tgt, np.float64)[:, ::-1], cfg)
+    row = np.rint(mid).astype(np.int64)
+    edges = np.zeros((len(lines), width + 1), np.float32)
+    for dy in range(-cfg.seam_separation_rows, cfg.seam_separation_rows + 1):
+        line = row + dy
+        k = np.where((line >= 0) & (line < len(solved)), solved[np.clip(line, 0, len(solved) - 1)], -1)
+        ok = k >= 0
+        first = np.clip(np.floor((lo[ok] - x0[k[ok]]) / cell), 0, width).astype(np.int64)
+        last = np.clip(np.ceil((hi[ok] - x0[k[ok]]) / cell), 0, width).astype(np.int64)
+        wide = last > first
+        np.add.at(edges, (k[ok][wide], first[wide]), cfg.seam_separation_weight)
+        np.add.at(edges, (k[ok][wide], last[wide]), -cfg.seam_separation_weight)
+    return np.cumsum(edges, axis=1)[:, :width]
 
 
 def lines_near(flags: np.ndarray, reach: int) -> np.ndarray:

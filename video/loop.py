@@ -2,7 +2,7 @@
 
 The stitch itself is not in here: the loop takes a *frame compositor*, built once from the first
 pairs of frames it takes (that is where a real stitch estimates its maps: "cached warps, per-frame
-seam slicing", SENA.md "Maps, not images"; the pairs it took are composited after), then called for
+seam slicing", docs/method.md "Maps, not images"; the pairs it took are composited after), then called for
 every pair on YUV 4:2:0 planes, so frames never go through RGB on the hot path.
 """
 

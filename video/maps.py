@@ -1,7 +1,7 @@
 """SENA canvas maps adapted to YUV 4:2:0 video planes, on a canvas fixed for the whole video.
 
 A stitch estimate gives full-resolution maps over its canvas (``sena_warp.stitch.StitchMaps``). A
-video composites the decoder's planes directly (no RGB on the hot path, SENA.md "Maps, not images"):
+video composites the decoder's planes directly (no RGB on the hot path, docs/method.md "Maps, not images"):
 Y with those maps, U and V with half-resolution maps derived from them once per estimate. The
 output size is fixed by the first estimate; later estimates are expressed on that canvas.
 
@@ -16,10 +16,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 import warp as wp
 
-from ..composite import SeamLayout
+from ..composite import BorderBlend, SeamLayout
 from ..rig import Rig
 from ..stitch import StitchMaps
 from sena_warp.kernels import map_change, runtime
+from sena_warp.kernels.transfer import host_array
 
 # Output pixels no input covers: black in limited-range BT.601, the range H.264 decoders assume.
 BLACK_Y, BLACK_UV = 16, 128
@@ -36,8 +37,11 @@ class PlaneMaps:
     ``*_chroma``: the same at (H/2, W/2), positions in the U/V planes.
     ``seam_x_working``: (rows,) float32 seam x per row of the *working* frame (``rig.py``), NaN
     where the estimate's canvas does not reach. ``inliers``: global-affine inliers of the estimate.
-    ``border_luma``: the estimate's border blend on the Y plane (``partition.border_offsets``): (lines
-    (2,), source offsets (2, P, 1), target offsets (2, P, 1)) in the compositor's terms, or None.
+    ``border_luma``: the estimate's border blend on the Y plane (``partition.border_offsets``): lines
+    (2,), source offsets (2, P, 1), target offsets (2, P, 1) in the compositor's terms, or None.
+
+    A value: its arrays are made read-only, so a plan may use them where they are (``composite_plan``)
+    and anything that moves the maps makes new ones.
     """
 
     map_src_luma: np.ndarray
@@ -50,7 +54,14 @@ class PlaneMaps:
     seam_chroma: SeamLayout
     seam_x_working: np.ndarray
     inliers: int
-    border_luma: tuple[tuple[float, float], np.ndarray, np.ndarray] | None
+    border_luma: BorderBlend | None
+
+    def __post_init__(self) -> None:
+        border = () if self.border_luma is None else (self.border_luma.src, self.border_luma.tgt)
+        for array in (self.map_src_luma, self.map_tgt_luma, self.alpha_luma, self.map_src_chroma, self.map_tgt_chroma,
+                      self.alpha_chroma, self.seam_luma.positions, self.seam_chroma.positions, self.seam_x_working,
+                      *border):
+            array.flags.writeable = False
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -61,7 +72,7 @@ class PlaneMaps:
 def target_offset(map_tgt_canvas: np.ndarray) -> np.ndarray:
     """o = (ox, oy), the canvas position of target pixel (0, 0), read off the target map.
 
-    The target is pasted unwarped (``map_tgt = u - o`` everywhere, SENA.md step 2), so the map at
+    The target is pasted unwarped (``map_tgt = u - o`` everywhere, docs/method.md step 2), so the map at
     canvas pixel (0, 0) is -o. Float64 (2,), whole pixels, in the frame the map is in.
     """
     return -np.asarray(map_tgt_canvas[0, 0], dtype=np.float64)
@@ -134,8 +145,19 @@ def plane_maps(maps: StitchMaps, shape: tuple[int, int], offset_fixed: np.ndarra
     )
 
 
-def border_on_canvas(maps: StitchMaps, shift_xy: np.ndarray, shape: tuple[int, int]
-                     ) -> tuple[tuple[float, float], np.ndarray, np.ndarray] | None:
+def maps_on_canvas(maps: StitchMaps, shape: tuple[int, int], offset_fixed: np.ndarray, band_px: int,
+                   shape_out: tuple[int, int]) -> PlaneMaps:
+    """:func:`plane_maps` of an estimate on the fixed canvas of ``shape``, scaled to the output of
+    ``shape_out`` (:func:`scaled_plane_maps`), its plan's band widened by ``band_px``, the reach of the
+    per-frame seam (``frame_seam.band_half_width``, output pixels), so both views are kept wherever the
+    frame's seam may go."""
+    plane = scaled_plane_maps(plane_maps(maps, shape, offset_fixed), shape_out)
+    reach = band_px + plane.seam_luma.band_px
+    return replace(plane, seam_luma=replace(plane.seam_luma, band_px=reach),
+                   seam_chroma=replace(plane.seam_chroma, band_px=0.5 * reach))
+
+
+def border_on_canvas(maps: StitchMaps, shift_xy: np.ndarray, shape: tuple[int, int]) -> BorderBlend | None:
     """The estimate's border blend (grey levels per working column at two working rows) on the fixed
     canvas's Y plane: lines ``L - dy``, offsets shifted by ``dx`` along them (0 beyond the estimate's
     canvas) and scaled to Y levels; None when the estimate has none. ``shift_xy`` and ``shape`` as
@@ -152,7 +174,7 @@ def border_on_canvas(maps: StitchMaps, shift_xy: np.ndarray, shape: tuple[int, i
         return (Y_PER_GREY * shifted.T)[:, :, None].astype(np.float32)
 
     lines = tuple(float(line - round(dy)) for line in border.lines)
-    return lines, along(border.src), along(border.tgt)
+    return BorderBlend(lines, along(border.src), along(border.tgt))
 
 
 def filled(positions: np.ndarray) -> np.ndarray:
@@ -264,11 +286,10 @@ def scaled_plane_maps(maps: PlaneMaps, shape_out: tuple[int, int]) -> PlaneMaps:
                       smooth_sigma_px=maps.seam_luma.smooth_sigma_px * across, lf_px=maps.seam_luma.lf_px * across)
     border = maps.border_luma
     if border is not None:
-        lines, offsets_src, offsets_tgt = border
         spots = canvas_positions(shape_out[1] if rows else shape_out[0], across)
-        border = (tuple(float((line + 0.5) * along - 0.5) for line in lines),
-                  at_positions(offsets_src, spots, axis=1).astype(np.float32),
-                  at_positions(offsets_tgt, spots, axis=1).astype(np.float32))
+        border = BorderBlend(tuple(float((line + 0.5) * along - 0.5) for line in border.lines),
+                             at_positions(border.src, spots, axis=1).astype(np.float32),
+                             at_positions(border.tgt, spots, axis=1).astype(np.float32))
     map_src, map_tgt, alpha = (on_output(field, shape_out)
                                for field in (maps.map_src_luma, maps.map_tgt_luma, maps.alpha_luma))
     return replace(maps, map_src_luma=map_src, map_tgt_luma=map_tgt, alpha_luma=alpha,
@@ -347,11 +368,6 @@ class MapsBlend:
                        seam_chroma=replace(self._goal.seam_chroma, positions=chroma))
 
 
-def lerp_maps(start: PlaneMaps, goal: PlaneMaps, weight: float) -> PlaneMaps:
-    """``start + weight * (goal - start)`` for every map; where either side is NaN, ``goal``'s value; a
-    map the two share (a drift moves only the source's) is kept as it is (:class:`MapsBlend`)."""
-    return MapsBlend(start, goal).at(weight)
-
 
 def sampled_mask(map_canvas: np.ndarray, plane_shape: tuple[int, int]) -> np.ndarray:
     """(H, W) bool: where the map's (x, y) has its bilinear footprint inside a plane of ``plane_shape`` (rows, cols)."""
@@ -379,11 +395,11 @@ def map_change_px(before: PlaneMaps, after: PlaneMaps, shape_src: tuple[int, int
     height, width = before.map_src_luma.shape[:2]
     rows, cols = -(-height // stride), -(-width // stride)
     change = np.empty((rows, cols), np.float32)
-    arrays = [runtime.readonly_array(m, wp.vec2, map_change.DEVICE)
+    arrays = [host_array(np.ascontiguousarray(m), wp.vec2)
               for m in (before.map_src_luma, after.map_src_luma, after.map_tgt_luma)]
     inputs = [stride, arrays[0], arrays[1], wp.vec3i(*shape_src, 1), arrays[2],
               wp.vec3i(*(shape_tgt or (0, 0)), 1), int(shape_tgt is not None),
-              wp.array(change, dtype=float, device=map_change.DEVICE, copy=False)]
+              host_array(change, float)]
     runtime.launch_rows(map_change.map_change_kernel, rows, cols, inputs, map_change.DEVICE, runtime.BAND_THREADS)
     counted = change[~np.isnan(change)]
     return float(np.percentile(counted, percentile)) if counted.size else 0.0

@@ -1,4 +1,4 @@
-"""Pairing two frame streams by presentation time, not by index (SENA.md "Video").
+"""Pairing two frame streams by presentation time, not by index (docs/method.md "Video").
 
 Each frame of the *tick* stream (the left/first input by default) is one output frame; it is paired
 with the frame of the *other* stream whose time is nearest. Two cameras rarely start together or

@@ -1,14 +1,21 @@
-"""Stitching two videos with SENA maps: estimate once (or now and then for a moving rig), composite planes.
+"""Stitching two videos with SENA maps: estimate once, then follow the rig, composite planes.
 
 ``stitch_videos`` is the ``sena-warp video`` job: the best of the first frame pairs gives the maps and
-fixes the output canvas (``estimate.py``); every frame pair is then composited in YUV 4:2:0 with
-those maps (``maps.py``) by the loop in ``loop.py``. A static rig's maps move with a camera that
-drifts (``drift.py``: each view's shift since the estimate). With a moving rig the maps are
-re-estimated every ``cfg.video_reestimate_s`` seconds on a worker thread (on the loop's with
-``video_estimate_workers`` 0: deterministic); implausible estimates are rejected; the maps move
-``cfg.video_warp_follow`` of the way to an accepted one (an exponential average over the estimates,
-causal), blended in over ``cfg.video_blend_frames`` frames at least, so the warp and the seam glide
-rather than jump. Jitter figures measure what remains.
+fixes the output canvas (``estimate.py``); every frame pair is then composited in YUV 4:2:0 by the
+loop in ``loop.py``, which calls :class:`SenaFrameCompositor` once per pair. A frame reads as the
+paper's per-frame path, one stage per line (:meth:`SenaFrameCompositor.composite_yuv`):
+
+1. the maps of the frame: the maps timeline (``timeline.py``: the first estimate, a static rig's
+   drift and its blends, a moving rig's alignment to every frame and its re-estimates, ``--rig
+   auto``'s switches between the two), a value per map set;
+2. their plan on the device, made once per map set (``device_frame.Plans``);
+3. the frame's gains (``exposure.py``: they follow the cameras' exposure);
+4. the pair on the device, and its seam band's difference back (``device_frame.DeviceFrame``);
+5. the frame's seam, cut anew in its band (``frame_seam.py``; on a moving rig keeping the two copies
+   of what its warp could not align on one side), and the seam blend's offsets: with the gains, the
+   frame's state (``composite.FrameState``);
+6. the compositing step, the plan and the state on the pair, and the output planes back;
+7. the run log (``RunLog``), which the report reads.
 
 An optional *observer* (``stitch_videos(observer=...)``) is called once per composited frame with a
 :class:`CompositedFrame`: what went in, what came out and what it was composited with. The pipeline
@@ -20,43 +27,46 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections import deque
+from collections import Counter
 from collections.abc import Iterator
-from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from ..composite import Compositor
+from ..composite import (LEVEL, CompositePlan, FrameState, applied_gains, border_offsets, clipped_seam, fixed_point,
+                         seam_weights)
 from ..config import CHOICES, Config, require_config
 from ..crop import largest_inner_rectangle
-from ..errors import InputError, StitchError, VideoError
+from ..errors import InputError, VideoError
 from ..outputs import OutputPlan
 from ..report import run_info
+from ..rig import Rig
 from ..stitch import StitchMaps
+from sena_warp.kernels import transfer
 from sena_warp.kernels.runtime import prewarm, resolve_config
 from .debug import dump_first_estimate
-from .drift import DriftWatch, overlap_boxes
-from .estimate import (Attempt, best_first_estimate, estimate_pair, paired_frames, rejection_reason, spaced_pairs,
-                       spaced_span)
+from .device_frame import DeviceFrame, FramePlan, Plans
+from .estimate import Attempt, best_first_estimate, paired_frames, spaced_pairs, spaced_span
 from .exposure import ExposureTracker
-from .frame_seam import FrameSeam, band_half_width, cell_px
+from .frame_seam import BandFrame, FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_still, run_video
-from .maps import (BLACK_UV, BLACK_Y, WHITE_Y, MapsBlend, PlaneMaps, canvas_scale, chroma_lines, drifted_maps,
-                   lerp_maps, map_change_px, output_shape, plane_maps, sampled_mask, scaled_plane_maps,
+from .maps import (PlaneMaps, chroma_lines, map_change_px, maps_on_canvas, output_shape, sampled_mask,
                    seam_change_px, seam_on_canvas_lines, seam_per_target_line, target_offset)
 from .reader import YuvFrame, probe_video
+from .align import Seam
+from .rig_motion import RigMotion
+from .timeline import Canvas, LastFrame, MapsTimeline, Reestimates, lookahead_frames, watch_frames
 from .writer import even_size
 
 RIGS = CHOICES["video_rig"]
 STILL_SUFFIXES = (".png", ".jpg", ".jpeg")  # an output of these types is the one stitched frame at the span's start
 JITTER_PERCENTILE = 99.0  # "largest map change" = this percentile of |delta M_s| per frame (robust to edge pixels)
 JITTER_STRIDE = 4  # ... over every this-th canvas row and column (a 1080p frame's full maps took 0.1 s)
+FRAME_PATH = ("planes", "band", "seam", "output")  # what a frame itself moves (``kernels/transfer.py``)
 PLANE_CHANNELS = (1, 2)  # the frame kernels' channel counts: the Y pass, and U and V stacked
-LUMA_FILL = (BLACK_Y,)  # output Y where no input is sampled
-CHROMA_FILL = (BLACK_UV, BLACK_UV)  # output U, V likewise
 
 
 @dataclass(frozen=True)
@@ -83,20 +93,24 @@ class PlanePass:
     fill: tuple[int, ...]
 
     @staticmethod
-    def of(compositor: Compositor, map_src: np.ndarray, map_tgt: np.ndarray, fill: tuple[int, ...]) -> "PlanePass":
-        """The pass ``compositor`` makes with its current seam, gains and offsets."""
-        channels = len(fill)
-        alpha, lf = compositor.seam_weights()
-        per_line_src, per_line_tgt = compositor.offsets(channels)
-        rows = compositor.layout.lines_are_rows
+    def of(plan: CompositePlan, state: FrameState, map_src: np.ndarray, map_tgt: np.ndarray, cfg: Config
+           ) -> "PlanePass":
+        """The pass ``plan`` composites with the frame's ``state`` (its seam, gains and offsets, as the
+        kernels apply them)."""
+        channels = plan.channels
+        alpha, lf = seam_weights(state.seam, plan.layout, plan.canvas_shape, cfg)
+        offsets = state.offsets if state.offsets is not None else (np.zeros((plan.lines, channels)),) * 2
+        rows = plan.layout.lines_are_rows
 
         def spread(per_line: np.ndarray) -> np.ndarray:
+            per_line = fixed_point(per_line).reshape(plan.lines, channels) / LEVEL
             lines = per_line[:, None, :] if rows else per_line[None, :, :]
             return (lf[:, :, None] * lines).astype(np.float32)
 
-        border_src, border_tgt = compositor.border_offsets(channels)
-        return PlanePass(map_src, map_tgt, alpha, compositor.gains(channels), compositor.knee(),
-                         spread(per_line_src) + border_src, spread(per_line_tgt) + border_tgt, fill)
+        border_src, border_tgt = border_offsets(plan)
+        gains = tuple(np.asarray(g, np.float64)[:channels] for g in state.gains)
+        return PlanePass(map_src, map_tgt, alpha, gains, plan.knee, spread(offsets[0]) + border_src,
+                         spread(offsets[1]) + border_tgt, plan.fill)
 
 
 @dataclass(frozen=True)
@@ -117,7 +131,7 @@ class CompositedFrame:
     float64, the Y pass's affine gains (``out = gain * Y + bias`` up to the knee), ``knee_luma`` their
     highlight knee (knee, white) grey levels (``gains.tone_curve``); ``offsets_luma``: ((L, 1), (L, 1))
     float64 the seam blend's per-line offsets of each side, grey levels at the seam. ``weights()``:
-    (alpha, lf) (Hc, Wc) float32 of the Y pass (``Compositor.seam_weights``: one kernel launch over
+    (alpha, lf) (Hc, Wc) float32 of the Y pass (``composite.seam_weights``: one kernel launch over
     the canvas, so call it only where needed).
     """
 
@@ -146,18 +160,48 @@ FrameObserver = Callable[[CompositedFrame], None]
 reported as the stitch's ``timing_s.observer``."""
 
 
+@dataclass
+class RunLog:
+    """What a run did, frame by frame, for its report: the maps' change (``seam_jitter_px``, the mean
+    change of the estimate's seam; ``map_change_px``, the source map's), the frame's seam motion, each
+    frame's transfers (``kernels/transfer.py``: (kind, what) -> count), and seconds per part."""
+
+    seconds: dict[str, float]
+    seam_jitter_px: list[float] = field(default_factory=list)
+    map_change_px: list[float] = field(default_factory=list)
+    seam_motion_px: list[float] = field(default_factory=list)
+    transfers: list[Counter] = field(default_factory=list)
+    frames: int = 0
+    time_s: float | None = None  # the time of the frame last updated to, until it is composited
+
+    @contextmanager
+    def clock(self, part: str) -> Iterator[None]:
+        t0 = time.perf_counter()
+        yield
+        self.seconds[part] = self.seconds.get(part, 0.0) + time.perf_counter() - t0
+
+    def transfer_figures(self) -> dict:
+        """Per frame, the frame path's uploads, downloads and waits (min and max over the frames, what
+        moved, ``FRAME_PATH``), and the run's total of each kind and what, new map sets' included."""
+        kinds = transfer.KINDS
+        per_frame = [{kind: sum(n for (k, what), n in counts.items() if k == kind and what in FRAME_PATH)
+                      for kind in kinds} for counts in self.transfers]
+        total = sum(self.transfers, Counter())
+        return {"frames": len(per_frame),
+                "per_frame_min": {kind: min((f[kind] for f in per_frame), default=0) for kind in kinds},
+                "per_frame_max": {kind: max((f[kind] for f in per_frame), default=0) for kind in kinds},
+                "total": {kind: {what: n for (k, what), n in sorted(total.items()) if k == kind} for kind in kinds}}
+
+
 class SenaFrameCompositor:
     """The loop's frame compositor for a SENA stitch (see ``loop.FrameCompositor``).
 
     Public surface: :meth:`from_pairs` and :meth:`from_videos` (estimate and build), ``output_size``
     (width, height), :meth:`update` and :meth:`composite_yuv` (what the loop calls), :meth:`source_target` and
     :meth:`passes` (what a frame is composited with, for the bench's reference implementation),
-    :meth:`report`; ``observer`` (a :data:`FrameObserver` or None) sees every composited frame. Inside: one :class:`~sena_warp.composite.Compositor` for the Y plane and one for
-    the U/V planes (stacked as two channels), both allocated once; every frame the seam is cut anew
-    in its band (``frame_seam``) and the gains follow the cameras' exposure (``exposure``). A static
-    rig's maps follow a drifting camera (``_drifted``). A moving rig's re-estimates run on a worker
-    thread while frames keep flowing on the current maps; an accepted one is blended in slowly enough
-    that the seam moves at most ``video_seam_speed_px`` per frame.
+    :meth:`report`; ``observer`` (a :data:`FrameObserver` or None) sees every composited frame.
+    Inside: the maps ``timeline``, the plans, the per-frame ``seam``, the exposure, the device frame
+    and the run log (module docstring).
     """
 
     def __init__(self, first: StitchMaps, first_attempts: list[Attempt], first_pair: int, fps: float,
@@ -168,81 +212,45 @@ class SenaFrameCompositor:
         (left, right); ``cfg.device`` resolved. With ``cfg.video_crop`` the fixed canvas is the largest
         rectangle the first estimate covers. ``observer``: called with every composited frame."""
         self._cfg = cfg
+        self._fps = fps
         self.observer = observer
-        self._frames = 0
-        self._time_s: float | None = None
-        self._rig = first.rig
-        self._reestimate_s = cfg.video_reestimate_s if cfg.video_rig == "moving" else None
-        # A static rig's views are checked for drift this often (``drift.py``); None: not checked.
-        self._drift_s = cfg.video_drift_check_s if cfg.video_rig == "static" and cfg.video_drift_check_s > 0 else None
-        x0, y0, width, height = fixed_canvas(first, self._rig.pick(*frame_shapes), cfg.video_crop)
+        rig = first.rig
+        x0, y0, width, height = fixed_canvas(first, rig.pick(*frame_shapes), cfg.video_crop)
         self.crop_xywh = (x0, y0, width, height) if cfg.video_crop else None
         # The output is the fixed canvas, or that canvas made at most video_max_width wide by the maps
         # themselves (``maps.scaled_plane_maps``): each output pixel samples the inputs once.
-        self._canvas_shape = (height, width)
-        shape = self._shape_out = output_shape(self._canvas_shape, cfg.video_max_width)
-        self._scale = canvas_scale(self._canvas_shape, shape)
-        self._band = band_half_width(shape, cfg)
-        self._offset_tgt = target_offset(first.map_tgt_input) - np.array([x0, y0], np.float64)
-        self._maps = self._on_canvas(first)
+        shape = output_shape((height, width), cfg.video_max_width)
         self.output_size = (shape[1], shape[0])
-        self._luma = Compositor(self._maps.map_src_luma, self._maps.map_tgt_luma, self._maps.seam_luma, cfg, WHITE_Y)
-        self._chroma = Compositor(self._maps.map_src_chroma, self._maps.map_tgt_chroma, self._maps.seam_chroma, cfg,
-                                  None)
-        self._border_set = None  # the border offsets last uploaded
-        self._set_border()
-        cell = max(1, round(cell_px(frame_shapes, cfg) * float(self._scale.min())))
-        self._seam = FrameSeam(self._maps.seam_luma.positions, self._band, cell, self._reestimate_s is None, fps, cfg)
-        self._fps = fps
-        self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
-        self._plane_shapes: tuple[tuple[int, int], tuple[int, int]] | None = None
-        self._first_inliers = self._maps.inliers
+        offset_tgt = target_offset(first.map_tgt_input) - np.array([x0, y0], np.float64)
+        self._canvas = Canvas((height, width), shape, offset_tgt, band_half_width(shape, cfg), rig)
+        maps = maps_on_canvas(first, self._canvas.stitched_shape, offset_tgt, self._canvas.band_px, shape)
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
-                            "inliers": self._first_inliers, "seconds": round(sum(first.seconds.values()), 4)}
-        self._blend: tuple[MapsBlend, int, int] | None = None  # (start to goal, frames done, frames)
-        self._workers = ThreadPoolExecutor(cfg.video_estimate_workers, thread_name_prefix="estimate") \
-            if self._reestimate_s is not None and cfg.video_estimate_workers > 0 else None
-        # With a worker, re-estimates start this many frames ahead (``look_ahead``) and land on their frame.
-        held_pairs = int(cfg.video_estimate_lookahead_mib / pair_mib(frame_shapes))
-        self.lookahead_frames = (min(int(math.ceil(cfg.video_estimate_lookahead_s * fps)), held_pairs)
-                                 if self._workers else 0)
-        # A static rig's drift: the camera views its maps were made on (taken on the first estimate's
-        # pair), those maps, the views' moves (source, target) they were last moved by, the time of the
-        # last check, and what the checks found.
-        self._drift: DriftWatch | None = None
-        self._drift_base = self._maps
-        self._drift_applied = (np.zeros(2), np.zeros(2))
-        self._drift_from_s = next(a.time_s for a in first_attempts if a.pair == first_pair)
-        self._drift_checked_s = 0.0
-        self._drift_log = {"check_s": self._drift_s, "threshold_px": cfg.video_drift_px, "checks": 0, "unclear": 0,
-                           "applied": []}
-        self._pending: deque[tuple[float, Future]] = deque()  # started re-estimates (frame time, job), oldest first
-        self._last_estimate_s: float | None = None
-        # "applied": per accepted estimate, the time of the frame it was made on and of the frame whose
-        # compositing it started to blend into (the same with a timely look-ahead).
-        self._reestimations = {"attempted": 0, "accepted": 0, "rejected": 0, "rejections": [], "applied": []}
-        self._seam_jitter_px: list[float] = []
-        self._map_change_px: list[float] = []
-        self._seam_motion_px: list[float] = []
-        self._seconds = {"reestimate": 0.0, "maps_upload": 0.0, "frame_seam": 0.0, "exposure": 0.0}
-        if observer is not None:
-            self._seconds["observer"] = 0.0
+                            "inliers": maps.inliers, "seconds": round(sum(first.seconds.values()), 4)}
+        first_s = next(a.time_s for a in first_attempts if a.pair == first_pair)
+        mode = "moving" if cfg.video_rig == "moving" else "static"  # --rig auto starts static and decides
+        self._timeline = MapsTimeline(maps, mode, first_s, self._canvas, self._reestimates(maps, fps, frame_shapes),
+                                      RigMotion(cfg) if cfg.video_rig == "auto" else None,
+                                      watch_frames(fps, pair_mib(frame_shapes), cfg), cfg)
+        self._plans = Plans(cfg)
+        cell = max(1, round(cell_px(frame_shapes, cfg) * float(self._canvas.scale.min())))
+        self._seam = FrameSeam(maps.seam_luma.positions, self._canvas.band_px, cell, mode == "static", fps, cfg)
+        self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
+        self._device: DeviceFrame | None = None  # likewise
+        self._last: tuple[FramePlan, FrameState, FrameState] | None = None  # the last frame's plan and states
+        self._log = RunLog({"reestimate": 0.0, "maps_upload": 0.0, "frame_seam": 0.0, "exposure": 0.0,
+                            **({"observer": 0.0} if observer is not None else {})})
 
-    def _set_border(self) -> None:
-        """The current maps' border blend on the Y pass (grey offsets: U and V have none to carry);
-        uploaded once per estimate, not on every frame of a blend (its steps share the goal's)."""
-        border = self._maps.border_luma
-        if border is not None and border is not self._border_set:
-            self._luma.set_border_offsets(*border)
-            self._border_set = border
+    def _reestimates(self, maps: PlaneMaps, fps: float, frame_shapes) -> Reestimates | None:
+        """The re-estimates of a rig that may move, started ahead of their frame by a worker's look-ahead."""
+        if self._cfg.video_rig == "static":
+            return None
+        return Reestimates(self._canvas, maps.inliers, lookahead_frames(fps, pair_mib(frame_shapes), self._cfg),
+                           self._cfg)
 
-    def _on_canvas(self, maps: StitchMaps) -> PlaneMaps:
-        """An estimate on the fixed canvas, scaled to the output, its plan band wide enough for the
-        per-frame seam."""
-        plane = scaled_plane_maps(plane_maps(maps, self._canvas_shape, self._offset_tgt), self._shape_out)
-        reach = self._band + plane.seam_luma.band_px
-        return replace(plane, seam_luma=replace(plane.seam_luma, band_px=reach),
-                       seam_chroma=replace(plane.seam_chroma, band_px=0.5 * reach))
+    @property
+    def lookahead_frames(self) -> int:
+        """How many pairs ahead the loop shows each pair to :meth:`look_ahead` (0: not at all)."""
+        return self._timeline.lookahead_frames
 
     @classmethod
     def from_pairs(cls, pairs: Iterator[tuple[YuvFrame, YuvFrame]], left: str | os.PathLike,
@@ -276,161 +284,80 @@ class SenaFrameCompositor:
 
     def source_target(self, item_left, item_right) -> tuple:
         """A (left, right) pair of per-input things (frames, planes, shapes) as (source, target)."""
-        return self._rig.pick(item_left, item_right)
+        return self._canvas.rig.pick(item_left, item_right)
+
+    @property
+    def maps(self) -> PlaneMaps:
+        """The maps the next frame is composited with (those of the frame last updated to)."""
+        return self._timeline.maps
+
+    @property
+    def frame_seam(self) -> FrameSeam:
+        """The per-frame seam (its last frame's seam, still lines and band)."""
+        return self._seam
+
+    @property
+    def rig(self) -> Rig:
+        """The rig: which input is the source, and whether it is vertical."""
+        return self._canvas.rig
+
+    @property
+    def last_frame(self) -> tuple[FramePlan, FrameState, FrameState] | None:
+        """(plan, Y state, U/V state) of the last composited frame, on the device frame ``device``."""
+        return self._last
+
+    @property
+    def device(self) -> DeviceFrame | None:
+        """The device frame the last frame was composited in (its pair still loaded)."""
+        return self._device
+
+    @property
+    def offset_tgt(self) -> np.ndarray:
+        """(x, y) the target's offset on the fixed canvas (input frame)."""
+        return self._canvas.offset_tgt
 
     def passes(self) -> tuple[PlanePass, PlanePass]:
         """(luma, chroma): the maps, seam, gains and offsets the last :meth:`composite_yuv` composited with."""
-        maps = self._maps
-        return (PlanePass.of(self._luma, maps.map_src_luma, maps.map_tgt_luma, LUMA_FILL),
-                PlanePass.of(self._chroma, maps.map_src_chroma, maps.map_tgt_chroma, CHROMA_FILL))
-
-    def look_ahead(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
-        """A pair ``lookahead_frames`` before it is composited: a re-estimate that is due starts on it,
-        so that it is ready when the loop reaches that frame (the maps of a frame still come from that
-        frame and earlier ones only)."""
-        if self.lookahead_frames and self._worker_idle() and self._due(float(frame_l.time_s)):
-            self._submit(frame_l, frame_r)
-
-    def _worker_idle(self) -> bool:
-        """No re-estimate is running (those done may still wait for their frame)."""
-        return all(job.done() for _, job in self._pending)
-
-    def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
-        """Before compositing a pair: start, collect or blend in a re-estimate, and record the maps' change.
-        A re-estimate made on a later frame (``look_ahead``) waits for the loop to reach that frame; one
-        that is reached while the last is still being blended in takes over from the maps of the moment
-        (else a rig that keeps moving falls further behind with every long blend)."""
-        self._time_s = float(frame_l.time_s)
-        before = self._maps
-        reached = bool(self._pending) and self._pending[0][1].done() and self._pending[0][0] <= self._time_s + 1e-6
-        if not (reached and self._collect(frame_l, frame_r)):  # an accepted one starts its blend on this frame
-            if self._blend is not None:
-                self._advance_blend()
-            elif (drifted := self._drifted(frame_l, frame_r)) is not None:
-                self._blend_to(*drifted)
-            elif not self.lookahead_frames and not self._pending and self._due(self._time_s):
-                self._submit(frame_l, frame_r)
-        changed = self._maps is not before
-        self._seam_jitter_px.append(seam_change_px(before, self._maps) if changed else 0.0)
-        self._map_change_px.append(
-            map_change_px(before, self._maps, self.source_target(frame_l, frame_r)[0].y.shape, JITTER_PERCENTILE,
-                          stride=JITTER_STRIDE) if changed else 0.0)
-
-    def _due(self, time_s: float) -> bool:
-        if self._reestimate_s is None:
-            return False
-        if self._last_estimate_s is None:  # the first estimate was made on the video's first pairs
-            self._last_estimate_s = time_s
-        return time_s - self._last_estimate_s >= self._reestimate_s
-
-    def _drifted(self, frame_l: YuvFrame, frame_r: YuvFrame) -> tuple[PlaneMaps, int] | None:
-        """A static rig's drift check, every ``video_drift_check_s`` from the first estimate's pair on:
-        the first estimate's maps moved by how far the views moved (``drifted_maps``) where that
-        differs from the last move by more than ``video_drift_px``, and the frames to blend them in
-        over (the source side moving at most ``video_drift_speed_px`` a frame); else None."""
-        if self._drift_s is None:
-            return None
-        time_s = self._time_s
-        y_src, y_tgt = (frame.y for frame in self.source_target(frame_l, frame_r))
-        if self._drift is None:
-            if time_s + 1e-6 >= self._drift_from_s:
-                boxes = overlap_boxes(self._drift_base, y_src.shape, y_tgt.shape)
-                self._drift, self._drift_checked_s = DriftWatch(y_src, y_tgt, boxes), time_s
-            return None
-        if time_s - self._drift_checked_s < self._drift_s - 1e-6:
-            return None
-        self._drift_checked_s = time_s
-        self._drift_log["checks"] += 1
-        shifts = self._drift.shifts(y_src, y_tgt)
-        if shifts is None:
-            self._drift_log["unclear"] += 1
-            return None
-        change = max(float(np.hypot(*(now - last))) for now, last in zip(shifts, self._drift_applied))
-        if change <= self._cfg.video_drift_px:
-            return None
-        self._drift_applied = shifts
-        self._drift_log["applied"].append({"time_s": round(time_s, 4), "source_px": np.round(shifts[0], 2).tolist(),
-                                           "target_px": np.round(shifts[1], 2).tolist()})
-        frames = int(np.ceil(change / self._cfg.video_drift_speed_px))
-        return drifted_maps(self._drift_base, *shifts, self._scale), frames
+        plan, luma, chroma = self._last
+        maps = plan.maps
+        return (PlanePass.of(plan.luma, luma, maps.map_src_luma, maps.map_tgt_luma, self._cfg),
+                PlanePass.of(plan.chroma, chroma, maps.map_src_chroma, maps.map_tgt_chroma, self._cfg))
 
     def _prior_seam_tgt(self) -> np.ndarray:
         """The current seam per working-frame target row, in target pixels: where a re-estimate's seam
         should stay (``stitch.estimate_maps``'s ``prior_seam_tgt``)."""
-        offset = self._offset_tgt[::-1] if self._rig.vertical else self._offset_tgt
-        lines = self._canvas_shape[1] if self._rig.vertical else self._canvas_shape[0]
-        seam = seam_on_canvas_lines(self._seam.positions, lines, self._scale, not self._rig.vertical)
-        return seam_per_target_line(seam, offset)
+        canvas = self._canvas
+        vertical = canvas.rig.vertical
+        lines = canvas.stitched_shape[1] if vertical else canvas.stitched_shape[0]
+        seam = seam_on_canvas_lines(self._seam.positions, lines, canvas.scale, not vertical)
+        return seam_per_target_line(seam, canvas.offset_tgt[::-1] if vertical else canvas.offset_tgt)
 
-    def _submit(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
-        self._last_estimate_s = float(frame_l.time_s)
-        self._reestimations["attempted"] += 1
-        # Same roles as the first estimate: the target stays the unwarped view on the fixed canvas.
-        if self._workers is not None:
-            job = self._workers.submit(self._estimate, frame_l, frame_r, self._prior_seam_tgt())
-        else:  # no worker: on the loop's thread, a frame waits for it (reproducible, for tests and batch runs)
-            job = Future()
-            job.set_result(self._estimate(frame_l, frame_r, self._prior_seam_tgt()))
-        self._pending.append((self._last_estimate_s, job))
+    def look_ahead(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
+        """A pair ``lookahead_frames`` before it is composited: a re-estimate that is due starts on it."""
+        self._timeline.look_ahead(frame_l, frame_r, self._prior_seam_tgt)
 
-    def _estimate(self, frame_l: YuvFrame, frame_r: YuvFrame, prior: np.ndarray) -> tuple[PlaneMaps | None, str | None]:
-        """On a worker thread: a re-estimate on the fixed canvas, or why it is rejected."""
-        t0 = time.perf_counter()
-        shape_src, shape_tgt = (f.y.shape for f in self.source_target(frame_l, frame_r))
-        try:
-            estimate = estimate_pair(frame_l, frame_r, self._cfg, self._rig.target, prior_seam_tgt=prior)
-            if estimate.rig.vertical != self._rig.vertical:
-                return None, "rig orientation changed"
-            candidate = self._on_canvas(estimate)
-            reason = rejection_reason(candidate, self._maps, self._first_inliers, shape_src, shape_tgt, self._cfg)
-            return (candidate, None) if reason is None else (None, reason)
-        except StitchError as exc:
-            return None, str(exc)
-        finally:
-            self._seconds["reestimate"] += time.perf_counter() - t0
+    def update(self, frame_l: YuvFrame, frame_r: YuvFrame) -> None:
+        """Before compositing a pair: the maps timeline advances to it (``timeline.py``), the seam glides
+        or may jump as its rig's plan says; the maps' change is logged."""
+        log = self._log
+        log.time_s = float(frame_l.time_s)
+        before = self._timeline.maps
+        y_src, y_tgt = (frame.y for frame in self.source_target(frame_l, frame_r))
+        after = self._timeline.advance(frame_l, frame_r, y_src, y_tgt, self._prior_seam_tgt, self._last_frame())
+        self._seam.set_jumps(self._timeline.mode == "static")
+        changed = after is not before
+        log.seam_jitter_px.append(seam_change_px(before, after) if changed else 0.0)
+        log.map_change_px.append(map_change_px(before, after, y_src.shape, JITTER_PERCENTILE, stride=JITTER_STRIDE)
+                                 if changed else 0.0)
 
-    def _collect(self, frame_l: YuvFrame, frame_r: YuvFrame) -> bool:
-        """The oldest re-estimate, whose frame is reached: blended in from this frame on (True) or rejected."""
-        time_s, job = self._pending.popleft()
-        candidate, reason = job.result()
-        if reason is not None:
-            self._reestimations["rejected"] += 1
-            self._reestimations["rejections"].append({"time_s": round(time_s, 4), "reason": reason})
-            return False
-        self._reestimations["accepted"] += 1
-        self._reestimations["applied"].append({"made_on_s": round(time_s, 4), "at_s": round(float(frame_l.time_s), 4)})
-        # The target maps are the fixed canvas's own, the same values in every estimate: shared, a blend
-        # keeps them as they are instead of mixing equal arrays.
-        candidate = replace(candidate, map_tgt_luma=self._maps.map_tgt_luma, map_tgt_chroma=self._maps.map_tgt_chroma)
-        # The rig's own geometry changes slowly; what differs from one estimate to the next is mostly
-        # estimation noise, which an exponential average over the accepted estimates takes out.
-        goal = lerp_maps(self._maps, candidate, self._cfg.video_warp_follow)
-        # Over video_blend_frames at least, and slowly enough that the seam moves at most
-        # video_seam_speed_px a frame.
-        seam_move = float(np.nanmax(np.abs(goal.seam_luma.positions - self._maps.seam_luma.positions)))
-        self._blend_to(goal, max(self._cfg.video_blend_frames, int(np.ceil(seam_move / self._cfg.video_seam_speed_px))))
-        return True
-
-    def _blend_to(self, goal: PlaneMaps, frames: int) -> None:
-        """Start blending from the maps of the moment to ``goal`` over ``frames`` frames (at least one)."""
-        self._blend = None  # the blend under way, if any, let go before the next one holds its differences
-        self._blend = (MapsBlend(self._maps, goal), 0, max(1, frames))
-        self._advance_blend()
-
-    def _advance_blend(self) -> None:
-        blend, done, frames = self._blend
-        done += 1
-        self._maps = blend.at(done / frames)
-        self._blend = None if done >= frames else (blend, done, frames)
-        t0 = time.perf_counter()
-        # The target maps never change on the fixed canvas; only the source map and the seam move.
-        self._luma.set_maps(self._maps.map_src_luma, self._maps.seam_luma.positions)
-        self._chroma.set_maps(self._maps.map_src_chroma, self._maps.seam_chroma.positions)
-        self._set_border()
-        self._seam.reset(self._maps.seam_luma.positions)
-        if self._exposure is not None:
-            self._exposure.set_maps(self._maps, *self._plane_shapes)
-        self._seconds["maps_upload"] += time.perf_counter() - t0
+    def _last_frame(self) -> LastFrame:
+        """The gains and seam of the frame composited last, for a moving rig's alignment."""
+        if self._exposure is None:
+            return LastFrame((1.0, 0.0, 1.0, 0.0), None)
+        (gain_src, bias_src), (gain_tgt, bias_tgt) = self._exposure.luma
+        shown = self._seam.shown
+        return LastFrame((float(gain_src[0]), float(bias_src[0]), float(gain_tgt[0]), float(bias_tgt[0])),
+                         None if shown is None else Seam(shown, self._timeline.maps.seam_luma.lines_are_rows))
 
     def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Output (y, u, v) planes of ``output_size``; uncovered pixels are black (Y 16, U = V = 128).
@@ -438,84 +365,118 @@ class SenaFrameCompositor:
         The exposure follows the frame's overlap, the seam is cut anew in its band on the frame's luma
         difference, and the seam blend's offsets come from the same difference.
         """
-        y_src, y_tgt = self.source_target(y_l, y_r)
-        u_src, u_tgt = self.source_target(u_l, u_r)
-        v_src, v_tgt = self.source_target(v_l, v_r)
-        t0 = time.perf_counter()
-        if self._exposure is None:
-            self._plane_shapes = (y_src.shape, y_tgt.shape)
-            self._exposure = ExposureTracker(self._maps, y_src.shape, y_tgt.shape, self._fps, self._cfg)
-        self._exposure.update(y_src, y_tgt, u_src, u_tgt, v_src, v_tgt)
-        (gain_src, bias_src), (gain_tgt, bias_tgt) = self._exposure.luma
-        self._luma.set_gains(1, gain_src, bias_src, gain_tgt, bias_tgt)
-        (cgain_src, cbias_src), (cgain_tgt, cbias_tgt) = self._exposure.chroma
-        self._chroma.set_gains(2, cgain_src, cbias_src, cgain_tgt, cbias_tgt)
-        t1 = time.perf_counter()
-        self._luma.load(y_src, y_tgt)
-        last = self._seam.positions if self._seam.shown is None else self._seam.shown  # a new array either way
-        positions, offsets_src, offsets_tgt = self._seam.next(self._luma)
-        self._seam_motion_px.append(float(np.abs(positions - last).max()))
-        self._luma.set_seam(positions.astype(np.float32))
-        self._chroma.set_seam(chroma_lines(positions.astype(np.float32)))
-        self._luma.set_offsets(offsets_src, offsets_tgt)
-        t2 = time.perf_counter()
-        self._seconds["exposure"] += t1 - t0
-        self._seconds["frame_seam"] += t2 - t1
-        y = self._luma.composite(LUMA_FILL).copy()
-        self._chroma.load_planes((u_src, v_src), (u_tgt, v_tgt))
-        uv = self._chroma.composite(CHROMA_FILL)
-        out = (y, uv[:, :, 0].copy(), uv[:, :, 1].copy())
+        log = self._log
+        counted = transfer.tally()
+        planes_src, planes_tgt = self.source_target((y_l, u_l, v_l), (y_r, u_r, v_r))
+        shapes = (planes_src[0].shape, planes_tgt[0].shape)
+        maps = self._timeline.maps
+        with log.clock("maps_upload"):
+            plan = self._plans.plan(maps, shapes)
+            self._seam.reset(maps.seam_luma.positions)
+        with log.clock("exposure"):
+            luma_gains, chroma_gains = self._gains(maps, planes_src, planes_tgt)
+        device = self._device_for(shapes)
+        device.load(planes_src, planes_tgt)
+        gains = device.gains(plan, luma_gains, chroma_gains)
+        with log.clock("frame_seam"):
+            band = device.band(plan, self._seam.place, gains[0])
+            luma, chroma = self._frame_states(band, plan, luma_gains, chroma_gains)
+        out = device.composite(plan, luma, chroma, gains)
+        self._last = (plan, luma, chroma)
         if self.observer is not None:
-            t3 = time.perf_counter()
-            self.observer(self._composited((y_src, u_src, v_src), (y_tgt, u_tgt, v_tgt), out))
-            self._seconds["observer"] += time.perf_counter() - t3
-        self._frames += 1
-        self._time_s = None
+            with log.clock("observer"):
+                self.observer(self._composited(planes_src, planes_tgt, out, gains[0]))
+        log.transfers.append(transfer.tally() - counted)
+        log.frames += 1
+        log.time_s = None
         return out
 
-    def _composited(self, planes_src: tuple, planes_tgt: tuple, planes_out: tuple) -> CompositedFrame:
-        """The frame just composited, for the observer (copies of the small per-line state only)."""
+    def _frame_states(self, band: BandFrame, plan: FramePlan, luma_gains: tuple, chroma_gains: tuple
+                      ) -> tuple[FrameState, FrameState]:
+        """Each pass's state of the frame whose seam band is ``band``: its seam (``frame_seam``), kept in
+        the band, with the seam blend's offsets on the Y pass, and its gains."""
+        last = self._seam.positions if self._seam.shown is None else self._seam.shown  # a new array either way
+        copies = self._timeline.copies(plan.maps.seam_luma.lines_are_rows)
+        positions, offsets_src, offsets_tgt = self._seam.next(band, copies)
+        self._log.seam_motion_px.append(float(np.abs(positions - last).max()))
+        positions = positions.astype(np.float32)
+        return (FrameState(clipped_seam(positions, plan.luma.layout), luma_gains, (offsets_src, offsets_tgt)),
+                FrameState(clipped_seam(chroma_lines(positions), plan.chroma.layout), chroma_gains))
+
+    def _gains(self, maps: PlaneMaps, planes_src: tuple, planes_tgt: tuple) -> tuple[tuple, tuple]:
+        """The frame's (luma, chroma) gains, (gain_src, bias_src, gain_tgt, bias_tgt) each (``exposure.py``)."""
+        if self._exposure is None:
+            self._exposure = ExposureTracker(maps, planes_src[0].shape, planes_tgt[0].shape, self._fps, self._cfg)
+        (y_src, u_src, v_src), (y_tgt, u_tgt, v_tgt) = planes_src, planes_tgt
+        self._exposure.update(maps, y_src, y_tgt, u_src, u_tgt, v_src, v_tgt)
+        (gain_src, bias_src), (gain_tgt, bias_tgt) = self._exposure.luma
+        (cgain_src, cbias_src), (cgain_tgt, cbias_tgt) = self._exposure.chroma
+        return (gain_src, bias_src, gain_tgt, bias_tgt), (cgain_src, cbias_src, cgain_tgt, cbias_tgt)
+
+    def _device_for(self, shapes: tuple[tuple[int, int], tuple[int, int]]) -> DeviceFrame:
+        """The device frame of planes of these Y shapes (made on the first frame)."""
+        if self._device is None or self._device.shapes != shapes:
+            self._device = DeviceFrame(shapes, self._canvas.shape, self._seam.grid, self._cfg)
+        return self._device
+
+    def _composited(self, planes_src: tuple, planes_tgt: tuple, planes_out: tuple, gains_luma) -> CompositedFrame:
+        """The frame just composited, for the observer."""
+        plan, luma, _ = self._last
+        maps = plan.maps
+        offsets = tuple(fixed_point(v).reshape(-1, 1) / LEVEL for v in luma.offsets)
         return CompositedFrame(
-            index=self._frames, time_s=self._time_s, source="left" if self._rig.source == "a" else "right",
-            planes_src=planes_src, planes_tgt=planes_tgt,
-            planes_out=planes_out, maps=self._maps, seam_home=self._maps.seam_luma.positions,
-            seam_reach_px=float(self._maps.seam_luma.band_px), seam=self._luma.seam_positions(), lines_are_rows=self._maps.seam_luma.lines_are_rows,
-            gains_luma=self._luma.gains(1), knee_luma=self._luma.knee(), offsets_luma=self._luma.offsets(1), weights=self._luma.seam_weights)
+            index=self._log.frames, time_s=self._log.time_s,
+            source="left" if self._canvas.rig.source == "a" else "right",
+            planes_src=planes_src, planes_tgt=planes_tgt, planes_out=planes_out, maps=maps,
+            seam_home=maps.seam_luma.positions, seam_reach_px=float(maps.seam_luma.band_px), seam=luma.seam.copy(),
+            lines_are_rows=maps.seam_luma.lines_are_rows, gains_luma=applied_gains(gains_luma, 1),
+            knee_luma=plan.luma.knee, offsets_luma=offsets,
+            weights=lambda: seam_weights(luma.seam, plan.luma.layout, plan.luma.canvas_shape, self._cfg))
 
     def close(self) -> None:
         """Stop the re-estimation worker (a pending estimate is dropped)."""
-        if self._workers is not None:
-            self._workers.shutdown(wait=True, cancel_futures=True)
+        self._timeline.close()
 
     def report(self) -> dict:
         """Estimation, re-estimation, seam and exposure figures of the run, JSON-ready."""
-        seam = np.asarray(self._seam_jitter_px or [0.0])
-        motion = np.asarray(self._seam_motion_px or [0.0])
+        log, cfg, canvas = self._log, self._cfg, self._canvas
+        seam = np.asarray(log.seam_jitter_px or [0.0])
+        motion = np.asarray(log.seam_motion_px or [0.0])
         history = self._exposure.history if self._exposure is not None else []
+        reestimates = self._timeline.reestimates
+        drift = self._timeline.drift
+        seconds = {**log.seconds, "reestimate": reestimates.seconds if reestimates is not None else 0.0,
+                   **({"align": self._timeline.align_seconds} if reestimates is not None else {})}
         return {
-            "rig": {"mode": self._cfg.video_rig, "source": "left" if self._rig.source == "a" else "right",
-                    "vertical": self._rig.vertical, "reestimate_s": self._reestimate_s},
+            "rig": {"mode": cfg.video_rig, "source": "left" if canvas.rig.source == "a" else "right",
+                    "vertical": canvas.rig.vertical,
+                    "reestimate_s": cfg.video_reestimate_s if reestimates is not None else None,
+                    "decisions": self._timeline.decisions, "alignment": self._timeline.alignment_log()},
             "first_estimate": self._first_info,
             "canvas": {"width": self.output_size[0], "height": self.output_size[1],
-                       "stitched_width": self._canvas_shape[1], "stitched_height": self._canvas_shape[0],
+                       "stitched_width": canvas.stitched_shape[1], "stitched_height": canvas.stitched_shape[0],
                        "crop_xywh": None if self.crop_xywh is None else list(self.crop_xywh),
-                       "offset_tgt": [float(v) for v in self._offset_tgt],
+                       "offset_tgt": [float(v) for v in canvas.offset_tgt],
                        "seam_x_working": [None if np.isnan(x) else round(float(x), 2)
-                                          for x in self._maps.seam_x_working]},
-            "reestimations": self._reestimations,
-            "drift": self._drift_log,
+                                          for x in self._timeline.maps.seam_x_working]},
+            "reestimations": (reestimates.log if reestimates is not None else
+                              {"attempted": 0, "accepted": 0, "rejected": 0, "rejections": [], "applied": []}),
+            "drift": (drift.log if drift is not None else
+                      {"check_s": None, "threshold_px": cfg.video_drift_px, "checks": 0, "unclear": 0,
+                       "applied": []}),
             "jitter": {
                 "seam_jitter_px_mean": round(float(seam.mean()), 4),
                 "seam_jitter_px_max": round(float(seam.max()), 4),
-                "map_change_p99_px_max": round(max(self._map_change_px, default=0.0), 4),
-                "frames": len(self._seam_jitter_px),
+                "map_change_p99_px_max": round(max(log.map_change_px, default=0.0), 4),
+                "frames": len(log.seam_jitter_px),
             },
-            "frame_seam": {"band_px": self._band, "cell_px": self._seam.cell, "line_step": self._seam.step,
+            "frame_seam": {"band_px": canvas.band_px, "cell_px": self._seam.cell, "line_step": self._seam.step,
                            "motion_px_mean": round(float(motion.mean()), 4),
                            "motion_px_p99": round(float(np.percentile(motion, 99)), 4),
                            "motion_px_max": round(float(motion.max()), 4)},
             "exposure": {"frames": history},
-            "timing_s": {name: round(seconds, 4) for name, seconds in self._seconds.items()},
+            "transfers": log.transfer_figures(),
+            "timing_s": {name: round(seconds, 4) for name, seconds in seconds.items()},
         }
 
 
@@ -563,7 +524,8 @@ def stitch_videos(left: str | os.PathLike, right: str | os.PathLike, output: str
 
     An ``output`` of a ``STILL_SUFFIXES`` type gets the stitched frame at the span's start and nothing
     more (:func:`loop.run_still`), a video file every frame of the span (:func:`loop.run_video`).
-    ``cfg.video_rig`` "static" estimates once; "moving" re-estimates every ``cfg.video_reestimate_s``.
+    ``cfg.video_rig`` "static" estimates once; "moving" aligns the maps to every frame and re-estimates
+    when the alignment falls behind; "auto" decides from the first second and watches (``timeline.py``).
     ``options``: offset, encoder and limits (None: ``VideoOptions.from_config(cfg)``).
     ``reference``: input kept unwarped ("a" = left, "b" = right, "auto" = the right/bottom view).
     An existing ``output`` is refused (OutputError, before any work) unless ``overwrite`` is True, as

@@ -1,4 +1,4 @@
-"""A video's estimates at a working resolution: the frames made small, the maps scaled up (issue 17).
+"""A video's estimates at a working resolution: the frames made small, the maps scaled up.
 
 An estimate's dear stages work per canvas pixel (the warp map, the views, the gains, the seam). Above
 ``video_estimate_max_side`` the frames are made that small for it (XFeat sees them at ``xfeat_max_side``
@@ -9,7 +9,7 @@ unwarped: its map on the full canvas is exact, at a whole-pixel offset.
 
 The default side, 1920 px, leaves frames up to 1080p as they were: the estimate's settings are in
 pixels, and a smaller working side lands on another model and seam, better on some recordings and
-worse on others (``docs/benchmarks.md``, 2026-12-02 sixth session); a 4K video is estimated as a
+worse on others (``docs/evaluation.md``, "Working resolution of a video's estimate"); a 4K video is estimated as a
 1080p one is.
 
 Conventions: pixel centres at whole coordinates at both resolutions, so a position p of a frame made
@@ -26,17 +26,14 @@ from dataclasses import replace
 
 import cv2
 import numpy as np
-import warp as wp
 
-from ..composite import SeamLayout
+from ..composite import SeamLayout, seam_weights
 from ..config import Config
 from ..features import Matches
 from ..partition import BorderOffsets, SeamMaps, SeamOffsets
 from ..rig import map_from_working
 from ..stitch import StitchMaps
 from .maps import at_positions, target_map
-from sena_warp.kernels import runtime
-from sena_warp.kernels.composite import seam_weights_kernel
 
 
 def working_scale(shapes: tuple[tuple[int, ...], ...], max_side: int) -> float:
@@ -96,12 +93,7 @@ def prior_to_small(prior_seam_tgt: np.ndarray | None, scale: float) -> np.ndarra
 def seam_alpha(seam_x: np.ndarray, shape: tuple[int, int], layout: SeamLayout, cfg: Config) -> np.ndarray:
     """(H, W) float32 source weight of a seam at ``seam_x`` (H,) per row, across ``layout``'s transition
     (``kernels/composite.py``'s ``seam_weights_kernel``: the rule ``partition.seam_maps`` gives its alpha)."""
-    alpha = wp.empty(shape, dtype=float, device=cfg.device)
-    lf = wp.empty(shape, dtype=float, device=cfg.device)
-    inputs = [wp.array(np.ascontiguousarray(seam_x, np.float32), dtype=float, device=cfg.device), 1,
-              float(layout.transition_px), float(layout.smooth_sigma_px), 0.0, alpha, lf]
-    runtime.launch_rows(seam_weights_kernel, *shape, inputs, cfg.device, cfg.cpu_threads)
-    return alpha.numpy()
+    return seam_weights(seam_x, replace(layout, lines_are_rows=True, lf_px=0.0), shape, cfg)[0]
 
 
 def scaled_up(maps: StitchMaps, scale_src: np.ndarray, scale_tgt: np.ndarray, shape_tgt: tuple[int, int],

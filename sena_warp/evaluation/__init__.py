@@ -1,6 +1,6 @@
 """Evaluation and benchmark tooling: it imports the pipeline, the pipeline never imports it.
 
-- ``metrics``: the measures of SENA.md "Measuring" on arrays (overlap PSNR / SSIM, anchor
+- ``metrics``: the quality measures of ``docs/evaluation.md`` on arrays (overlap PSNR / SSIM, anchor
   residuals, transition-band difference, shape of a forward warp);
 - ``figures``: those measures on a finished stitch, one definition each (``sena-warp eval``,
   ``image --report`` and the benchmarks all use them);

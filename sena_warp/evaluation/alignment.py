@@ -1,4 +1,4 @@
-"""Warp alignment of SENA steps 1-6 on one pair (issue 3): SENA's map against the global affine and a
+"""Warp alignment of SENA steps 1-6 on one pair: SENA's map against the global affine and a
 SIFT + RANSAC homography, in the target frame, with the shape cost of the local warp.
 
 Used by ``benchmarks/eval_warp.py`` (tables, sweeps, timing) and by ``tests/test_warp_quality.py``, so
@@ -27,7 +27,7 @@ from .baselines import HOMOGRAPHY_RANSAC_PX, affine_map_canvas, homography_to_ta
 from .figures import in_target_frame, map_in_target_frame
 from .metrics import overlap_psnr_ssim
 
-# The sweep's best setting that does not fold the source (docs/evaluation.md, "Warp alignment"):
+# The sweep's best setting that does not fold the source (docs/evaluation.md, "Warp alignment, steps 1-6"):
 # meets the wins and gain targets, not the homography one; kept out of the defaults (see there).
 TUNED_SETTING = "ransac_reproj_px=25,grid_x=6,grid_y=6,lambda1=0.005,gamma_min=0.9"
 

@@ -23,7 +23,7 @@ from sena_warp.warp_map import source_map_canvas
 
 from .metrics import Forward
 
-HOMOGRAPHY_RANSAC_PX = 3.0  # the SIFT + RANSAC baseline's inlier threshold (SENA.md "Measuring")
+HOMOGRAPHY_RANSAC_PX = 3.0  # the SIFT + RANSAC baseline's inlier threshold (docs/evaluation.md)
 MIN_HOMOGRAPHY_INLIERS = 8  # fewer RANSAC inliers than this: no usable homography
 FULL_WEIGHT_TOL = 1e-4  # a warped image of ones below 1 - this had a bilinear tap outside the source
 OPENCV_MODES = {"opencv_panorama": cv2.Stitcher_PANORAMA, "opencv_scans": cv2.Stitcher_SCANS}

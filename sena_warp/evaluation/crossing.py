@@ -1,4 +1,4 @@
-"""The crossing clip (issue 14): a textured object moving across the overlap of a real image pair.
+"""The crossing clip: a textured object moving across the overlap of a real image pair.
 
 A static two-camera clip made from one image pair (background, the same every frame) with a square
 object, a patch cut from another image, pasted into both views: it moves at a constant speed along
@@ -91,12 +91,12 @@ def paste(frame: np.ndarray, patch: np.ndarray, centre: np.ndarray) -> np.ndarra
     return np.clip(np.rint(mixed), 0, 255).astype(np.uint8)
 
 
-def write_clip(path: Path, frames_bgr: Iterable[np.ndarray], fps: int = FPS) -> None:
-    """A near-lossless H.264 clip (:data:`CLIP_CRF`) of BGR frames (H, W, 3) uint8 with even sides."""
+def write_clip(path: Path, frames_bgr: Iterable[np.ndarray], fps: int = FPS, crf: int = CLIP_CRF) -> None:
+    """An H.264 clip of BGR frames (H, W, 3) uint8 with even sides, at ``crf`` (near-lossless by default)."""
     frames_bgr = iter(frames_bgr)
     first = next(frames_bgr)
     height, width = first.shape[:2]
-    with VideoWriter(path, width, height, Fraction(fps), "libx264", CLIP_CRF, "veryfast") as writer:
+    with VideoWriter(path, width, height, Fraction(fps), "libx264", crf, "veryfast") as writer:
         for index, frame in enumerate(itertools.chain([first], frames_bgr)):
             i420 = cv2.cvtColor(frame, cv2.COLOR_BGR2YUV_I420)
             chroma = i420[height:].reshape(2, height // 2, width // 2)

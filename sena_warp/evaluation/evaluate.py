@@ -3,8 +3,8 @@
 For every pair folder of DATA_DIR (one holding ``a.*`` and ``b.*``) it runs
 
 - ``sena``: the whole SENA stitch (``stitch_images``);
-- ``sena_ba``: the same with the inputs swapped (``b a``: the same panorama, issue 13's order invariance);
-- ``sena_paper``: SENA as the paper and ``SENA.md`` write it (``PAPER_SETTINGS``), the ablation of
+- ``sena_ba``: the same with the inputs swapped (``b a``: it must give the same panorama);
+- ``sena_paper``: SENA as the paper has it (``PAPER_SETTINGS``), the ablation of
   every departure at once;
 - ``affine``: SENA's own global affine ``A_glob`` alone (no local warp, no seam);
 - ``homography``: a global homography from SIFT matches and RANSAC (3 px);
@@ -62,7 +62,7 @@ from .sheets import thumbnail, tile
 
 SENA_RUNS = ("sena", "sena_ba", "sena_paper")
 METHODS = (*SENA_RUNS, "affine", "homography", *OPENCV_MODES)
-# SENA as the paper has it: every departure of issue 13 undone (docs/evaluation.md, "Ablations").
+# SENA as the paper has it: every departure undone (docs/method.md; what each buys: docs/evaluation.md).
 PAPER_SETTINGS = dict(ffd_model="blend", gate_model="paper", seam_model="paper", gain_model="none",
                       seam_blend_ratio=0.0, border_blend=False, transition_px=24, global_model_choice="inliers",
                       switch_align=False, thin_strip_ratio=0.0)
@@ -93,12 +93,12 @@ class MethodResult:
     lines: int = 0
     width: int = 0  # panorama size (methods that make one)
     height: int = 0
-    anchors: int = 0  # SENA's seam figures (SENA.md "Measuring: Seam")
+    anchors: int = 0  # SENA's seam figures (anchor residuals, seam and feather MAD)
     anchor_residual_px: float = math.nan  # median over the anchors
     anchor_residual_max_px: float = math.nan
     seam_mad: float = math.nan
     feather_mad: float = math.nan
-    copies: int = 0  # issue 13's figures (naturalness), SENA's runs
+    copies: int = 0  # the natural-appearance figures (naturalness), SENA's runs
     dup_lost_pct: float = math.nan
     dup_lost_over_4px: int = 0
     dup_lost_worst_px: float = math.nan
@@ -388,8 +388,8 @@ def summary_markdown(rows: list[MethodResult], data_dir: Path, cfg: Config, seco
 
 
 def natural_markdown(pairs: list[str], table: dict) -> list[str]:
-    """The summary's issue-13 section: the targets per SENA run over all pairs, then each pair."""
-    lines = ["", "## Natural appearance (issue 13)", "",
+    """The summary's natural-appearance section: the targets per SENA run over all pairs, then each pair."""
+    lines = ["", "## Natural appearance", "",
              "Duplicated / lost: reliable matches in the overlap whose two copies are > 2 px apart and both "
              "visible or neither (`naturalness`); seam step and border step (across the target's border beyond "
              "the seam's ends) in grey levels; bend: largest of the long lines each "

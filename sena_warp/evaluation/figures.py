@@ -1,4 +1,4 @@
-"""The figures of a finished SENA stitch (SENA.md "Measuring"), one definition each.
+"""The figures of a finished SENA stitch (``docs/evaluation.md``), one definition each.
 
 ``sena-warp eval`` records them per pair, the benchmarks print them, and the CLI's ``image --report``
 adds them to the report: all three call the functions here. Seam figures are measured in the working
@@ -15,9 +15,10 @@ import cv2
 import numpy as np
 
 from sena_warp.config import Config
+from sena_warp.composite import FrameState, composite_image, composite_plan
 from sena_warp.gains import compensated, compensated_views
 from sena_warp.rig import image_to_working, matches_to_working
-from sena_warp.stitch import Panorama, Warp, panorama_compositor
+from sena_warp.stitch import Panorama, Warp
 from sena_warp.switch_align import shown_labels, switch_pixels
 from sena_warp.warp_map import CanvasViews, canvas_views, forward_points, remap_image
 from sena_warp.zone import overlap_x_extent
@@ -138,7 +139,7 @@ def panorama_views(img_src: np.ndarray, img_tgt: np.ndarray, pano: Panorama, cfg
 
 
 def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
-    """Issue 13's figures of a finished stitch (``naturalness``), in the working frame on the canvas.
+    """The natural-appearance figures of a finished stitch (``naturalness``), in the working frame on the canvas.
 
     ``copies``: reliable matches whose target copy is in the overlap; ``dup_lost_pct``: of them, %
     duplicated or lost (copies > 2 px apart); ``dup_lost_over_4px`` how many by more than 4 px,
@@ -233,18 +234,14 @@ def rendered(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config, 
     each view as it is (``with_gains`` False) or times its gains alone (the plain panorama). The same
     compositor and sampling as the panorama's, so that comparing them sees tones, not resampling."""
     maps = pano.maps
-    compositor = panorama_compositor(maps, cfg)
+    img_src, img_tgt = maps.rig.pick(img_a, img_b)
+    plan = composite_plan(maps.map_src_input, maps.map_tgt_input, maps.seam_input, (img_src.shape, img_tgt.shape), cfg)
     gains = maps.seam.gains
     channels = len(gains.gain_src)
-    if not with_gains:
-        ones, zeros = np.ones(channels), np.zeros(channels)
-        compositor.set_gains(channels, ones, zeros, ones, zeros)
-    lines = np.zeros((compositor.lines, channels), np.float32)
-    compositor.set_offsets(lines, lines)
-    if maps.seam.border.on:
-        along = np.zeros_like(maps.seam.border.src)
-        compositor.set_border_offsets(maps.seam.border.lines, along, along)
-    return image_to_working(compositor.apply(*maps.rig.pick(img_a, img_b)), maps.rig)
+    ones, zeros = np.ones(channels), np.zeros(channels)
+    values = (gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt) if with_gains else (ones, zeros, ones, zeros)
+    image = composite_image(img_src, img_tgt, plan, FrameState(maps.seam_input.positions, values), cfg)
+    return image_to_working(image, maps.rig)
 
 
 def report_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:

@@ -1,4 +1,4 @@
-"""Quality measures of SENA.md "Measuring": overlap alignment (UDIS-D protocol), seam, shape.
+"""Quality measures on arrays (``docs/evaluation.md``): overlap alignment (UDIS-D protocol), seam, shape.
 
 Alignment: images already on one frame (the warped source and the placed target, each with a
 validity mask of the same (H, W) shape). Seam: the canvas maps and anchors of steps 6-9 (working
@@ -109,7 +109,7 @@ def anchor_residuals_px(
 
     The source anchor's scene point is ``p = before(anchor_src)`` (a source-image position); where it
     lands is the canvas point u with ``after(u) = p``, found by Newton steps from the target anchor
-    with a central-difference Jacobian of ``after`` (SENA.md step 6: invert maps numerically).
+    with a central-difference Jacobian of ``after`` (docs/method.md step 6: invert maps numerically).
     NaN where the maps are not defined, the Newton steps leave the canvas (anchors on its border),
     or the Jacobian is singular.
     """

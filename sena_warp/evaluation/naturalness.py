@@ -1,4 +1,4 @@
-"""Figures of a natural panorama (issue 13): what a viewer sees twice, not at all, stepped or bent.
+"""Figures of a natural panorama: what a viewer sees twice, not at all, stepped or bent.
 
 All functions work in the pipeline's working frame on the canvas (source left of a seam that runs
 top to bottom, ``seam_x[y]`` per row) on plain arrays, so that SENA's variants are measured alike.
@@ -46,7 +46,7 @@ from sena_warp.switch_align import view_weights  # noqa: F401 - the figures' wei
 
 VISIBLE_WEIGHT = 0.25  # a copy shown at a quarter or more is seen (a ghost in a blend counts)
 COINCIDE_PX = 2.0  # copies closer than this are one point
-STRICT_PX = 4.0  # the issue's second threshold: no point duplicated or lost by more than this
+STRICT_PX = 4.0  # the strict threshold: no point duplicated or lost by more than this
 EPIPOLAR_PX = 1.0  # fundamental-matrix RANSAC threshold of the reliable matches
 EPIPOLAR_SEED = 1  # USAC's random state: the same matches every run
 MAX_DISPARITY_PX = 60.0  # reliable matches lie within this of the global affine (wrong ones can sit on an epipolar line)

@@ -1,4 +1,4 @@
-"""Accuracy of ``--offset auto`` (issue 14): clips cut from recorded pairs at known shifts.
+"""Accuracy of ``--offset auto``: clips cut from recorded pairs at known shifts.
 
 ``cut_pair`` cuts a window of one recording and the same window of another (or the same) one
 started ``shift_s`` later (earlier when negative). The video is re-encoded (H.264), the audio
@@ -24,7 +24,7 @@ from sena_warp.video.reader import probe_video
 from sena_warp.video.sync import METHODS, SyncEstimate, measure_offset
 
 REPO = Path(__file__).resolve().parents[2]
-SHIFTS_S = (0.5, 1.37, -2.0)  # the shifts of issue 14's cut clips
+SHIFTS_S = (0.5, 1.37, -2.0)  # the shifts of the cut clips
 # (name, left, right) under shared/data/videos
 RECORDINGS = (
     ("rooftop_handheld", "left.mp4", "right.mp4"),

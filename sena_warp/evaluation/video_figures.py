@@ -1,4 +1,4 @@
-"""Figures of a stitched video over time (issue 14), measured by an observer of the frame loop.
+"""Figures of a stitched video over time, measured by an observer of the frame loop.
 
 :class:`VideoFigures` is a :data:`~sena_warp.video.stitch.FrameObserver`: ``stitch_videos(...,
 observer=VideoFigures(cfg))`` calls it with every composited frame, and :meth:`VideoFigures.figures`
@@ -29,9 +29,16 @@ rig), in a band of :data:`BAND_MARGIN_PX` beyond the per-frame seam's reach arou
   ``sum_d w_d mean((P_{t-d} - P_t)^2 + (P_{t+d} - P_t)^2)`` over d = 1, 2, 3 with w = 0.9, 0.3, 0.1,
   the mean over t = 3 .. T-4, the lattice points on the canvas in every frame and both coordinates.
   This is the warp's own shake: maps that never change (a static rig) score 0 whatever the cameras do.
+* *Uncovered share* (% of the canvas): the canvas pixels neither view samples (where the output is
+  black), per frame from the frame's maps; its largest frame-to-frame change says whether black areas
+  flash in or out.
 * *Duplicated / lost* (a clip with known ground truth, ``truth``): per frame, the object's points in
   both views mapped to the canvas and judged from the frame's seam weights by
   ``naturalness.copy_figures``; a frame is duplicated (lost) when any point is.
+
+:class:`FrameClock` is a second, nearly free observer: the process's CPU time per frame (every
+thread: decoding, stitching, encoding), for a run apart from the figures' (they cost more than the
+stitch).
 
 Cost: the band views are two small remaps per frame; the flow runs every :data:`FLOW_EVERY` frames;
 the lattice is inverted only when the maps change; the seam weights (a kernel over the canvas) are
@@ -41,6 +48,7 @@ computed only for frames with ground truth.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import Callable
 
@@ -194,6 +202,14 @@ def band_flow(src: np.ndarray, tgt: np.ndarray, valid_src: np.ndarray, valid_tgt
     return dis.calc(tgt8, src8, None)
 
 
+def uncovered_pct(frame: CompositedFrame) -> float:
+    """% of the canvas neither view samples with the frame's maps (where the output is the fill)."""
+    maps = frame.maps
+    covered = (sampled_mask(maps.map_src_luma, frame.planes_src[0].shape)
+               | sampled_mask(maps.map_tgt_luma, frame.planes_tgt[0].shape))
+    return 100.0 * (1.0 - float(covered.mean()))
+
+
 def _stats(values, percentile: float | None = None) -> float | None:
     values = np.asarray([v for v in values if v is not None and np.isfinite(v)], np.float64)
     if not values.size:
@@ -229,9 +245,10 @@ class VideoFigures:
         self._scale = np.ones(2)
         self._path: np.ndarray | None = None
         self._valid: tuple[np.ndarray, np.ndarray] | None = None
+        self._uncovered = 0.0  # % of the canvas the current maps leave uncovered
         self.per_frame: dict[str, list] = {name: [] for name in (
             "time_s", "maps_changed", "seam_motion_px", "seam_motion_still_px", "still_lines_pct",
-            "exposure_step", "exposure_step_change", "misalignment_px")}
+            "exposure_step", "exposure_step_change", "misalignment_px", "uncovered_pct")}
         self.paths: list[np.ndarray] = []
         self._flow_cells: list[np.ndarray] = []
         self._flow_cross: list[np.ndarray] = []
@@ -275,6 +292,7 @@ class VideoFigures:
         record["exposure_step_change"].append(change)
         record["misalignment_px"].append(
             self._misalignment(src_g, tgt_g, band, seam_band) if frame.index % self.flow_every == 0 else None)
+        record["uncovered_pct"].append(self._uncovered)
         self.paths.append(self._path)
         if self.truth is not None:
             self._copies(frame)
@@ -296,6 +314,7 @@ class VideoFigures:
             self._scale = np.array([STABILITY_SIZE[0] / shape_src[1], STABILITY_SIZE[1] / shape_src[0]])
         self._path = forward_on_canvas(frame.maps.map_src_luma, self._lattice, self.cfg) * self._scale
         self._valid = None
+        self._uncovered = uncovered_pct(frame)
 
     def _still_lines(self, src, tgt, last_src, last_tgt) -> np.ndarray:
         """(L,) bool: lines where neither view changed within the band, nor within the dilation."""
@@ -415,6 +434,8 @@ class VideoFigures:
                 "across_p95": round(float(np.percentile(cross, 95)), 4) if cross.size else None,
                 "worst_frame_median": _stats(record["misalignment_px"], 100),
             },
+            "uncovered_pct": {"mean": _stats(record["uncovered_pct"]), "max": _stats(record["uncovered_pct"], 100),
+                              "largest_change": _stats(np.abs(np.diff(record["uncovered_pct"])), 100) or 0.0},
             "stability": {"value": None if not np.isfinite(value) else round(value, 4),
                           "points": int(np.isfinite(per_point).sum()), "scale_to": list(STABILITY_SIZE),
                           "map_sets": int(sum(record["maps_changed"])),
@@ -431,3 +452,28 @@ class VideoFigures:
                 "per_frame": self.copies,
             }
         return figures
+
+
+class FrameClock:
+    """An observer reading the process's CPU time (all its threads) as each frame reaches it: what a frame
+    costs end to end, decoding and encoding included. Nearly free, so a run measured for its CPU carries
+    no other observer (``benchmarks/video_figures.py --cpu``)."""
+
+    def __init__(self) -> None:
+        self.cpu_s: list[float] = []
+        self.time_s: list[float | None] = []
+
+    def __call__(self, frame: CompositedFrame) -> None:
+        self.cpu_s.append(time.process_time())
+        self.time_s.append(frame.time_s)
+
+    def figures(self) -> dict:
+        """CPU ms per frame from :data:`SETTLED_S` on (the first estimate's set-up left out): the mean
+        (total over frames) and the median and p95 of single frames; None with fewer than two frames."""
+        t0 = next((t for t in self.time_s if t is not None), 0.0)
+        settled = [c for c, t in zip(self.cpu_s, self.time_s) if t is not None and t - t0 >= SETTLED_S]
+        steps = 1000.0 * np.diff(settled)
+        if steps.size == 0:
+            return {"frames": 0, "mean_ms": None, "median_ms": None, "p95_ms": None}
+        return {"frames": int(steps.size), "mean_ms": round(float(steps.mean()), 3),
+                "median_ms": round(float(np.median(steps)), 3), "p95_ms": round(float(np.percentile(steps, 95)), 3)}

@@ -1,0 +1,80 @@
+"""``video/device_frame.py`` on real frames: both frame kernels give the same planes, frame after frame.
+
+CUDA composites with the per-pixel kernel, the CPU with the row-run kernel and its runs
+(``kernels/composite.py``). Here both run on the CPU over a whole clip as ``sena-warp video`` makes it
+(plans made when the maps change, runs found once a plan has served a frame, the per-frame seam and
+gains): every output plane must be the same, byte for byte.
+"""
+
+from __future__ import annotations
+
+from itertools import islice
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sena_warp.composite import composite
+from sena_warp.config import Config
+from sena_warp.video import device_frame
+from sena_warp.video.reader import FrameReader
+from sena_warp.video.stitch import SenaFrameCompositor
+
+CFG = Config(device="cpu", video_estimate_pairs=1)
+
+
+def composited(left: Path, right: Path, cfg: Config, frames: int) -> tuple[list[tuple[np.ndarray, ...]], list[bool]]:
+    """The first ``frames`` output frames' (y, u, v) as the frame loop makes them, and per frame whether
+    its Y plan had its runs."""
+    compositor = SenaFrameCompositor.from_videos(left, right, 0.0, cfg, "auto")
+    out, runs = [], []
+    try:
+        with FrameReader(left) as reader_l, FrameReader(right) as reader_r:
+            for frame_l, frame_r in islice(zip(reader_l, reader_r), frames):
+                compositor.update(frame_l, frame_r)
+                out.append(compositor.composite_yuv(frame_l.y, frame_l.u, frame_l.v, frame_r.y, frame_r.u, frame_r.v))
+                runs.append(compositor.last_frame[0].luma.runs is not None)
+    finally:
+        compositor.close()
+    return out, runs
+
+
+def per_pixel(monkeypatch) -> None:
+    """Every pass composited by the per-pixel kernel, as on CUDA."""
+    def forced(frame, plan, seam, gains, cfg, _per_pixel=None):
+        composite(frame, plan, seam, gains, cfg, per_pixel=True)
+
+    monkeypatch.setattr(device_frame, "composite", forced)
+
+
+def assert_same_planes(left: Path, right: Path, cfg: Config, frames: int, monkeypatch) -> list[bool]:
+    rows, runs = composited(left, right, cfg, frames)
+    with monkeypatch.context() as patch:
+        per_pixel(patch)
+        pixels, _ = composited(left, right, cfg, frames)
+    assert len(rows) == len(pixels) == frames
+    for index, (a, b) in enumerate(zip(rows, pixels)):
+        for plane_a, plane_b in zip(a, b):
+            np.testing.assert_array_equal(plane_a, plane_b, err_msg=f"frame {index}")
+    return runs
+
+
+@pytest.mark.parametrize("rig", ["static", "moving"])
+def test_both_frame_kernels_give_the_same_planes_on_the_bundled_clip(bundled_dir, rig, monkeypatch):
+    """The rooftop clip: a static rig whose drift checks move the maps, and a moving rig aligned every
+    frame (a plan every frame)."""
+    clips = bundled_dir / "video"
+    cfg = CFG.replace(video_rig=rig, video_reestimate_s=0.5, video_estimate_workers=0)
+    runs = assert_same_planes(clips / "rooftop_left.mp4", clips / "rooftop_right.mp4", cfg, 60, monkeypatch)
+    if rig == "static":
+        assert sum(runs) > 20  # the row-run kernel took its runs on many frames
+    else:  # each plan serves one frame: its runs are never found, the per-pixel kernel composites it
+        assert not any(runs)
+
+
+@pytest.mark.shared
+def test_both_frame_kernels_give_the_same_planes_on_a_recording(shared_dir, monkeypatch):
+    """The shared office recording (its target's border blend on the Y plane), 100 frames."""
+    folder = shared_dir / "videos" / "office_static"
+    runs = assert_same_planes(folder / "cam1.mp4", folder / "cam2.mp4", CFG, 100, monkeypatch)
+    assert sum(runs) > 50  # a plan has its runs from its second frame on (a drift move makes new plans)
