@@ -144,7 +144,8 @@ class Config:
     seam_blend_colour: bool = True  # seam blend as a gain: per channel, each within 10 % of the grey one
     # (a smooth colour difference of the views: a sky bluer in one); False: one grey value per line
     # --- seam, switch alignment (ours, switch_align.py; no step of the paper) -------------------
-    switch_align: bool = True  # align the source to the target at the seam and the borders, cut again (False: paper)
+    switch_align: bool = False  # align the source to the target at the seam and the borders, cut again (False: the
+    # paper's; off by default: it costs 0.7-1.4 s of a 1000x750 stitch, docs/evaluation.md)
     switch_rounds: int = 2  # align and cut again this many times
     # --- seam, switch alignment, fine tuning ----------------------------------------------------
     switch_flow_preset: int = 1  # DIS optical flow preset between the views: 0 ultrafast, 1 fast, 2 medium

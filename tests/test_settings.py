@@ -95,7 +95,8 @@ def test_threads_reach_every_launch_of_a_video_stitch(bundled_dir, tmp_path, mon
     assert {(device, threads) for key, device, threads in seen if key in band} == {("cpu", runtime.BAND_THREADS)}
 
 
-@pytest.mark.parametrize("changes, aligned", [(dict(switch_align=False), 0), (dict(switch_rounds=1), 1), (dict(), 2)])
+@pytest.mark.parametrize("changes, aligned", [(dict(), 0), (dict(switch_align=True, switch_rounds=1), 1),
+                                              (dict(switch_align=True), 2)])
 def test_switch_settings_reach_the_seam_stage(udisd_pair, monkeypatch, changes, aligned):
     """``switch_align`` and ``switch_rounds`` decide how often the source is aligned at the switches (the
     aligned map's kernel launches) and the seam cut again; the cut uses the aligned map."""
