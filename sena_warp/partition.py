@@ -173,22 +173,26 @@ def thin_strips(label: np.ndarray, max_px: float) -> tuple[np.ndarray, np.ndarra
 
     label: (H, W) uint8 the view shown per canvas pixel (``switch_align.shown_labels``: 1 source, 2
     target, 0 none). Per column from the top and from the bottom, per row from the left and the right:
-    the first run of one view, where the other view follows it directly and it is shorter than max_px.
+    the first run of one view, where the other view follows it directly and it is shorter than max_px
+    (only the first ``ceil(max_px) + 1`` pixels of each line are read: a longer run is no strip).
     """
     thin = np.zeros(label.shape, bool)
     for flip_rows, transpose in ((False, False), (True, False), (False, True), (True, True)):
         lab = label.T if transpose else label
         lab = lab[::-1] if flip_rows else lab
-        shown = lab > 0
-        rows = np.arange(lab.shape[0])[:, None]
-        first = np.argmax(shown, axis=0)[None, :]
-        view = np.take_along_axis(lab, first, axis=0)
-        run = np.cumprod((lab == view) | (rows < first), axis=0).astype(bool) & (rows >= first)
+        lines, cols = lab.shape[0], np.arange(lab.shape[1])
+        first = np.argmax(lab > 0, axis=0)
+        view = lab[first, cols]
+        rows = first[None, :] + np.arange(min(int(np.ceil(max_px)) + 1, lines))[:, None]
+        window = np.take_along_axis(lab, np.minimum(rows, lines - 1), axis=0)
+        run = np.cumprod((window == view) & (rows < lines), axis=0).astype(bool)
         length = run.sum(axis=0)
-        after = np.take_along_axis(lab, np.minimum(first[0] + length, lab.shape[0] - 1)[None, :], axis=0)[0]
-        strip = run & ((length < max_px) & (first[0] + length < lab.shape[0]) & (after > 0) & (after != view[0]))[None, :]
-        strip = strip[::-1] if flip_rows else strip
-        thin |= strip.T if transpose else strip
+        after = lab[np.minimum(first + length, lines - 1), cols]
+        strip = run & ((length < max_px) & (first + length < lines) & (after > 0) & (after != view))[None, :]
+        mask = np.zeros(lab.shape, bool)
+        mask[rows[strip], np.broadcast_to(cols, rows.shape)[strip]] = True
+        mask = mask[::-1] if flip_rows else mask
+        thin |= mask.T if transpose else mask
     return thin & (label == 1), thin & (label == 2)
 
 
