@@ -399,7 +399,7 @@ def natural_markdown(pairs: list[str], table: dict) -> list[str]:
              "max | bend max % (pairs > 2 %) | continuity median px | seam MAD < feather MAD | order diff max |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for run in SENA_RUNS:
-        done = [table[p, run] for p in pairs if table[p, run].ok]
+        done = _done(pairs, table, run)
         lines.append(
             f"| {run} | {sum(r.dup_lost_over_4px > 0 for r in done)} | {sum(r.dup_lost_pct > 0.5 for r in done)} | "
             f"{_fmt(_max(r.dup_lost_pct for r in done), 2)} | {_fmt(_median(r.seam_step for r in done), 2)} / "
@@ -410,14 +410,20 @@ def natural_markdown(pairs: list[str], table: dict) -> list[str]:
             f"{_fmt(_max(r.order_diff_grey for r in done), 1)} |")
     lines += ["", "| pair | run | dup/lost % (> 4 px, worst px) | seam step | border step | bend max % | "
               "continuity px (cut lines) |", "|---|---|---:|---:|---:|---:|---:|"]
-    for p in pairs:
-        for run in SENA_RUNS:
-            r = table[p, run]
-            if r.ok:
-                lines.append(f"| {p} | {run} | {r.dup_lost_pct:.2f} ({r.dup_lost_over_4px}, {_fmt(r.dup_lost_worst_px, 1)}) | "
-                             f"{_fmt(r.seam_step, 2)} | {_fmt(r.border_step, 2)} | {_fmt(r.visible_bend_max_pct, 2)} | "
-                             f"{_fmt(r.continuity_px, 2)} ({r.cut_lines}) |")
+    lines += _pair_rows(pairs, table, lambda r: (
+        f"{r.dup_lost_pct:.2f} ({r.dup_lost_over_4px}, {_fmt(r.dup_lost_worst_px, 1)}) | {_fmt(r.seam_step, 2)} | "
+        f"{_fmt(r.border_step, 2)} | {_fmt(r.visible_bend_max_pct, 2)} | {_fmt(r.continuity_px, 2)} ({r.cut_lines})"))
     return lines
+
+
+def _done(pairs: list[str], table: dict, run: str) -> list:
+    """The results of ``run`` on ``pairs`` that succeeded."""
+    return [table[p, run] for p in pairs if table[p, run].ok]
+
+
+def _pair_rows(pairs: list[str], table: dict, cells) -> list[str]:
+    """A table row per pair and SENA run that succeeded: ``| pair | run | cells(result) |``."""
+    return [f"| {p} | {run} | {cells(table[p, run])} |" for p in pairs for run in SENA_RUNS if table[p, run].ok]
 
 
 def dense_markdown(pairs: list[str], table: dict) -> list[str]:
@@ -434,7 +440,7 @@ def dense_markdown(pairs: list[str], table: dict) -> list[str]:
              "tone spread worse than plain by > 1 (pairs) | tone colour worse than plain by > 1 (pairs) | white cast max |",
              "|---|---:|---:|---:|---:|---:|---:|"]
     for run in SENA_RUNS:
-        done = [table[p, run] for p in pairs if table[p, run].ok]
+        done = _done(pairs, table, run)
         seam_p95 = [r.seam_misalign_p95_px for r in done]
         border_p95 = [r.border_misalign_p95_px for r in done]
         lines.append(
@@ -446,17 +452,13 @@ def dense_markdown(pairs: list[str], table: dict) -> list[str]:
             f"{_fmt(_max(r.white_cast_grey for r in done), 1)} |")
     lines += ["", "| pair | run | seam px median / p95 | border px median / p95 | doubled / lost % (objects, largest px) | "
               "tone spread / plain % | tone colour / plain % | white cast / plain |", "|---|---|---:|---:|---:|---:|---:|---:|"]
-    for p in pairs:
-        for run in SENA_RUNS:
-            r = table[p, run]
-            if r.ok:
-                lines.append(
-                    f"| {p} | {run} | {_fmt(r.seam_misalign_median_px, 2)} / {_fmt(r.seam_misalign_p95_px, 2)} | "
-                    f"{_fmt(r.border_misalign_median_px, 2)} / {_fmt(r.border_misalign_p95_px, 2)} | "
-                    f"{r.doubled_pct:.2f} / {r.lost_pct:.2f} ({r.dup_objects}, {r.dup_object_px}) | "
-                    f"{_fmt(r.tone_spread_pct, 1)} / {_fmt(r.tone_spread_plain_pct, 1)} | "
-                    f"{_fmt(r.tone_colour_pct, 1)} / {_fmt(r.tone_colour_plain_pct, 1)} | "
-                    f"{_fmt(r.white_cast_grey, 1)} / {_fmt(r.white_cast_plain_grey, 1)} |")
+    lines += _pair_rows(pairs, table, lambda r: (
+        f"{_fmt(r.seam_misalign_median_px, 2)} / {_fmt(r.seam_misalign_p95_px, 2)} | "
+        f"{_fmt(r.border_misalign_median_px, 2)} / {_fmt(r.border_misalign_p95_px, 2)} | "
+        f"{r.doubled_pct:.2f} / {r.lost_pct:.2f} ({r.dup_objects}, {r.dup_object_px}) | "
+        f"{_fmt(r.tone_spread_pct, 1)} / {_fmt(r.tone_spread_plain_pct, 1)} | "
+        f"{_fmt(r.tone_colour_pct, 1)} / {_fmt(r.tone_colour_plain_pct, 1)} | "
+        f"{_fmt(r.white_cast_grey, 1)} / {_fmt(r.white_cast_plain_grey, 1)}"))
     return lines
 
 
