@@ -435,4 +435,4 @@ def test_a_span_s_start_is_reached_by_seeking_and_its_end_stops_decoding(keyed_c
         frames = list(reader)
     # Frames 36-44: the seek lands on the key frame of frame 30, so only 30-35 are decoded before the span.
     assert [f.time_s for f in frames] == [Fraction(k, 30) for k in range(36, 45)]
-    assert reader.skipped == 6 and reader.stopped_at_end and reader.decoded == 9
+    assert reader.log.skipped == 6 and reader.log.stopped_at_end and reader.log.decoded == 9

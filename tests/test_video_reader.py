@@ -41,7 +41,7 @@ def test_probe_follows_a_file_that_is_replaced(clips, tmp_path):
 def test_frames_carry_exact_times_and_offset(clips):
     with FrameReader(clips / "rooftop_right.mp4", offset_s=Fraction(1, 4)) as reader:
         times = [f.time_s for f in reader]
-    assert len(times) == 63 and reader.damaged == 0
+    assert len(times) == 63 and reader.log.damaged == 0
     assert list(reader) == []  # exhausted: a second pass ends at once instead of waiting
     assert times == [Fraction(1, 4) + Fraction(k, 30) for k in range(63)]
 
@@ -69,7 +69,7 @@ def test_planes_drop_line_padding_and_match_pyav(clips):
 def test_yuv422_source_is_converted_to_420(clips):
     with FrameReader(clips / "office_cam1.mp4") as reader:
         frames = list(reader)
-    assert reader.converted_from == "yuv422p" and len(frames) == 48
+    assert reader.log.converted_from == "yuv422p" and len(frames) == 48
     assert frames[0].y.shape == (480, 640) and frames[0].u.shape == (240, 320)
     assert frames[-1].time_s == Fraction(47, 24)
 
@@ -79,4 +79,4 @@ def test_stopping_early_joins_the_decoder_thread(clips):
         next(iter(reader))
         assert any(t.name == "decode:office_cam1.mp4" for t in threading.enumerate())
     assert not any(t.name == "decode:office_cam1.mp4" for t in threading.enumerate())
-    assert reader.decoded < 48  # the bounded queue held the decoder back
+    assert reader.log.decoded < 48  # the bounded queue held the decoder back

@@ -122,16 +122,16 @@ class VideoOptions:
 
 
 def _input_summary(info: VideoInfo, reader: FrameReader) -> dict:
-    span = reader.damaged_span_s
+    span = reader.log.damaged_span_s
     return {
         "path": str(info.path), "width": info.width, "height": info.height, "fps": float(info.fps),
-        "rotation_deg": info.rotation_deg, "pix_fmt": info.pix_fmt, "converted_from": reader.converted_from,
-        "offset_s": float(reader.offset_s), "frames_decoded": reader.decoded, "frames_skipped": reader.skipped,
-        "damaged": reader.damaged,
+        "rotation_deg": info.rotation_deg, "pix_fmt": info.pix_fmt, "converted_from": reader.log.converted_from,
+        "offset_s": float(reader.offset_s), "frames_decoded": reader.log.decoded, "frames_skipped": reader.log.skipped,
+        "damaged": reader.log.damaged,
         "damaged_span_s": None if span is None else [round(float(t), 4) for t in span],
-        "time_stamps_dropped": reader.out_of_order, "rescaled": reader.rescaled,
-        "decode_wait_s": round(reader.wait_s, 4), "decode_s": round(reader.decode_s, 4),
-        "decoder_threads": reader.decoder_threads,
+        "time_stamps_dropped": reader.log.out_of_order, "rescaled": reader.log.rescaled,
+        "decode_wait_s": round(reader.log.wait_s, 4), "decode_s": round(reader.log.decode_s, 4),
+        "decoder_threads": reader.log.decoder_threads,
     }
 
 
@@ -221,7 +221,7 @@ def _paired(left, right, infos: dict[str, VideoInfo], options: VideoOptions, sta
         first = next(pairs, None)
         trimmed = f" between --ss {options.start_s:g} s and --to {options.end_s:g} s" if options.end_s else (
             f" from --ss {options.start_s:g} s on" if options.start_s else "")
-        undecoded = [path for path, reader in ((left, reader_l), (right, reader_r)) if not reader.decoded + reader.damaged]
+        undecoded = [path for path, reader in ((left, reader_l), (right, reader_r)) if not reader.log.decoded + reader.log.damaged]
         if first is None and undecoded and not trimmed:
             raise VideoError(f"{undecoded[0]}: no frame could be decoded: it holds no key frame (as a piece cut out of a "
                              f"longer stream may not); re-encode it")
@@ -283,7 +283,7 @@ def _run(left, right, output, compositor_factory: CompositorFactory, options: Vi
     for warning in warnings:
         LOGGER.warning(warning)
     timing["total"] = time.perf_counter() - t_run
-    timing["decode_wait"] = reader_l.wait_s + reader_r.wait_s
+    timing["decode_wait"] = reader_l.log.wait_s + reader_r.log.wait_s
     for note in _input_notes(infos, readers, stats):
         _note(notes, note)
     return {"started": started.isoformat(timespec="microseconds"), "span_s": _span_report(options),
@@ -332,8 +332,8 @@ def _input_notes(infos: dict[str, VideoInfo], readers: dict[str, FrameReader], s
         notes.append(f"frame rates differ (left {float(rate_l):g} fps, right {float(rate_r):g} fps): frames paired "
                      f"by time at the left rate; {stats.dropped} right frames dropped, {stats.repeated} repeated")
     for side, reader in readers.items():
-        if reader.interval_range_s is not None and reader.interval_range_s[0] > 0:
-            low, high = reader.interval_range_s
+        if reader.log.interval_range_s is not None and reader.log.interval_range_s[0] > 0:
+            low, high = reader.log.interval_range_s
             if high > VFR_SPREAD * low:
                 kept = "the output keeps its frame times" if side == "left" else "paired to the left frames by time"
                 notes.append(f"{side} input has a variable frame rate (frames {1000 * float(low):.0f} to "
@@ -349,28 +349,28 @@ def _input_problems(infos: dict[str, VideoInfo], readers: dict[str, FrameReader]
     the matter, what was done), see ``reader.py``."""
     problems = []
     for side, reader in readers.items():
-        if reader.damaged:
-            span = reader.damaged_span_s
+        if reader.log.damaged:
+            span = reader.log.damaged_span_s
             where = f" between {float(span[0]):.2f} s and {float(span[1]):.2f} s" if span is not None else ""
-            problems.append((f"{side} input has {reader.damaged} damaged frames{where}",
+            problems.append((f"{side} input has {reader.log.damaged} damaged frames{where}",
                              "each replaced by the last good frame (--strict fails instead)"))
-        if reader.out_of_order:
-            last_s, time_s = reader.out_of_order_at
-            frames = "1 frame whose time stamp goes back or repeats" if reader.out_of_order == 1 else \
-                f"{reader.out_of_order} frames whose time stamps go back or repeat"
+        if reader.log.out_of_order:
+            last_s, time_s = reader.log.out_of_order_at
+            frames = "1 frame whose time stamp goes back or repeats" if reader.log.out_of_order == 1 else \
+                f"{reader.log.out_of_order} frames whose time stamps go back or repeat"
             problems.append((f"{side} input has {frames} (the first: {float(time_s):.3f} s after "
                              f"{float(last_s):.3f} s)", "dropped (--strict fails instead)"))
-        if reader.rescaled:
-            (width, height), time_s = reader.rescaled_from
-            problems.append((f"{side} input changes resolution from {reader.size[0]}x{reader.size[1]} to "
+        if reader.log.rescaled:
+            (width, height), time_s = reader.log.rescaled_from
+            problems.append((f"{side} input changes resolution from {reader.log.size[0]}x{reader.log.size[1]} to "
                              f"{width}x{height} at {float(time_s):.2f} s",
-                             f"{reader.rescaled} frames were rescaled to {reader.size[0]}x{reader.size[1]} "
+                             f"{reader.log.rescaled} frames were rescaled to {reader.log.size[0]}x{reader.log.size[1]} "
                              f"(--strict fails instead)"))
         declared = infos[side].frame_count
         # Counted only over a whole file: a trimmed input was not decoded from its start or to its end.
-        whole = reader.span_s[0] is None and not reader.stopped_at_end
-        if whole and declared and reader.decoded + reader.damaged < declared:
-            problems.append((f"{side} input ended after {reader.decoded + reader.damaged} of the {declared} frames "
+        whole = reader.span_s[0] is None and not reader.log.stopped_at_end
+        if whole and declared and reader.log.decoded + reader.log.damaged < declared:
+            problems.append((f"{side} input ended after {reader.log.decoded + reader.log.damaged} of the {declared} frames "
                              f"its header declares (truncated?)", "stitched up to where it ends"))
     return problems
 
@@ -508,11 +508,11 @@ def _report(infos, readers, writer: VideoWriter, stats: PairingStats, timing: di
     reader_l, reader_r = readers
     audio = writer.audio
     return {
-        "frames_in": {"left": reader_l.decoded, "right": reader_r.decoded},
+        "frames_in": {"left": reader_l.log.decoded, "right": reader_r.log.decoded},
         "frames_out": writer.frames,
         "dropped": stats.dropped,
         "repeated": stats.repeated,
-        "damaged": {"left": reader_l.damaged, "right": reader_r.damaged},
+        "damaged": {"left": reader_l.log.damaged, "right": reader_r.log.damaged},
         "pairing": stats.as_dict(),
         "timing_s": {name: round(seconds, 4) for name, seconds in timing.items()},
         "output_fps": round(writer.frames / timing["total"], 2),

@@ -197,25 +197,62 @@ def plane_array(plane: av.video.plane.VideoPlane) -> np.ndarray:
     return rows.reshape(plane.height, plane.line_size)[:, : plane.width].copy()
 
 
+@dataclass
+class DecodeLog:
+    """What one :class:`FrameReader` met, for the loop's warnings and the report.
+
+    ``decoded`` good frames; ``damaged`` frames replaced (``damaged_span_s``: the first and last damaged
+    time on the shared clock); ``skipped`` frames before the span's start (from the key frame a seek lands
+    on); ``stopped_at_end``: decoding stopped at the span's end, before the end of the file;
+    ``interval_range_s``: the (shortest, longest) time between two good frames (a variable frame rate when
+    they differ; not across a dropped frame); ``converted_from``: the source pixel format when it was not
+    yuv420p; ``out_of_order`` frames dropped because their time stamp went back or repeated
+    (``out_of_order_at``: the first, as (last time kept, its time)); ``size``: (width, height) of the first
+    frame, as stored (before rotation); ``rescaled`` frames of another size, brought to ``size``
+    (``rescaled_from``: the first one's size and time); ``decoder_threads``: the count the decoder was
+    opened with; ``wait_s``: the consumer's time blocked waiting for frames; ``decode_s``: the decoder
+    thread's time decoding and copying planes out (not its waits on a full queue).
+    """
+
+    decoded: int = 0
+    damaged: int = 0
+    damaged_span_s: tuple[Fraction, Fraction] | None = None
+    skipped: int = 0
+    stopped_at_end: bool = False
+    interval_range_s: tuple[Fraction, Fraction] | None = None
+    converted_from: str | None = None
+    out_of_order: int = 0
+    out_of_order_at: tuple[Fraction, Fraction] | None = None
+    size: tuple[int, int] | None = None
+    rescaled: int = 0
+    rescaled_from: tuple[tuple[int, int], Fraction] | None = None
+    decoder_threads: int | None = None
+    wait_s: float = 0.0
+    decode_s: float = 0.0
+
+    def count_damage(self, time_s: Fraction) -> None:
+        self.damaged += 1
+        first, _ = self.damaged_span_s or (time_s, time_s)
+        self.damaged_span_s = (first, time_s)
+
+    def count_interval(self, step_s: Fraction) -> None:
+        low, high = self.interval_range_s or (step_s, step_s)
+        self.interval_range_s = (min(low, step_s), max(high, step_s))
+
+
 class FrameReader:
     """Decode one input on a background thread; iterate to get :class:`YuvFrame` in time order.
 
     Use as a context manager (``with FrameReader(...) as reader: for frame in reader: ...``);
     leaving the block stops and joins the thread even mid-file. Damaged frames are replaced as the
-    module says and counted in ``damaged`` (``damaged_span_s``: the first and last damaged time on
-    the shared clock); with ``strict`` the first one raises VideoError instead. Any other failure is
-    re-raised in the iterating thread. ``decoded`` counts the good frames; ``interval_range_s`` is
-    the (shortest, longest) time between two of them (a variable frame rate when they differ; not across
-    a dropped frame).
-    ``wait_s`` accumulates the time the consumer spent blocked waiting for frames; ``decode_s`` the
-    decoder thread's time decoding and copying planes out (not its waits on a full queue).
-    ``threads``: FFmpeg decoder threads (``Config.cpu_threads``; 0 lets FFmpeg choose); once decoding
-    has started, ``decoder_threads`` is the count the decoder was opened with.
+    module says; with ``strict`` the first one raises VideoError instead. Any other failure is
+    re-raised in the iterating thread. ``log`` (:class:`DecodeLog`) counts what happened.
+    ``threads``: FFmpeg decoder threads (``Config.cpu_threads``; 0 lets FFmpeg choose).
 
     ``span_s`` = (start, end) on the shared clock: only frames with start <= time < end come out (None:
     from the beginning, to the end of the file). A start inside the file is reached by seeking to the
     key frame before it, so only the frames from there on are decoded (``skipped``: those before the
-    start); decoding stops at the first frame at or past the end (``stopped_at_end``).
+    start); decoding stops at the first frame at or past the end.
     """
 
     def __init__(self, path: str | os.PathLike, offset_s: Fraction = Fraction(0), queue_frames: int = 8,
@@ -224,23 +261,9 @@ class FrameReader:
         self.path = Path(path)
         self.offset_s = Fraction(offset_s)
         self.span_s = span_s
-        self.stopped_at_end = False  # decoding stopped at the span's end, before the end of the file
-        self.skipped = 0  # frames decoded before the span's start (from the key frame a seek lands on)
         self.threads = threads
-        self.decoder_threads: int | None = None
         self.strict = strict
-        self.decoded = 0
-        self.damaged = 0
-        self.damaged_span_s: tuple[Fraction, Fraction] | None = None
-        self.interval_range_s: tuple[Fraction, Fraction] | None = None
-        self.converted_from: str | None = None  # source pixel format when it was not yuv420p
-        self.out_of_order = 0  # frames dropped because their time stamp went back or repeated
-        self.out_of_order_at: tuple[Fraction, Fraction] | None = None  # the first: (last time kept, its time)
-        self.size: tuple[int, int] | None = None  # (width, height) of the first frame, as stored (before rotation)
-        self.rescaled = 0  # frames of another size, rescaled to ``size``
-        self.rescaled_from: tuple[tuple[int, int], Fraction] | None = None  # the first: its size and time
-        self.wait_s = 0.0
-        self.decode_s = 0.0
+        self.log = DecodeLog()
         self._container = open_input(self.path)
         self._queue: queue.Queue = queue.Queue(maxsize=queue_frames)
         self._stop = threading.Event()
@@ -268,7 +291,7 @@ class FrameReader:
         while not self._ended:
             t0 = time.perf_counter()
             item = self._queue.get()
-            self.wait_s += time.perf_counter() - t0
+            self.log.wait_s += time.perf_counter() - t0
             if item is _END:
                 self._ended = True
             elif isinstance(item, BaseException):
@@ -291,7 +314,7 @@ class FrameReader:
         try:
             self._decode_all()
         except av.error.FFmpegError as exc:
-            self._put(VideoError(f"{self.path}: decoding failed after {self.decoded} frames ({exc.strerror})"))
+            self._put(VideoError(f"{self.path}: decoding failed after {self.log.decoded} frames ({exc.strerror})"))
         except BaseException as exc:  # handed to the consumer, which re-raises it
             self._put(exc)
         finally:
@@ -325,9 +348,9 @@ class FrameReader:
                 tainted = True
                 continue
             finally:
-                self.decode_s += time.perf_counter() - t0
+                self.log.decode_s += time.perf_counter() - t0
             for frame in frames:
-                self.decoder_threads = stream.codec_context.thread_count
+                self.log.decoder_threads = stream.codec_context.thread_count
                 was_tainted = tainted
                 tainted = (tainted and not frame.key_frame) or frame.is_corrupt
                 pts = frame.pts
@@ -339,10 +362,10 @@ class FrameReader:
                     self._count_out_of_order(time_s)
                     continue
                 if first_s is not None and time_s < first_s:  # between the key frame a seek lands on and the span's start
-                    self.skipped += 1
+                    self.log.skipped += 1
                     continue
                 if end_s is not None and time_s >= end_s:
-                    self.stopped_at_end = True
+                    self.log.stopped_at_end = True
                     return
                 if (was_tainted or tainted) and not self._fill_gap(time_s, 1 / rate):
                     return
@@ -352,7 +375,7 @@ class FrameReader:
                     continue
                 t0 = time.perf_counter()
                 yuv = self._to_yuv(frame, time_s)
-                self.decode_s += time.perf_counter() - t0
+                self.log.decode_s += time.perf_counter() - t0
                 if not self._put(yuv):
                     return
 
@@ -363,7 +386,7 @@ class FrameReader:
             self._container.seek(int(pts), stream=stream, backward=True, any_frame=False)
 
     def _damage_error(self, time_s: Fraction) -> VideoError:
-        return VideoError(f"{self.path}: damaged frame at {float(time_s):.2f} s after {self.decoded} good frames "
+        return VideoError(f"{self.path}: damaged frame at {float(time_s):.2f} s after {self.log.decoded} good frames "
                           f"(--strict)")
 
     def _count_out_of_order(self, time_s: Fraction) -> None:
@@ -372,16 +395,14 @@ class FrameReader:
         if self.strict:
             how = "repeat" if time_s == last_s else f"go back to {float(time_s):.3f} s"
             raise VideoError(f"{self.path}: frame time stamps {how} after {float(last_s):.3f} s (--strict)")
-        self.out_of_order += 1
-        self.out_of_order_at = self.out_of_order_at or (last_s, time_s)
+        self.log.out_of_order += 1
+        self.log.out_of_order_at = self.log.out_of_order_at or (last_s, time_s)
         self._dropped_since_last = True
 
     def _count_damage(self, time_s: Fraction) -> None:
         if self.strict:
             raise self._damage_error(time_s)
-        self.damaged += 1
-        first, _ = self.damaged_span_s or (time_s, time_s)
-        self.damaged_span_s = (first, time_s)
+        self.log.count_damage(time_s)
 
     def _fill_gap(self, time_s: Fraction, period_s: Fraction) -> bool:
         """Damaged frames for the frames lost before ``time_s`` (more than half a period missing
@@ -406,26 +427,24 @@ class FrameReader:
 
     def _to_yuv(self, frame: av.VideoFrame, time_s: Fraction) -> YuvFrame:
         size = (frame.width, frame.height)
-        self.size = self.size or size
-        if size != self.size:  # the maps are made for the first size: a later one is brought to it
+        first = self.log.size = self.log.size or size
+        if size != first:  # the maps are made for the first size: a later one is brought to it
             if self.strict:
-                raise VideoError(f"{self.path}: the resolution changes from {self.size[0]}x{self.size[1]} to "
+                raise VideoError(f"{self.path}: the resolution changes from {first[0]}x{first[1]} to "
                                  f"{size[0]}x{size[1]} at {float(time_s):.2f} s (--strict)")
-            self.rescaled += 1
-            self.rescaled_from = self.rescaled_from or (size, time_s)
-            frame = frame.reformat(width=self.size[0], height=self.size[1], format=PIX_FMT)
+            self.log.rescaled += 1
+            self.log.rescaled_from = self.log.rescaled_from or (size, time_s)
+            frame = frame.reformat(width=first[0], height=first[1], format=PIX_FMT)
         if frame.format.name != PIX_FMT:
             # Only non-4:2:0 sources (e.g. yuv422p webcams) pay for a conversion.
-            self.converted_from = frame.format.name
+            self.log.converted_from = frame.format.name
             frame = frame.reformat(format=PIX_FMT)
         turns = _quarter_turns(frame.rotation)
         y, u, v = (np.ascontiguousarray(np.rot90(plane_array(p), turns)) if turns else plane_array(p)
                    for p in frame.planes[:3])
         if self._last_good is not None and not self._dropped_since_last:  # a drop's gap is said as the drop
-            step = time_s - self._last_good.time_s
-            low, high = self.interval_range_s or (step, step)
-            self.interval_range_s = (min(low, step), max(high, step))
-        self.decoded += 1
-        self._last_good = YuvFrame(time_s=time_s, index=self.decoded - 1, y=y, u=u, v=v)
+            self.log.count_interval(time_s - self._last_good.time_s)
+        self.log.decoded += 1
+        self._last_good = YuvFrame(time_s=time_s, index=self.log.decoded - 1, y=y, u=u, v=v)
         self._dropped_since_last = False
         return self._last_good

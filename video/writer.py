@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 
@@ -217,6 +218,25 @@ class AudioCopier:
         self._input.close()
 
 
+@dataclass(frozen=True)
+class EncoderSettings:
+    """How a :class:`VideoWriter` encodes: the encoder used (``codec``) for the one asked for
+    (``requested``), its rate control (``crf``, or an average ``bitrate_kbps``; ``maxrate_kbps`` caps
+    either), ``preset``, and FFmpeg ``threads`` of ``thread_type``."""
+
+    requested: str
+    codec: str
+    crf: int
+    preset: str
+    threads: int
+    thread_type: str
+    bitrate_kbps: int
+    maxrate_kbps: int
+
+    def options(self) -> dict[str, str]:
+        return encoder_options(self.codec, self.crf, self.preset, self.bitrate_kbps, self.maxrate_kbps)
+
+
 class VideoWriter:
     """H.264 or HEVC (``codec``) yuv420p encoder into ``path`` at ``rate`` frames per second (optionally with audio).
 
@@ -252,13 +272,10 @@ class VideoWriter:
             raise VideoError(f"{self.path}: output frame {width}x{height} is too small to encode")
         self.rate = Fraction(rate)
         self.time_base = Fraction(time_base) if time_base is not None else 1 / self.rate
-        self.requested_codec = codec
-        self.codec, note = choose_codec(codec, self.width, self.height, self.rate)
+        used, note = choose_codec(codec, self.width, self.height, self.rate)
+        self.settings = EncoderSettings(codec, used, crf, preset, threads, thread_type, bitrate_kbps, maxrate_kbps)
         self.notes = [note] if note else []  # fallbacks the report should mention
         self.audio_refusal: str | None = None  # why the audio was left out (see add_audio)
-        self._options = encoder_options(self.codec, crf, preset, bitrate_kbps, maxrate_kbps)
-        self.crf, self.preset, self.threads, self.thread_type = crf, preset, threads, thread_type
-        self.bitrate_kbps, self.maxrate_kbps = bitrate_kbps, maxrate_kbps
         self._open()
         self.audio: AudioCopier | None = None
         self.frames = 0
@@ -268,14 +285,15 @@ class VideoWriter:
     def encoder_settings(self) -> dict:
         """The encoder as opened: codec (and the one asked for), rate control (constant quality ``crf``, or
         an average ``bitrate_kbps``; a peak ``maxrate_kbps`` or None), preset, thread count and type."""
-        software = self.codec in X26X  # NVENC has no x264 preset nor threads of its own
+        settings = self.settings
+        software = settings.codec in X26X  # NVENC has no x264 preset nor threads of its own
         ctx = self.stream.codec_context
-        return {"codec": self.codec, "requested": self.requested_codec,
-                "rate_control": "bitrate" if self.bitrate_kbps else "crf",
-                "crf": None if self.bitrate_kbps else self.crf, "bitrate_kbps": self.bitrate_kbps or None,
-                "maxrate_kbps": self.maxrate_kbps or None,
-                "preset": self.preset if software else None, "threads": ctx.thread_count,
-                "thread_type": ctx.thread_type.name.lower() if self.codec == FALLBACK_CODEC else None,
+        return {"codec": settings.codec, "requested": settings.requested,
+                "rate_control": "bitrate" if settings.bitrate_kbps else "crf",
+                "crf": None if settings.bitrate_kbps else settings.crf,
+                "bitrate_kbps": settings.bitrate_kbps or None, "maxrate_kbps": settings.maxrate_kbps or None,
+                "preset": settings.preset if software else None, "threads": ctx.thread_count,
+                "thread_type": ctx.thread_type.name.lower() if settings.codec == FALLBACK_CODEC else None,
                 "pix_fmt": PIX_FMT}
 
     def _open(self) -> None:
@@ -284,15 +302,16 @@ class VideoWriter:
             self.container = av.open(str(self.path), mode="w")
         except av.error.FFmpegError as exc:
             raise OutputError(f"{self.path}: cannot create the video file ({exc.strerror})") from exc
-        self.stream = self.container.add_stream(self.codec, rate=self.rate, options=self._options)
+        settings = self.settings
+        self.stream = self.container.add_stream(settings.codec, rate=self.rate, options=settings.options())
         self.stream.width, self.stream.height = self.width, self.height
         self.stream.pix_fmt = PIX_FMT
-        if self.codec in MP4_TAGS and self.container.format.name in ("mp4", "mov"):
-            self.stream.codec_context.codec_tag = MP4_TAGS[self.codec]
+        if settings.codec in MP4_TAGS and self.container.format.name in ("mp4", "mov"):
+            self.stream.codec_context.codec_tag = MP4_TAGS[settings.codec]
         self.stream.time_base = self.stream.codec_context.time_base = self.time_base
         # Both before the encoder opens on the first frame.
-        self.stream.codec_context.thread_count = self.threads
-        self.stream.codec_context.thread_type = self.thread_type.upper()
+        self.stream.codec_context.thread_count = settings.threads
+        self.stream.codec_context.thread_type = settings.thread_type.upper()
 
     def add_audio(self, source: str | os.PathLike, shift_s: Fraction) -> AudioCopier | None:
         """Copy ``source``'s audio (output time = its time - ``shift_s``); call before :meth:`write`.
