@@ -16,9 +16,12 @@ follows the target's *camera path* through a causal low-pass:
    hand-held rig's frame-to-frame jitter); where the shifted canvas does not reach, the output is black
    and that band moves as smoothly as the window does.
 
-With ``--crop`` the output is the first estimate's rectangle less ``video_steady_max_px`` on every side
-(:func:`steady_crop`): the window never leaves the cropped canvas, so the rectangle the viewer sees does
-not change at all. A static rig's window is the whole canvas, unshifted (``video_steady_max_px`` 0: the
+With ``--crop`` and ``--rig moving`` the output is the first estimate's rectangle less
+``video_steady_max_px`` on every side (:func:`steady_crop`): the window never leaves the cropped canvas,
+so the rectangle the viewer sees does not change at all. The output's size is fixed before ``--rig
+auto`` has judged the rig, and a fixed rig's cropped output must stay what it was: with ``--crop`` under
+``auto`` the output is the whole rectangle and it is not stabilised (a moving window would uncover its
+edges). A static rig's window is the whole canvas, unshifted (``video_steady_max_px`` 0: the
 same for a moving rig); a rig found static after moving glides back there at the filter's pace.
 """
 
@@ -36,8 +39,9 @@ HOME_PX = 0.01  # a static rig's window this close to the centre is the canvas i
 
 
 def margin_px(cfg: Config) -> int:
-    """Whole, even output px the window may move from the canvas's centre each way (0 for a static rig)."""
-    if cfg.video_rig == "static":
+    """Whole, even output px the window may move from the canvas's centre each way (0 unless ``--rig moving``:
+    the only mode known to move before the output's size is fixed)."""
+    if cfg.video_rig != "moving":
         return 0
     return 2 * int(np.ceil(cfg.video_steady_max_px / 2.0))
 
@@ -84,8 +88,10 @@ class SteadyCanvas:
                                np.float64)
         self.scale = np.asarray(scale, np.float64)
         self.max_px = float(cfg.video_steady_max_px)
-        # Whether the output may be a window on the canvas: a rig that may move, or an output cropped from it.
-        self.windowed = tuple(output_shape) != tuple(canvas_shape) or (cfg.video_rig != "static" and self.max_px > 0)
+        # Whether the output may be a window on the canvas: an output cropped from it, or a rig that may move
+        # where nothing was cropped (a window on a crop with no margin would uncover the crop's edges).
+        self.windowed = tuple(output_shape) != tuple(canvas_shape) or (
+            cfg.video_rig != "static" and self.max_px > 0 and not cfg.video_crop)
         self._filter = LagBoundedFilter(cfg.video_steady_follow, self.max_px)
         self._path = np.zeros(2)
         self._last: np.ndarray | None = None
@@ -98,7 +104,7 @@ class SteadyCanvas:
 
     def follow(self, y_tgt: np.ndarray) -> None:
         """A frame of a moving rig: its target Y plane extends the path, the window moves."""
-        if self.max_px <= 0:
+        if self.max_px <= 0 or not self.windowed:
             return
         small = small_y(y_tgt)
         if self._last is None or self._last.shape != small.shape:

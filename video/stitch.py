@@ -219,7 +219,7 @@ class SenaFrameCompositor:
         pair tried) for inputs at ``fps`` frames per second whose (rows, cols) are ``frame_shapes``
         (left, right); ``cfg.device`` resolved. With ``cfg.video_crop`` the fixed canvas is the largest
         rectangle the first estimate covers and the output that less the steady canvas's margin
-        (``steady.py``) unless the rig is static. ``observer``: called with every composited frame."""
+        (``steady.py``) with ``--rig moving``. ``observer``: called with every composited frame."""
         self._cfg = cfg
         self._fps = fps
         self.observer = observer
