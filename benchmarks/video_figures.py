@@ -178,8 +178,9 @@ def main_compositor_class(observer: VideoFigures):
             zeros = np.zeros((len(home), 1))
             observer(CompositedFrame(
                 index=self.frames, time_s=self.time_s, source="left" if self.rig.source == "a" else "right",
-                planes_src=planes_src, planes_tgt=planes_tgt, planes_out=out, maps=maps, seam_home=home,
-                seam_reach_px=0.0, seam=home, lines_are_rows=not self.rig.vertical, gains_luma=identity,
+                planes_src=planes_src, planes_tgt=planes_tgt, planes_out=out,
+                window=(0.0, 0.0, out[0].shape[1], out[0].shape[0]), maps=maps, seam_home=home,
+                seam_reach_px=0.0, seam=home, gains_luma=identity,
                 knee_luma=None, offsets_luma=(zeros, zeros),
                 weights=lambda: (maps.alpha_luma, np.zeros_like(maps.alpha_luma))))
             self.frames += 1
@@ -239,20 +240,22 @@ def table(recording: str, reports: dict[str, dict]) -> str:
     lines = [f"**{recording}**", "",
              "| run | frames | seam motion mean / p99 / max px | frames the seam moved | where nothing moves: max px "
              "(frames moved / with still lines) | exposure step mean / p99 (settled) | step change p99 (settled) "
-             "| misalignment median / p95 px | stability | uncovered max / largest change % | CPU ms/frame "
-             "| re-est. acc/rej |",
-             "|---|---:|---|---:|---|---|---|---|---:|---|---:|---|"]
+             "| misalignment median / p95 px | stability | output shake mean / p95 px "
+             "| uncovered max / largest change % | CPU ms/frame | re-est. acc/rej |",
+             "|---|---:|---|---:|---|---|---|---|---:|---|---|---:|---|"]
     for run, report in reports.items():
         fig, st = report["figures"], report["stitch"]
         motion, step, change = fig["seam_motion_px"], fig["exposure_step_grey"], fig["exposure_step_change_grey"]
         mis, re_est, uncovered = fig["misalignment_px"], st["reestimations"], fig.get("uncovered_pct", {})
+        shake = fig.get("output_shake_px", {})
         lines.append(
             f"| {run} | {fig['frames']} | {_fmt(motion['mean'])} / {_fmt(motion['p99'])} / {_fmt(motion['max'])} "
             f"| {motion['frames_moving']} | {_fmt(motion['where_still_max'])} ({motion['frames_moving_where_still']} / "
             f"{motion['frames_with_still_lines']}) | {_fmt(step['mean'])} / {_fmt(step['p99'])} "
             f"({_fmt(step['settled_mean'])} / {_fmt(step['settled_p99'])}) | {_fmt(change['p99'])} "
             f"({_fmt(change['settled_p99'])}) | {_fmt(mis['median'])} / {_fmt(mis['p95'])} "
-            f"| {_fmt(fig['stability']['value'], 3)} | {_fmt(uncovered.get('max'))} / "
+            f"| {_fmt(fig['stability']['value'], 3)} | {_fmt(shake.get('mean'))} / {_fmt(shake.get('p95'))} "
+            f"| {_fmt(uncovered.get('max'))} / "
             f"{_fmt(uncovered.get('largest_change'))} | {_fmt(report.get('cpu_per_frame', {}).get('mean_ms'), 1)} "
             f"| {re_est['accepted']}/{re_est['rejected']} |")
     return "\n".join(lines)

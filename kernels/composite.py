@@ -4,7 +4,9 @@ The source is shown on one side of the seam, the target on the other; across a t
 the two are mixed by ``kernels/seam.py``'s ``source_alpha`` (the rule the seam maps' alpha follows). Each side gets its own per-channel affine gain (exposure
 compensation) and, within ``lf_px`` of the seam, a per-line offset that fades linearly to 0 (the
 low-frequency part of the seam blend: what is left of an exposure difference after the gains is
-spread over a wide band, while detail switches sides within T). The same kind of offset, per position
+spread over a wide band, while detail switches sides within T): added in grey levels, or (an
+image's panorama) a relative change of the side's gain, so that it is a smooth gain and changes no
+colour or contrast. The same kind of offset, per position
 along it, fades out from each of the target's two borders across the seam's direction (its top and
 bottom edges for a horizontal rig): beyond the seam's ends the canvas switches from the target to the
 source there, and the border blend hides what the gains leave of that step too.
@@ -95,14 +97,17 @@ class SeamState:
 @wp.struct
 class Gains:
     """A frame's gains per channel of each side: gains in 1/2**12, biases in 1/2**20 grey levels;
-    ``tone`` = (knee, white) in 1/2**20 grey levels (white 0: no knee, ``adjusted``); ``table``: the
-    target's gains tabulated per channel and grey level (``gain_table_kernel``)."""
+    ``tone`` = (knee, white) in 1/2**20 grey levels (white 0: no knee, ``adjusted``); ``relative`` 1:
+    the seam's and the borders' offsets change each side's gain relatively (``with_offset``), 0: they
+    are added; ``table``: the target's gains tabulated per channel and grey level
+    (``gain_table_kernel``)."""
 
     gain_src: wp.vec4i
     bias_src: wp.vec4i
     gain_tgt: wp.vec4i
     bias_tgt: wp.vec4i
     tone: wp.vec2i
+    relative: int
     table: wp.array(dtype=wp.uint8)
 
 
@@ -265,6 +270,16 @@ def adjusted(sample: int, gain: int, bias: int, offset: int, tone: wp.vec2i) -> 
         if at_knee < white:
             v = at_knee + int(wp.int64(sample - knee) * wp.int64(white - at_knee) / wp.int64(white - knee))
     return v + offset
+
+
+@wp.func
+def with_offset(sample: int, gain: int, bias: int, offset: int, tone: wp.vec2i, relative: int) -> int:
+    """:func:`adjusted` with a side's low-frequency offset: added in 1/2**20 grey levels, or with
+    ``relative``, a relative change of the gain in 1/2**20 (the gain times 1 + offset / 2**20, before
+    the knee: the offset is a smooth gain, and white stays white)."""
+    if relative != 0:
+        return adjusted(sample, gain + int((wp.int64(gain) * wp.int64(offset)) >> wp.int64(20)), bias, 0, tone)
+    return adjusted(sample, gain, bias, offset, tone)
 
 
 @wp.func
@@ -492,26 +507,27 @@ def pixel_rule(x: int, y: int, q: int, plan: Plan, seam: SeamState, layout: Layo
 def rule_channel(r: PixelRule, c: int, planes: Planes, seam: SeamState, border: Border, gains: Gains,
                  fill: wp.vec4i) -> wp.uint8:
     """Channel c of a pixel by the full rule: ``fill[c]`` where no side covers it, else per side ``gain *
-    sample + bias + lf * lf[line, c]`` plus each border's weighted offset (``side_offset``), mixed by ``a``."""
+    sample + bias`` with ``lf * lf[line, c]`` plus each border's weighted offset (``side_offset``) added or
+    as a relative change of the gain (``gains.relative``, ``with_offset``), mixed by ``a``."""
     if r.kind == KIND_FILL:
         return wp.uint8(fill[c])
     steps = planes.steps
     if r.a >= 1.0:
         off = side_offset(r.lf, seam.lf_src, r.lo + c, r.bw, border.src, r.bo + c, border.second)
-        v = adjusted(sample_fixed(planes.src, r.p + c, r.fx, r.fy, steps[0], steps[1]), gains.gain_src[c],
-                     gains.bias_src[c], off, gains.tone)
+        v = with_offset(sample_fixed(planes.src, r.p + c, r.fx, r.fy, steps[0], steps[1]), gains.gain_src[c],
+                        gains.bias_src[c], off, gains.tone, gains.relative)
         return grey_level(v)
     if r.a <= 0.0:
         off = side_offset(r.lf, seam.lf_tgt, r.lo + c, r.bw, border.tgt, r.bo + c, border.second)
-        v = adjusted(sample_fixed(planes.tgt, r.p + c, r.fx, r.fy, steps[2], steps[3]), gains.gain_tgt[c],
-                     gains.bias_tgt[c], off, gains.tone)
+        v = with_offset(sample_fixed(planes.tgt, r.p + c, r.fx, r.fy, steps[2], steps[3]), gains.gain_tgt[c],
+                        gains.bias_tgt[c], off, gains.tone, gains.relative)
         return grey_level(v)
-    vs = adjusted(sample_fixed(planes.src, r.p + c, r.fx, r.fy, steps[0], steps[1]), gains.gain_src[c],
-                  gains.bias_src[c], side_offset(r.lf, seam.lf_src, r.lo + c, r.bw, border.src, r.bo + c, border.second),
-                  gains.tone)
-    vt = adjusted(sample_fixed(planes.tgt, r.p_t + c, r.fx_t, r.fy_t, steps[2], steps[3]), gains.gain_tgt[c],
-                  gains.bias_tgt[c], side_offset(r.lf, seam.lf_tgt, r.lo + c, r.bw, border.tgt, r.bo + c, border.second),
-                  gains.tone)
+    vs = with_offset(sample_fixed(planes.src, r.p + c, r.fx, r.fy, steps[0], steps[1]), gains.gain_src[c],
+                     gains.bias_src[c], side_offset(r.lf, seam.lf_src, r.lo + c, r.bw, border.src, r.bo + c, border.second),
+                     gains.tone, gains.relative)
+    vt = with_offset(sample_fixed(planes.tgt, r.p_t + c, r.fx_t, r.fy_t, steps[2], steps[3]), gains.gain_tgt[c],
+                     gains.bias_tgt[c], side_offset(r.lf, seam.lf_tgt, r.lo + c, r.bw, border.tgt, r.bo + c, border.second),
+                     gains.tone, gains.relative)
     return grey_level(int(r.a * float(vs) + (1.0 - r.a) * float(vt)))
 
 

@@ -95,3 +95,17 @@ def seam_maps_kernel(
     map_src_out[y, x] = bilinear_map(map_src_in, q)
     map_tgt_out[y, x] = wp.vec2(fx, fy) - offset_tgt
     alpha_out[y, x] = source_alpha(t, transition_px, smooth_sigma_px)
+
+
+@wp.kernel
+def displaced_map_kernel(
+    row0: int,
+    map_in: wp.array2d(dtype=wp.vec2),
+    field: wp.array2d(dtype=wp.vec2),
+    map_out: wp.array2d(dtype=wp.vec2),
+):
+    """One canvas pixel (x, y = row0 + i): the map resampled at (x, y) + field[y, x] (the switch
+    alignment's ``M_a(u) = M_s(u + C(u))``)."""
+    i, x = wp.tid()
+    y = row0 + i
+    map_out[y, x] = bilinear_map(map_in, wp.vec2(float(x), float(y)) + field[y, x])

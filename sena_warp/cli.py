@@ -156,7 +156,8 @@ def _add_video(parser: argparse.ArgumentParser) -> None:
                           f"(default: {Config.video_reestimate_s:g})")
     picture = parser.add_argument_group("picture")
     picture.add_argument("--crop", action="store_true",
-                         help="crop to the largest rectangle the first estimate covers (a video: for all of it)")
+                         help="crop to the largest rectangle the first estimate covers (a video: for all of it, "
+                              "less the steady canvas's margin with --rig moving)")
     picture.add_argument("--max-width", dest="max_width", type=_positive_int, metavar="W",
                          help="at most W pixels wide, aspect kept, made by the stitch's maps (default: as stitched)")
     encoding = parser.add_argument_group("encoding")

@@ -81,7 +81,8 @@ def fixed_point(values: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class BorderBlend:
     """The border blend's low-frequency offsets of each side along the target's two borders (grey
-    levels at the border, fading like the seam's over ``lf_px``): border k lies at line coordinate
+    levels at the border, or relative changes of the gain for a frame with ``relative_offsets``, fading
+    like the seam's over ``lf_px``): border k lies at line coordinate
     ``lines[k]``; ``src``, ``tgt`` (2, P, C) float32, P positions along it (canvas columns when lines
     are rows, else rows)."""
 
@@ -95,11 +96,14 @@ class FrameState:
     """What one frame sets: ``seam`` (L,) float32 its seam per line as composited (kept within the band
     around the static seam, :func:`clipped_seam`); ``gains`` (gain_src, bias_src, gain_tgt, bias_tgt),
     each (C,) grey levels; ``offsets`` (src, tgt), each (L, C) grey levels, the seam blend's offsets
-    per line, or None (none: a chroma pass)."""
+    per line, or None (none: a chroma pass). ``relative_offsets``: the seam's and the border blend's
+    offsets are relative changes of each side's gain (0.05: 5 % brighter there, a smooth gain that
+    changes no colour or contrast), not grey levels added."""
 
     seam: np.ndarray
     gains: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     offsets: tuple[np.ndarray, np.ndarray] | None = None
+    relative_offsets: bool = False
 
 
 def clipped_seam(positions: np.ndarray, layout: SeamLayout) -> np.ndarray:
@@ -109,9 +113,10 @@ def clipped_seam(positions: np.ndarray, layout: SeamLayout) -> np.ndarray:
     return np.clip(positions, static - reach, static + reach).astype(np.float32)
 
 
-def kernel_gains(gains: Sequence, channels: int, tone: wp.vec2i, table: wp.array) -> Gains:
+def kernel_gains(gains: Sequence, channels: int, tone: wp.vec2i, table: wp.array, relative: bool = False) -> Gains:
     """(gain_src, bias_src, gain_tgt, bias_tgt) grey levels of ``channels`` channels as the kernels take
-    them (fixed point), with the highlight knee ``tone`` and the target's gain ``table`` to fill."""
+    them (fixed point), with the highlight knee ``tone`` and the target's gain ``table`` to fill;
+    ``relative``: the offsets change the gains relatively (:class:`FrameState`'s ``relative_offsets``)."""
     def vec(values, default, unit):
         v = np.array(default, np.float64)
         v[:channels] = values
@@ -124,6 +129,7 @@ def kernel_gains(gains: Sequence, channels: int, tone: wp.vec2i, table: wp.array
     fixed.gain_tgt = vec(gain_tgt, IDENTITY[0], GAIN_ONE)
     fixed.bias_tgt = vec(bias_tgt, IDENTITY[1], LEVEL)
     fixed.tone = tone
+    fixed.relative = int(relative)
     fixed.table = table
     return fixed
 
@@ -371,7 +377,7 @@ def composite_image(img_src: np.ndarray, img_tgt: np.ndarray, plan: CompositePla
     out = wp.empty(plan.canvas_shape[0] * plan.canvas_shape[1] * plan.channels, dtype=wp.uint8, device=plan.device)
     frame = FrameArrays.on(transfer.to_device(src3.ravel(), wp.uint8, plan.device, "planes"),
                            transfer.to_device(tgt3.ravel(), wp.uint8, plan.device, "planes"), out, plan)
-    gains = kernel_gains(state.gains, plan.channels, plan.tone, frame.table)
+    gains = kernel_gains(state.gains, plan.channels, plan.tone, frame.table, state.relative_offsets)
     composite(frame, plan, seam_state(state, plan), gains, cfg, per_pixel)
     image = transfer.download(out, "output").reshape(*plan.canvas_shape, plan.channels).copy()
     return image[:, :, 0] if np.ndim(img_src) == 2 else image

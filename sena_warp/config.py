@@ -136,7 +136,25 @@ class Config:
     seam_fade_px: float = 64.0  # distance beyond the transition over which the source's anchor correction fades to 0
     seam_blend_strip_px: int = 12  # seam blend: the offsets are measured within this of the seam
     seam_blend_rows: int = 31  # seam blend: and averaged over this many rows
-    border_blend_mad_grey: float = 6.0  # border blend: a block whose views differ by more (MAD) shows other content
+    border_blend_mad_grey: float = 6.0  # seam and border blend: a row or block whose views differ by more (MAD) shows other content
+    thin_strip_ratio: float = 0.02  # a view shown only in a strip thinner than this x image diagonal where the other
+    # takes over (beyond the other's border) is left out: it shows nothing whole (0: kept, the earlier and the paper's)
+    seam_blend_gain: bool = True  # seam and border blend: applied as a relative gain (no contrast change);
+    # False: per-channel grey levels added (the earlier version)
+    seam_blend_colour: bool = True  # seam blend as a gain: per channel, each within 10 % of the grey one
+    # (a smooth colour difference of the views: a sky bluer in one); False: one grey value per line
+    # --- seam, switch alignment (ours, switch_align.py; no step of the paper) -------------------
+    switch_align: bool = False  # align the source to the target at the seam and the borders, cut again (False: the
+    # paper's; off by default: it costs 0.7-1.4 s of a 1000x750 stitch, docs/evaluation.md)
+    switch_rounds: int = 2  # align and cut again this many times
+    # --- seam, switch alignment, fine tuning ----------------------------------------------------
+    switch_flow_preset: int = 1  # DIS optical flow preset between the views: 0 ultrafast, 1 fast, 2 medium
+    switch_band_px: float = 24.0  # the flow is followed this far from a switch, where both views are defined
+    switch_sigma_px: float = 8.0  # and smoothed along the switches by a normalised Gaussian of this sigma
+    switch_max_px: float = 80.0  # flow larger than this is not followed (a depth jump the seam must avoid)
+    switch_fade_px: float = 48.0  # the correction fades to 0 this far from its switch (smootherstep) at least,
+    switch_max_slope: float = 0.25  # and further where it is large: it changes by at most this per px
+    switch_cell_px: int = 4  # the correction field is worked out on cells this wide (it is smooth) and upsampled
 
     # --- exposure: gains of each view (Brown & Lowe 2007; no step of the paper) ----------------
     gain_model: str = "channels"  # "channels": per-channel gains (gains.py); "opencv": cv2's ChannelsCompensator; "none"
@@ -196,6 +214,9 @@ class Config:
     video_align_prior: float = 1e-4  # the fit's pull towards the predicted lattice (per node, against the mean data term)
     video_align_follow: float = 0.3  # the filter takes this share of a measured change at once (alpha)
     video_align_max_lag_px: float = 1.0  # ... and never lags the measured lattice by more than this
+    # --- video, fine tuning: a moving rig's steady canvas (video/steady.py) --------------------
+    video_steady_follow: float = 0.1  # the output's path takes this share of the target's camera path's change at once (alpha)
+    video_steady_max_px: float = 24.0  # ... and never lags it by more than this (output px; --crop gives it up on every side); 0: off
     # --- video, fine tuning: the per-frame seam -----------------------------------------------
     video_seam_band_ratio: float = 0.05  # band half-width, x the canvas diagonal (room to go round an object)
     video_seam_band_min_px: int = 8  # band half-width at least this
@@ -348,7 +369,10 @@ RANGES: dict[str, Range] = {
     "seam_zone_margin": Range(0, 100), "seam_anchor_px": _above(0, 1000), "seam_anchor_spacing_px": _above(0, 10000),
     "seam_refine_px": Range(0, 256), "correction_smooth": Range(0, 1e9), "seam_smooth_sigma_px": Range(0, 64),
     "seam_fade_px": Range(0, 10000), "seam_blend_strip_px": Range(1, 1024), "seam_blend_rows": Range(1, 1023),
-    "border_blend_mad_grey": _above(0, 255),
+    "border_blend_mad_grey": _above(0, 255), "thin_strip_ratio": Range(0, 1), "switch_rounds": Range(0, 8),
+    "switch_flow_preset": Range(0, 2), "switch_band_px": _above(0, 1024), "switch_sigma_px": _above(0, 256),
+    "switch_max_px": _above(0, 10000), "switch_fade_px": Range(0, 10000), "switch_max_slope": _above(0, 10),
+    "switch_cell_px": Range(1, 64),
     # exposure
     "gain_sigma_g": _above(0, 100), "gain_sigma_n": _above(0, 255), "gain_outlier_fraction": Range(0, 0.99),
     "gain_dark_level": Range(0, 254), "gain_bright_level": _above(0, 255), "gain_knee_ratio": _above(0, 1),
@@ -366,6 +390,7 @@ RANGES: dict[str, Range] = {
     "video_align_lattice_nodes": _above(1, 200), "video_align_seam_px": Range(0, 10000),
     "video_align_seam_weight": Range(1, 1000), "video_align_bend": Range(0, 1000), "video_align_tukey_px": _above(0, 1000),
     "video_align_prior": Range(0, 1000), "video_align_follow": _above(0, 1), "video_align_max_lag_px": _above(0, 10000),
+    "video_steady_follow": _above(0, 1), "video_steady_max_px": Range(0, 10000),
     "video_estimate_lookahead_s": Range(0, 60), "seam_prior_weight": Range(0, 1000), "video_blank_max_std": Range(0, 255),
     "video_seam_band_ratio": _above(0, 1), "video_seam_band_min_px": Range(1, 4096), "video_seam_line_step": Range(1, 64),
     "video_seam_frame_cells": Range(8, 8192), "video_seam_noise": Range(0, 255), "video_seam_still_box_px": Range(1, 64),

@@ -164,14 +164,71 @@ def seam_maps(map_src_canvas: np.ndarray, canvas: Canvas, path: SeamPath, cfg: C
     )
 
 
+def thin_strips(label: np.ndarray, max_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """(source, target): (H, W) bool pixels of a view the panorama shows only in a strip thinner than
+    ``max_px`` along the canvas's edge of what it covers, before the other view takes over: the source
+    a few px beyond the target's top, bottom or far border, the target a few px beyond the warped
+    source's edge. A strip that thin shows nothing whole, only content the switch cuts, and what is
+    left of the parallax shifts it against the other view all along.
+
+    label: (H, W) uint8 the view shown per canvas pixel (``switch_align.shown_labels``: 1 source, 2
+    target, 0 none). Per column from the top and from the bottom, per row from the left and the right:
+    the first run of one view, where the other view follows it directly and it is shorter than max_px
+    (only the first ``ceil(max_px) + 1`` pixels of each line are read: a longer run is no strip).
+    """
+    thin = np.zeros(label.shape, bool)
+    for flip_rows, transpose in ((False, False), (True, False), (False, True), (True, True)):
+        lab = label.T if transpose else label
+        lab = lab[::-1] if flip_rows else lab
+        lines, cols = lab.shape[0], np.arange(lab.shape[1])
+        first = np.argmax(lab > 0, axis=0)
+        view = lab[first, cols]
+        rows = first[None, :] + np.arange(min(int(np.ceil(max_px)) + 1, lines))[:, None]
+        window = np.take_along_axis(lab, np.minimum(rows, lines - 1), axis=0)
+        run = np.cumprod((window == view) & (rows < lines), axis=0).astype(bool)
+        length = run.sum(axis=0)
+        after = lab[np.minimum(first + length, lines - 1), cols]
+        strip = run & ((length < max_px) & (first + length < lines) & (after > 0) & (after != view))[None, :]
+        mask = np.zeros(lab.shape, bool)
+        mask[rows[strip], np.broadcast_to(cols, rows.shape)[strip]] = True
+        mask = mask[::-1] if flip_rows else mask
+        thin |= mask.T if transpose else mask
+    return thin & (label == 1), thin & (label == 2)
+
+
+LEVEL_MIN_GREY = 16.0  # relative offsets: a view's level is taken as at least this (dark rows: no huge gains)
+BLEND_LOG_SPREAD = 0.1  # seam blend as a gain: a row whose log ratio's median absolute deviation is larger ...
+BLEND_LOG_MAX = 0.3  # ... or whose ratio is further than this from 1 (log) shows other content, not an exposure
+BLEND_COLOUR_MAX = 0.1  # seam blend in colour: a channel's log ratio departs from the grey one by at most this
+
+
 @dataclass(frozen=True)
 class SeamOffsets:
     """The seam blend's low-frequency part: per canvas row, grey levels added to each view near the
-    seam (``src``, ``tgt``: (H, C) float32, full at the seam, fading linearly to 0 at ``fade_px``)."""
+    seam (``src``, ``tgt``: (H, C) float32, full at the seam, fading linearly to 0 at ``fade_px``).
+    ``level_src``, ``level_tgt``: (H,) float32 each view's mean grey level next to the seam, where the
+    offsets were measured (None: not measured), for :meth:`relative`."""
 
     src: np.ndarray
     tgt: np.ndarray
     fade_px: float
+    level_src: np.ndarray | None = None
+    level_tgt: np.ndarray | None = None
+
+    def relative(self) -> tuple[np.ndarray, np.ndarray]:
+        """The offsets as relative changes of each view's gain ((H, C) float32 each): the offset over the
+        level it was measured at (at least ``LEVEL_MIN_GREY``), what a ``FrameState`` with ``relative_offsets``
+        applies."""
+        return relative_to(self.src, self.level_src), relative_to(self.tgt, self.level_tgt)
+
+
+def relative_to(offsets: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """Offsets in grey levels as relative gains at ``level`` (per channel, or one per line broadcast
+    against them), float32, within
+    exp(+-``BLEND_LOG_MAX``) - 1: a larger ratio is not an exposure the blend should spread."""
+    level = np.asarray(level)
+    relative = offsets / np.maximum(level if level.ndim == offsets.ndim else level[..., None], LEVEL_MIN_GREY)
+    return np.clip(relative, np.expm1(-BLEND_LOG_MAX), np.expm1(BLEND_LOG_MAX)).astype(np.float32)
 
 
 def running_mean(values: np.ndarray, known: np.ndarray, window: int) -> np.ndarray:
@@ -190,7 +247,15 @@ def running_mean(values: np.ndarray, known: np.ndarray, window: int) -> np.ndarr
 
 def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, cfg: Config) -> SeamOffsets:
     """Offsets that take half the two views' mean difference next to the seam off one side and add it
-    to the other (module docstring); zero when ``cfg.seam_blend_ratio`` is 0.
+    to the other (module docstring), with each view's mean level there; zero when
+    ``cfg.seam_blend_ratio`` is 0. With ``cfg.seam_blend_gain`` it is a ratio: per row the median log
+    ratio of the grey views, from the rows where it is one ratio (``BLEND_LOG_SPREAD``) near 1
+    (``BLEND_LOG_MAX``): elsewhere the views show other things there, not one thing at two exposures,
+    and those rows follow their neighbours. With ``cfg.seam_blend_colour`` each channel's median log
+    ratio departs from the grey one by up to ``BLEND_COLOUR_MAX`` (the views' colours differ smoothly:
+    a sky bluer in one view), else every channel takes the grey one. Each side then moves half of it
+    as a gain: offsets of (exp(-+ r / 2) - 1) x its level, which :meth:`SeamOffsets.relative` turns
+    back into those gains (a gain, not grey levels added: dark texture is not lifted into a haze).
 
     views: the gain-compensated canvas views; seam_x_canvas: (H,) seam x per row.
     """
@@ -198,7 +263,8 @@ def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, 
     channels = views.src.shape[2]
     if cfg.seam_blend_ratio <= 0:
         zeros = np.zeros((height, channels), np.float32)
-        return SeamOffsets(zeros, zeros.copy(), 0.0)
+        level = np.full(height, 255.0, np.float32)
+        return SeamOffsets(zeros, zeros.copy(), 0.0, level, level.copy())
     seam_x = np.asarray(seam_x_canvas, np.float64)
     reach = cfg.seam_blend_strip_px
     # Only the columns within reach of each row's seam: (H, 2 reach + 2) of them, not the whole canvas.
@@ -207,11 +273,37 @@ def seam_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, diag_px: float, 
     cols = np.clip(cols, 0, width - 1)
     rows = np.arange(height)[:, None]
     strip = inside & views.both[rows, cols] & (np.abs(cols - seam_x[:, None]) <= reach)
-    diff = (views.src[rows, cols].astype(np.float32) - views.tgt[rows, cols].astype(np.float32)) * strip[:, :, None]
-    count = strip.sum(axis=1)
-    per_row = diff.sum(axis=1) / np.maximum(count, 1)[:, None]
-    delta = running_mean(per_row, count > 0, cfg.seam_blend_rows).astype(np.float32)
-    return SeamOffsets(-0.5 * delta, 0.5 * delta, float(cfg.seam_blend_ratio * diag_px))
+    src = views.src[rows, cols].astype(np.float32) * strip[:, :, None]
+    tgt = views.tgt[rows, cols].astype(np.float32) * strip[:, :, None]
+    count = np.maximum(strip.sum(axis=1), 1)[:, None]
+    means = np.concatenate([src.sum(axis=1) / count, tgt.sum(axis=1) / count], axis=1)
+    known = strip.any(axis=1)
+    if not cfg.seam_blend_gain:
+        per_row = running_mean(means, known, cfg.seam_blend_rows).astype(np.float32)
+        delta = per_row[:, :channels] - per_row[:, channels:]
+        return SeamOffsets(-0.5 * delta, 0.5 * delta, float(cfg.seam_blend_ratio * diag_px),
+                           per_row[:, :channels].mean(axis=1), per_row[:, channels:].mean(axis=1))
+    # As a gain: the log ratio of the grey views, from the rows where it is one exposure ratio (small
+    # spread, not far from 1); elsewhere the views show other things there (parallax), not measured.
+    ratio = np.log((src.mean(axis=2) + 1.0) / (tgt.mean(axis=2) + 1.0))
+    median, spread = np.zeros(height), np.zeros(height)
+    ratio = np.where(strip, ratio, np.nan)[known]
+    median[known] = np.nanmedian(ratio, axis=1)
+    spread[known] = np.nanmedian(np.abs(ratio - median[known, None]), axis=1)
+    colour = np.zeros((height, channels))
+    if cfg.seam_blend_colour:  # each channel's ratio less the grey one, within BLEND_COLOUR_MAX
+        ratios = np.log((src + 1.0) / (tgt + 1.0))
+        ratios = np.where(strip[:, :, None], ratios, np.nan)[known]
+        colour[known] = np.clip(np.nanmedian(ratios, axis=1) - median[known, None], -BLEND_COLOUR_MAX, BLEND_COLOUR_MAX)
+    known &= (spread <= BLEND_LOG_SPREAD) & (np.abs(median) <= BLEND_LOG_MAX)
+    per_row = running_mean(np.concatenate([means, median[:, None] + colour], axis=1), known, cfg.seam_blend_rows)
+    level_src, level_tgt = per_row[:, :channels].mean(axis=1), per_row[:, channels:2 * channels].mean(axis=1)
+    half = 0.5 * per_row[:, 2 * channels:]
+    # Grey levels at each side's level, so that ``relative`` gives the gains exp(-+ half) - 1 per channel.
+    off_src = (np.exp(-half) - 1.0) * np.maximum(level_src, LEVEL_MIN_GREY)[:, None]
+    off_tgt = (np.exp(half) - 1.0) * np.maximum(level_tgt, LEVEL_MIN_GREY)[:, None]
+    return SeamOffsets(off_src.astype(np.float32), off_tgt.astype(np.float32), float(cfg.seam_blend_ratio * diag_px),
+                       level_src.astype(np.float32), level_tgt.astype(np.float32))
 
 
 @dataclass(frozen=True)
@@ -220,12 +312,21 @@ class BorderOffsets:
     ``lines`` the two borders' y (between the target's first row and the one above it, between its
     last and the one below); ``src``, ``tgt``: (2, W, C) float32 grey levels added to each view per
     canvas column at that border, fading linearly to 0 at ``fade_px`` from it; ``on``: False when
-    off (all zero)."""
+    off (all zero). ``level_src``, ``level_tgt``: (2, W, C) float32 each view's mean level just
+    inside the border (grey in every channel, or each channel's with ``seam_blend_colour``; None: not
+    measured), for :meth:`relative`."""
 
     lines: tuple[float, float]
     src: np.ndarray
     tgt: np.ndarray
     on: bool
+    level_src: np.ndarray | None = None
+    level_tgt: np.ndarray | None = None
+
+    def relative(self) -> tuple[np.ndarray, np.ndarray]:
+        """The offsets as relative changes of each view's gain ((2, W, C) float32 each), as
+        :meth:`SeamOffsets.relative`."""
+        return relative_to(self.src, self.level_src), relative_to(self.tgt, self.level_tgt)
 
 
 def with_seam_offsets(img: np.ndarray, rows: slice, seam_x_canvas: np.ndarray, per_row: np.ndarray,
@@ -237,12 +338,15 @@ def with_seam_offsets(img: np.ndarray, rows: slice, seam_x_canvas: np.ndarray, p
     return img[rows].astype(np.float32) + weight[:, :, None] * per_row[rows, None, :]
 
 
-def block_medians(diff: np.ndarray, used: np.ndarray, block: int, mad_limit: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per block of ``block`` columns of a strip: (centres (K,), medians (K,)) of the channel-mean
-    differences ``diff`` (R, W, C) where ``used`` (R, W) (a brightness residual: the gains took the
-    colour), for the blocks where at least a third of the strip is used
-    and every channel's median absolute deviation of the differences is at most ``mad_limit`` (above it
-    the two views show different things there, not one thing at two exposures)."""
+def block_medians(diff: np.ndarray, used: np.ndarray, block: int, mad_limit: float,
+                  colour: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Per block of ``block`` columns of a strip: (centres (K,), medians (K, C)) of the differences
+    ``diff`` (R, W, C) where ``used`` (R, W): the median of the channel mean in every channel (a
+    brightness residual: the gains took the colour), or with ``colour`` each channel's own median. For
+    the blocks where at least a third of the strip is used and every channel's median absolute
+    deviation of the differences is at most ``mad_limit`` (above it the two views show different
+    things there, not one thing at two exposures)."""
+    channels = diff.shape[2]
     centres, medians = [], []
     for x0 in range(0, diff.shape[1], block):
         mask = used[:, x0:x0 + block]
@@ -252,8 +356,8 @@ def block_medians(diff: np.ndarray, used: np.ndarray, block: int, mad_limit: flo
         if np.median(np.abs(values - np.median(values, axis=0)), axis=0).max() > mad_limit:
             continue
         centres.append(x0 + 0.5 * (mask.shape[1] - 1))
-        medians.append(np.median(values.mean(axis=1)))
-    return np.asarray(centres), np.asarray(medians)
+        medians.append(np.median(values, axis=0) if colour else np.full(channels, np.median(values.mean(axis=1))))
+    return np.asarray(centres), np.asarray(medians).reshape(-1, channels)
 
 
 def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamOffsets, offset_tgt: tuple[float, float],
@@ -265,8 +369,9 @@ def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamO
     to nothing over ``cfg.seam_blend_rows`` columns where the source does not go on.
 
     The difference is measured on the ``cfg.seam_blend_strip_px`` rows just inside the border, after
-    the seam offsets, as the median of each block of ``cfg.seam_blend_rows`` columns, and interpolated
-    between blocks; a block whose views show different things (``block_medians``,
+    the seam offsets, as the median of each block of ``cfg.seam_blend_rows`` columns (of the grey
+    difference, or with ``cfg.seam_blend_colour`` of each channel's, within ``BLEND_COLOUR_MAX`` of the
+    grey one as a ratio), and interpolated between blocks; a block whose views show different things (``block_medians``,
     ``cfg.border_blend_mad_grey``) follows its neighbours. All zero when ``cfg.border_blend`` is off or
     the seam blend is.
 
@@ -278,8 +383,10 @@ def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamO
     oy = int(round(offset_tgt[1]))
     lines = (oy - 0.5, oy + height_tgt - 0.5)
     zeros = np.zeros((2, width, channels), np.float32)
+    levels = np.full((2, 2, width, channels), 255.0, np.float32)  # (view, border, column, channel)
+    colour = cfg.seam_blend_gain and cfg.seam_blend_colour
     if not cfg.border_blend or offsets.fade_px <= 0:
-        return BorderOffsets(lines, zeros, zeros.copy(), False)
+        return BorderOffsets(lines, zeros, zeros.copy(), False, *levels)
     strip = max(1, cfg.seam_blend_strip_px)
     block = max(1, cfg.seam_blend_rows)
     inside_rows = (slice(max(oy, 0), min(oy + strip, height)),
@@ -295,12 +402,34 @@ def border_offsets(views: CanvasViews, seam_x_canvas: np.ndarray, offsets: SeamO
         diff = (with_seam_offsets(views.src, rows, seam_x, offsets.src, offsets.fade_px)
                 - with_seam_offsets(views.tgt, rows, seam_x, offsets.tgt, offsets.fade_px))
         used = shown_tgt & views.valid_src[beyond][None, :]
-        centres, medians = block_medians(diff, used, block, cfg.border_blend_mad_grey)
+        for side, img in enumerate((views.src, views.tgt)):
+            levels[side, k] = column_level(img[rows], used, block, colour)
+        centres, medians = block_medians(diff, used, block, cfg.border_blend_mad_grey, colour)
         seam_at = float(seam_x[rows.start if k == 0 else rows.stop - 1])
         if not len(centres) or not np.isfinite(seam_at):
             continue
         right = centres > seam_at  # at the seam the seam blend has met the views already: the offsets start at 0 there
-        along = np.interp(cols, np.r_[seam_at, centres[right]], np.r_[0.0, medians[right]], left=0.0)
+        along = np.stack([np.interp(cols, np.r_[seam_at, centres[right]], np.r_[0.0, medians[right, c]], left=0.0)
+                          for c in range(channels)], axis=1)
         goes_on = np.convolve(views.valid_src[beyond].astype(np.float64), np.ones(block) / block, "same")
-        delta[k] = (along * goes_on)[:, None]
-    return BorderOffsets(lines, -0.5 * delta, 0.5 * delta, True)
+        if colour:  # each channel within BLEND_COLOUR_MAX (as a ratio) of the grey difference, as the seam's
+            grey = along.mean(axis=1, keepdims=True)
+            limit = BLEND_COLOUR_MAX * levels[:, k].mean(axis=(0, 2))[:, None]
+            along = grey + np.clip(along - grey, -limit, limit)
+        delta[k] = along * goes_on[:, None]
+    return BorderOffsets(lines, -0.5 * delta, 0.5 * delta, True, *levels)
+
+
+def column_level(img: np.ndarray, used: np.ndarray, block: int, colour: bool = False) -> np.ndarray:
+    """(W, C) float32: the mean grey level of a strip (R, W, C) per column where ``used`` (R, W), in
+    every channel, or with ``colour`` each channel's own mean, averaged over ``block`` columns; columns
+    without any used pixel near take the nearest that has one (255 where none has)."""
+    values = img.astype(np.float32)
+    channels = values.shape[2]
+    count = used.sum(axis=0)
+    if not count.any():
+        return np.full((len(count), channels), 255.0, np.float32)
+    mean = (values * used[:, :, None]).sum(axis=0) / np.maximum(count, 1)[:, None]
+    if not colour:
+        mean = np.repeat(mean.mean(axis=1, keepdims=True), channels, axis=1)
+    return running_mean(mean, count > 0, block).astype(np.float32)

@@ -12,8 +12,9 @@ compositor never transposes frames.
 
 Where this departs from the paper (``docs/method.md``; what each departure buys: ``docs/evaluation.md``),
 the paper's version stays one setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
-``seam_model="paper"`` (steps 8-9), ``gain_model="none"``, ``seam_blend_ratio=0``, ``border_blend=False``,
-``transition_px=24``.
+``seam_model="paper"`` (steps 8-9), ``thin_strip_ratio=0``, ``gain_model="none"``, ``seam_blend_ratio=0``,
+``border_blend=False``, ``transition_px=24``. Switch alignment (``switch_align=True``), no step of the paper,
+is off by default: it costs more than the stitch's time allows.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from __future__ import annotations
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -39,11 +40,13 @@ from .global_affine import GlobalAffine, check_views_alike, fit_global_affine, n
 from .imageio import check_image, described
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
-from .partition import BorderOffsets, SeamMaps, SeamOffsets, border_offsets, seam_maps, seam_offsets
+from .partition import (BorderOffsets, SeamMaps, SeamOffsets, border_offsets, seam_maps, seam_offsets,
+                        thin_strips)
 from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .seam_path import SeamPath, seam_line
-from .warp_map import canvas_views, forward_points, source_map_canvas
+from .switch_align import aligned_source_map, shown_labels, view_weights
+from .warp_map import CanvasViews, canvas_views, forward_points, source_map_canvas
 from .zone import Zone, adequate_zone
 from sena_warp.kernels import runtime
 
@@ -93,7 +96,8 @@ class Warp:
 class Seam:
     """Steps 7-9 in the working frame (positions and maps on the working canvas): the zone, the seam's
     path and anchors, the seam maps, each view's gains and the seam blend's offsets (along the seam and
-    along the target's borders beyond its ends)."""
+    along the target's borders beyond its ends). ``map_cut_canvas``: (H, W, 2) float32 the source map
+    they ran on (step 6's, or step 6's aligned at the switches: ``switch_align``)."""
 
     zone: Zone
     path: SeamPath
@@ -101,6 +105,7 @@ class Seam:
     gains: Gains
     offsets: SeamOffsets
     border: BorderOffsets
+    map_cut_canvas: np.ndarray
 
     @property
     def anchors_src_canvas(self) -> np.ndarray:
@@ -185,30 +190,62 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndar
     with each view's gains and the seam blend; ``cfg.device`` resolved. ``matches_*``: every match
     (N, 2), working-frame source / target pixels: where its neighbours support it, the seam does not
     separate its two copies. ``prior_seam_tgt``: a seam to stay near, x per target row in target
-    pixels (NaN: none), e.g. the current seam of a video."""
-    canvas = warp.overlap.canvas
+    pixels (NaN: none), e.g. the current seam of a video.
+
+    With ``cfg.switch_align`` the source is then aligned to the target wherever that stitch switches
+    views (``switch_align``) and steps 7-9 run again on the aligned source, ``cfg.switch_rounds`` times.
+    """
     supported = neighbour_supported(matches_src, matches_tgt, cfg.support_neighbours, cfg.support_tol_px,
                                     cfg.support_min)
+    prior = _prior_on_canvas(prior_seam_tgt, warp.overlap.canvas)
+    copies = matches_src[supported], matches_tgt[supported]
+    seam, views = cut_seam(img_src, img_tgt, *copies, warp, warp.map_src_canvas, cfg, clock, prior)
+    for _ in range(cfg.switch_rounds if cfg.switch_align else 0):
+        with clock("switch_align"):
+            map_aligned = aligned_source_map(seam.map_cut_canvas, *views.grey(), views.valid_src, views.valid_tgt,
+                                             seam.maps.alpha_canvas, cfg)
+        seam, views = cut_seam(img_src, img_tgt, *copies, warp, map_aligned, cfg, clock, prior, seam.gains)
+    return seam
+
+
+def cut_seam(img_src: np.ndarray, img_tgt: np.ndarray, copies_src: np.ndarray, copies_tgt: np.ndarray, warp: Warp,
+             map_src_canvas: np.ndarray, cfg: Config, clock: StageClock, prior_x_canvas: np.ndarray | None,
+             gains: Gains | None = None) -> tuple[Seam, CanvasViews]:
+    """Steps 7-9 on the source map ``map_src_canvas`` (H, W, 2) (step 6's, or aligned at the switches):
+    the seam runs where that source and the target agree, the seam maps resample that map.
+    ``copies_*``: the matches whose two copies the seam does not separate (N, 2), working-frame source /
+    target pixels; ``prior_x_canvas``: ``seam_line``'s; ``gains``: the views' gains, measured here when
+    None (a source aligned locally keeps the gains measured before). Returns the seam and the views it
+    was cut on, with their gains, where the panorama shows them (thin strips left out)."""
+    canvas = warp.overlap.canvas
+    affine = warp.glob.affine_src_to_tgt
     with clock("forward_points"):
-        pts_src_canvas = forward_points(warp.map_src_canvas, warp.glob.affine_src_to_tgt, canvas, warp.inliers_src, cfg)
-        copies_src_canvas = forward_points(warp.map_src_canvas, warp.glob.affine_src_to_tgt, canvas, matches_src[supported], cfg)
+        pts_src_canvas = forward_points(map_src_canvas, affine, canvas, warp.inliers_src, cfg)
+        copies_src_canvas = forward_points(map_src_canvas, affine, canvas, copies_src, cfg)
     pts_tgt_canvas = canvas.tgt_to_canvas(warp.inliers_tgt)
     with clock("views"):
-        views = canvas_views(img_src, img_tgt, warp.map_src_canvas, canvas, cfg)
+        views = canvas_views(img_src, img_tgt, map_src_canvas, canvas, cfg)
     with clock("gains"):
-        gains = view_gains(views, cfg)
+        gains = view_gains(views, cfg) if gains is None else gains
         views = compensated_views(views, gains)
     with clock("zone"):
         zone = adequate_zone(pts_src_canvas, pts_tgt_canvas, views.both, *views.grey(), cfg)
     with clock("chain"):
         path = seam_line(zone, views, pts_src_canvas, pts_tgt_canvas, copies_src_canvas,
-                         canvas.tgt_to_canvas(matches_tgt[supported]), cfg, _prior_on_canvas(prior_seam_tgt, canvas))
+                         canvas.tgt_to_canvas(copies_tgt), cfg, prior_x_canvas)
     with clock("seam_maps"):
-        maps = seam_maps(warp.map_src_canvas, canvas, path, cfg)
+        maps = seam_maps(map_src_canvas, canvas, path, cfg)
+        if cfg.thin_strip_ratio > 0:  # left out: a view shown only in a thin strip where the other takes over
+            label = shown_labels(*view_weights(maps.alpha_canvas, views.valid_src, views.valid_tgt))
+            thin_src, thin_tgt = thin_strips(label, cfg.thin_strip_ratio * _diagonal_px(img_src, img_tgt))
+            nan = np.float32(np.nan)
+            maps = replace(maps, map_src_canvas=np.where(thin_src[..., None], nan, maps.map_src_canvas),
+                           map_tgt_canvas=np.where(thin_tgt[..., None], nan, maps.map_tgt_canvas))
+            views = replace(views, valid_src=views.valid_src & ~thin_src, valid_tgt=views.valid_tgt & ~thin_tgt)
     with clock("seam_blend"):
         offsets = seam_offsets(views, path.seam_x_canvas, _diagonal_px(img_src, img_tgt), cfg)
         border = border_offsets(views, path.seam_x_canvas, offsets, canvas.offset_tgt, img_tgt.shape[0], cfg)
-    return Seam(zone, path, maps, gains, offsets, border)
+    return Seam(zone, path, maps, gains, offsets, border, map_src_canvas), views
 
 
 def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
@@ -255,22 +292,24 @@ def seam_layout(seam: Seam, rig: Rig, cfg: Config, band_px: float | None = None)
 def panorama_plan(maps: StitchMaps, shapes: tuple[tuple[int, ...], tuple[int, ...]], cfg: Config,
                   transparent: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> CompositePlan:
     """The compositing plan for BGR images of the two inputs of (H, W, C) ``shapes`` (source, target):
-    the maps, the seam and the border blend. ``transparent``: per input (a, b), (H, W) bool pixels it
-    must not sample (``without_transparent``)."""
+    the maps, the seam and the border blend (relative changes of the gains with ``cfg.seam_blend_gain``).
+    ``transparent``: per input (a, b), (H, W) bool pixels it must not sample (``without_transparent``)."""
     transparent_src, transparent_tgt = maps.rig.pick(*transparent)
     border = maps.seam.border
-    blend = BorderBlend(border.lines, border.src, border.tgt) if border.on else None
+    offsets = border.relative() if cfg.seam_blend_gain else (border.src, border.tgt)
+    blend = BorderBlend(border.lines, *offsets) if border.on else None
     return composite_plan(without_transparent(maps.map_src_input, transparent_src),
                           without_transparent(maps.map_tgt_input, transparent_tgt), maps.seam_input, shapes, cfg,
                           border=blend)
 
 
-def panorama_state(maps: StitchMaps) -> FrameState:
+def panorama_state(maps: StitchMaps, cfg: Config) -> FrameState:
     """What the panorama is composited with: the estimate's seam, both views' gains and the seam blend's
-    offsets."""
+    offsets (with ``cfg.seam_blend_gain`` as relative gains: a smooth gain changes no colour or contrast)."""
     gains, offsets = maps.seam.gains, maps.seam.offsets
+    relative = cfg.seam_blend_gain
     return FrameState(maps.seam_input.positions, (gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt),
-                      (offsets.src, offsets.tgt))
+                      offsets.relative() if relative else (offsets.src, offsets.tgt), relative)
 
 
 def stitch_images(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",
@@ -308,7 +347,7 @@ def panorama_image(img_a: np.ndarray, img_b: np.ndarray, maps: StitchMaps, cfg: 
     neither covers the canvas); ``transparent`` as :func:`stitch_images`'."""
     img_src, img_tgt = maps.rig.pick(img_a, img_b)
     plan = panorama_plan(maps, (img_src.shape, img_tgt.shape), cfg, transparent)
-    return np.dstack([composite_image(img_src, img_tgt, plan, panorama_state(maps), cfg), coverage(plan)])
+    return np.dstack([composite_image(img_src, img_tgt, plan, panorama_state(maps, cfg), cfg), coverage(plan)])
 
 
 def _prior_on_canvas(prior_seam_tgt: np.ndarray | None, canvas) -> np.ndarray | None:

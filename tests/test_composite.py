@@ -67,8 +67,7 @@ def reference(plan, state: FrameState, img_src, img_tgt, map_src, map_tgt, cfg: 
     rows = plan.layout.lines_are_rows
     off_src, off_tgt = (o[:, None, :] if rows else o[None, :, :] for o in (off_src, off_tgt))
     knee, white = plan.knee or (math.inf, math.inf)
-    src = tone_curve(v_src, gain_src, bias_src, knee, white) + lf[..., None] * off_src
-    tgt = tone_curve(v_tgt, gain_tgt, bias_tgt, knee, white) + lf[..., None] * off_tgt
+    total_src, total_tgt = lf[..., None] * off_src, lf[..., None] * off_tgt
     border = plan.border_source
     if border is not None:
         height, width = alpha.shape
@@ -76,7 +75,13 @@ def reference(plan, state: FrameState, img_src, img_tgt, map_src, map_tgt, cfg: 
         for k in range(2):
             weight = np.clip(1 - np.abs(line - border.lines[k]) / plan.layout.lf_px, 0, None)[..., None]
             along_src, along_tgt = (b[k][None, :, :] if rows else b[k][:, None, :] for b in (border.src, border.tgt))
-            src, tgt = src + weight * along_src, tgt + weight * along_tgt
+            total_src, total_tgt = total_src + weight * along_src, total_tgt + weight * along_tgt
+    if state.relative_offsets:  # a relative change of the gain, before the knee
+        src = tone_curve(v_src, gain_src * (1 + total_src), bias_src, knee, white)
+        tgt = tone_curve(v_tgt, gain_tgt * (1 + total_tgt), bias_tgt, knee, white)
+    else:
+        src = tone_curve(v_src, gain_src, bias_src, knee, white) + total_src
+        tgt = tone_curve(v_tgt, gain_tgt, bias_tgt, knee, white) + total_tgt
     a = np.where(ok_src, np.where(ok_tgt, alpha, 1.0), 0.0)[..., None]
     covered = ok_src | ok_tgt
     return np.where(covered[..., None], np.clip(a * src + (1 - a) * tgt, 0, 255), 0.0), covered
@@ -156,6 +161,37 @@ def test_border_offsets_fade_from_both_borders_on_each_side(scene, warp_device):
         near = np.abs(np.arange(lines) - 10.5) < 0.5 * seam.lf_px
         changed = np.abs(out.astype(int) - plain.astype(int)).max(axis=2)
         assert (changed[near] if lines_are_rows else changed[:, near]).max() >= 4  # the offsets are there to see
+
+
+@pytest.mark.parametrize("lines_are_rows", [True, False])
+def test_relative_offsets_are_a_gain_that_keeps_white_white(scene, lines_are_rows, warp_device):  # noqa: F811
+    """With ``relative_offsets`` the seam's and borders' offsets scale each side's gain (before its knee):
+    the kernel matches the reference, white squares stay white where the offsets darken their side by
+    20 %, and the mid-tones between them come out about 20 % darker than without the offsets."""
+    img_src, img_tgt, map_src, map_tgt, _ = scene
+    rows, cols = np.indices(img_src.shape[:2])
+    img_src = np.where((((rows // 24) + (cols // 24)) % 2 == 0)[..., None], np.uint8(255), img_src)  # white squares
+    seam = layout(scene, lines_are_rows)
+    cfg = Config(device=warp_device, cpu_threads=2)
+    gains = ([1.1, 0.9, 1.0], [0.0, 0.0, 0.0], [0.95, 1.05, 1.0], [0.0, 0.0, 0.0])
+    lines = len(seam.positions)
+    offsets = (np.full((lines, 3), -0.2, np.float32), np.full((lines, 3), 0.1, np.float32))
+    state = FrameState(seam.positions, gains, offsets, relative_offsets=True)
+    positions = map_src.shape[1] if lines_are_rows else map_src.shape[0]
+    along = np.linspace(-0.1, 0.1, positions, dtype=np.float32)[:, None] * np.ones(3, np.float32)
+    border = BorderBlend((10.5, lines - 20.5), np.stack([along, -along]), np.stack([-along, along]))
+    plan = plan_for(scene, seam, cfg, border=border)
+    out = composite_image(img_src, img_tgt, plan, state, cfg)
+    expected, covered = reference(plan, state, img_src, img_tgt, map_src, map_tgt, cfg)
+    assert np.abs(out.astype(np.float64) - expected).max() <= 1.0
+    white_src, _ = remap_reference(img_src, map_src)
+    alpha, lf = seam_weights(state.seam, plan.layout, plan.canvas_shape, cfg)
+    shown_white = (white_src.min(axis=2) >= 254.5) & (alpha > 0.999) & (lf > 0.3) & covered
+    assert shown_white.sum() > 50 and out[shown_white].min() >= 254  # fixed point: within a level
+    darkened = (white_src.max(axis=2) < 150) & (white_src.min(axis=2) > 40) & (alpha > 0.999) & (lf > 0.8) & covered
+    plain = composite_image(img_src, img_tgt, plan_for(scene, seam, cfg), FrameState(seam.positions, gains), cfg)
+    ratio = (out[darkened].astype(np.float64) + 0.5) / (plain[darkened] + 0.5)
+    assert darkened.sum() > 50 and 0.7 < np.median(ratio) < 0.9
 
 
 @pytest.mark.parametrize("device", DEVICES)

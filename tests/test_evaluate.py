@@ -65,6 +65,22 @@ def test_sena_is_measured_against_its_own_affine_on_real_pairs(evaluated):
     assert table["udisd_test_000001", "opencv_panorama"].ok and table["udisd_test_000001", "opencv_panorama"].psnr_db > 12
 
 
+def test_sena_runs_carry_the_dense_figures(evaluated):
+    """Every SENA run of a stitched pair has issue 35's figures, the same for a b and b a (one panorama),
+    and the summary lists them per pair."""
+    _, out, table = evaluated
+    summary = (out / "summary.md").read_text()
+    assert "## Dense figures" in summary
+    for pair in ("graf_gt", "udisd_test_000001"):
+        sena, swapped = table[pair, "sena"], table[pair, "sena_ba"]
+        assert sena.seam_misalign_median_px <= sena.seam_misalign_p95_px < 20
+        assert 0 <= sena.doubled_pct < 5 and 0 <= sena.lost_pct < 5
+        assert 0 < sena.tone_spread_plain_pct <= sena.tone_spread_pct < 30
+        assert sena.seam_misalign_p95_px == pytest.approx(swapped.seam_misalign_p95_px, abs=1e-6)
+        assert sena.tone_spread_pct == pytest.approx(swapped.tone_spread_pct, abs=1e-6)
+        assert f"| {pair} | sena | {sena.seam_misalign_median_px:.2f} / {sena.seam_misalign_p95_px:.2f} |" in summary
+
+
 def test_failures_are_recorded_with_their_reason_and_the_run_goes_on(evaluated):
     _, _, table = evaluated
     assert all(not table["broken", m].ok and "b.jpg" in table["broken", m].error for m in METHODS)

@@ -10,7 +10,8 @@ from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.evaluation.metrics import anchor_residuals_px, transition_mad
 from sena_warp.imageio import read_image
-from sena_warp.partition import SeamOffsets, border_offsets, seam_maps, seam_offsets, seam_rows, smooth_curve
+from sena_warp.partition import (BLEND_COLOUR_MAX, SeamOffsets, border_offsets, seam_maps, seam_offsets, seam_rows, smooth_curve,
+                                 thin_strips)
 from sena_warp.seam_path import straight_path
 from sena_warp.warp_map import CanvasViews
 
@@ -55,17 +56,66 @@ def test_smooth_correction_follows_the_anchors_without_kinks():
 
 
 def test_seam_offsets_meet_halfway_and_vanish_when_off():
+    """Views 110 and 100 by the seam meet halfway: in grey levels with ``seam_blend_gain`` off, in ratio
+    with it on, where rows whose views differ by a ratio no exposure explains follow their neighbours."""
     height, width = 60, 100
     src = np.full((height, width, 3), 110, np.uint8)
     tgt = np.full((height, width, 3), 100, np.uint8)
     valid = np.ones((height, width), bool)
     views = CanvasViews(src, tgt, valid, valid)
-    offsets = seam_offsets(views, np.full(height, 50.0), 500.0, Config())
+    offsets = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_gain=False))
     np.testing.assert_allclose(offsets.src, -5.0, atol=1e-5)
     np.testing.assert_allclose(offsets.tgt, 5.0, atol=1e-5)
     assert offsets.fade_px == pytest.approx(Config().seam_blend_ratio * 500.0)
+    relative_src, relative_tgt = seam_offsets(views, np.full(height, 50.0), 500.0, Config()).relative()
+    met = np.sqrt(111.0 * 101.0) - 1.0  # as gains the two meet at their geometric mean
+    np.testing.assert_allclose(110.0 * (1.0 + relative_src), met, atol=0.05)
+    np.testing.assert_allclose(100.0 * (1.0 + relative_tgt), met, atol=0.05)
+    src[30:], tgt[30:] = 40, 120  # other content in the lower half: a ratio of 3 is not an exposure
+    relative_src, _ = seam_offsets(CanvasViews(src, tgt, valid, valid), np.full(height, 50.0), 500.0, Config()).relative()
+    np.testing.assert_allclose(relative_src[45:], relative_src[:15], atol=1e-6)
     off = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_ratio=0.0))
     assert np.all(off.src == 0) and np.all(off.tgt == 0) and off.fade_px == 0
+
+
+def test_seam_offsets_as_a_gain_are_relative_to_the_level_they_were_measured_at_per_channel_or_grey():
+    """A source brighter than the target by (20, 10, 0) levels per channel at levels 120 / 110 / 100:
+    with ``seam_blend_gain`` each side moves half way in ratio; per channel with ``seam_blend_colour``
+    (each channel meets the other view's at the geometric mean), else the same gain in every channel
+    (the grey levels 110 and 100 meet near 105); without ``seam_blend_gain``, per channel in grey levels."""
+    height, width = 60, 100
+    src = np.tile(np.uint8([120, 110, 100]), (height, width, 1))
+    tgt = np.tile(np.uint8([100, 100, 100]), (height, width, 1))
+    valid = np.ones((height, width), bool)
+    views = CanvasViews(src, tgt, valid, valid)
+    relative_src, relative_tgt = seam_offsets(views, np.full(height, 50.0), 500.0, Config()).relative()
+    met = np.sqrt(np.float32([121.0, 111.0, 101.0]) * 101.0) - 1.0
+    np.testing.assert_allclose(np.float32([120, 110, 100]) * (1.0 + relative_src), met[None, :].repeat(height, 0), atol=0.1)
+    np.testing.assert_allclose(100.0 * (1.0 + relative_tgt), met[None, :].repeat(height, 0), atol=0.1)
+    offsets = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_colour=False))
+    np.testing.assert_allclose(offsets.src, -5.0, atol=0.1)
+    np.testing.assert_allclose(offsets.tgt, 5.0, atol=0.2)
+    relative_src, relative_tgt = offsets.relative()
+    assert np.ptp(relative_src) < 1e-6 and np.ptp(relative_tgt) < 1e-6  # one gain for all channels
+    np.testing.assert_allclose(110.0 * (1.0 + relative_src), 100.0 * (1.0 + relative_tgt), atol=0.1)
+    per_channel = seam_offsets(views, np.full(height, 50.0), 500.0, Config(seam_blend_gain=False))
+    np.testing.assert_allclose(per_channel.src[0], [-10.0, -5.0, 0.0], atol=1e-4)
+
+
+def test_a_colour_difference_at_the_seam_is_blended_only_up_to_its_limit():
+    """Blue 60 % stronger in the source than in the target while green and red agree: the seam blend
+    takes the grey ratio and each channel at most ``BLEND_COLOUR_MAX`` (in log) away from it, so a
+    colour the views disagree about that much (other content) is not spread over the panorama."""
+    height, width = 60, 100
+    src = np.tile(np.uint8([160, 100, 100]), (height, width, 1))
+    tgt = np.full((height, width, 3), 100, np.uint8)
+    valid = np.ones((height, width), bool)
+    relative_src, relative_tgt = seam_offsets(CanvasViews(src, tgt, valid, valid), np.full(height, 50.0), 500.0,
+                                              Config()).relative()
+    grey = np.log(121.0 / 101.0)
+    blended = np.log((1.0 + relative_tgt) / (1.0 + relative_src))  # the log ratio the blend takes off
+    np.testing.assert_allclose(blended[:, 0], grey + BLEND_COLOUR_MAX, atol=1e-3)
+    np.testing.assert_allclose(blended[:, 1:], grey - BLEND_COLOUR_MAX, atol=1e-3)
 
 
 def test_seam_maps_alpha_and_target_map():
@@ -174,8 +224,55 @@ def test_border_offsets_meet_halfway_across_the_targets_borders_and_leave_other_
     for k in range(2):
         np.testing.assert_allclose(border.src[k, inside], -5.0, atol=1.0)
         np.testing.assert_allclose(border.tgt[k, inside], 5.0, atol=1.0)
+    grey = img.astype(np.float32).mean(axis=2)
+    for k, rows in enumerate((slice(100, 112), slice(388, 400))):  # the level each side was measured at
+        assert border.level_src[k, inside].mean() == pytest.approx(grey[rows, inside].mean(), abs=2.0)
+        assert border.level_tgt[k, inside].mean() == pytest.approx(grey[rows, inside].mean() - 10.0, abs=2.0)
     other = border_offsets(_border_views(img, 100, 300, 150, img[::-1]), seam_x, none, (150.0, 100.0), 300, cfg)
     assert np.abs(other.src).max() == 0 and np.abs(other.tgt).max() == 0
     off = border_offsets(_border_views(img, 100, 300, 150, darker), seam_x, none, (150.0, 100.0), 300,
                          cfg.replace(border_blend=False))
     assert not off.on and np.abs(off.tgt).max() == 0
+
+
+def test_border_offsets_take_a_colour_difference_per_channel_or_as_grey(bundled_dir):
+    """The target's blue 8 levels lower inside rows 100-399 right of x 150: with ``seam_blend_colour`` the
+    border blend takes half of it off the source's blue alone; without it, a third of that in every
+    channel (the grey difference)."""
+    img = read_image(bundled_dir / "udisd_test_000001" / "a.jpg")
+    height, width = img.shape[:2]
+    seam_x = np.full(height, 120.0, np.float32)
+    zero = np.zeros((height, 3), np.float32)
+    none = SeamOffsets(zero, zero.copy(), 60.0)
+    bluer = img.astype(np.int16)
+    bluer[:, :, 0] -= 8
+    bluer = np.clip(bluer, 0, 255).astype(np.uint8)
+    views = _border_views(img, 100, 300, 150, bluer)
+    inside = slice(200, width - 20)
+    colour = border_offsets(views, seam_x, none, (150.0, 100.0), 300, Config(device=DEVICE))
+    grey = border_offsets(views, seam_x, none, (150.0, 100.0), 300, Config(device=DEVICE, seam_blend_colour=False))
+    for k in range(2):
+        np.testing.assert_allclose(colour.src[k, inside, 0], -4.0, atol=1.0)
+        np.testing.assert_allclose(colour.src[k, inside, 1:], 0.0, atol=0.5)
+        np.testing.assert_allclose(grey.src[k, inside], -4.0 / 3.0, atol=0.5)
+
+
+def test_thin_strips_of_either_view_where_the_other_takes_over_are_found():
+    """A 100 x 160 canvas: the target shown at rows 20-79, columns 61-139 (right of a seam down x 60), the
+    source elsewhere where it goes: left of the seam from row 3 (so the target's 2 rows above it, columns
+    40-60, are a thin strip of the target), 5 rows above the target up to column 99 and 20 rows from
+    there, 3 rows below it, 4 columns right of it. With 12 px as the limit the 2-row target strip, the
+    5-row, 3-row and 4-column source strips are thin; the 20-row part and the source left of the target
+    (where nothing takes over) are not."""
+    label = np.zeros((100, 160), np.uint8)
+    label[15:83, :144] = 1
+    label[0:20, 100:144] = 1
+    label[20:80, 61:140] = 2
+    label[3:15, :61] = 1  # left of the seam the source starts at row 3 ...
+    label[0:3, 40:61] = 2  # ... with the target above its top edge there
+    thin_src, thin_tgt = thin_strips(label, 12.0)
+    assert thin_src[15:20, 61:100].all() and not thin_src[:20, 100:140].any()
+    assert thin_src[80:83, 61:140].all() and thin_src[20:80, 140:144].all()
+    assert not thin_src[:, :61].any()
+    assert thin_src.sum() == 5 * 39 + 3 * 79 + 60 * 4
+    assert thin_tgt[0:3, 40:61].all() and thin_tgt.sum() == 3 * 21

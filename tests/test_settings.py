@@ -93,3 +93,35 @@ def test_threads_reach_every_launch_of_a_video_stitch(bundled_dir, tmp_path, mon
             "coarse_masks_kernel", "band_cost_kernel", "strip_mean_kernel", "frame_runs_kernel", "map_change_kernel"}
     assert {(device, threads) for key, device, threads in seen if key not in band} == {("cpu", THREADS)}
     assert {(device, threads) for key, device, threads in seen if key in band} == {("cpu", runtime.BAND_THREADS)}
+
+
+@pytest.mark.parametrize("changes, aligned", [(dict(), 0), (dict(switch_align=True, switch_rounds=1), 1),
+                                              (dict(switch_align=True), 2)])
+def test_switch_settings_reach_the_seam_stage(udisd_pair, monkeypatch, changes, aligned):
+    """``switch_align`` and ``switch_rounds`` decide how often the source is aligned at the switches (the
+    aligned map's kernel launches) and the seam cut again; the cut uses the aligned map."""
+    seen = launches(monkeypatch)
+    maps = stitch.estimate_maps(*udisd_pair, Config(device="cpu", **changes))
+    assert sum("displaced_map" in key for key, _, _ in seen) == aligned
+    moved = np.abs(maps.seam.map_cut_canvas - maps.warp.map_src_canvas).max()
+    assert (moved > 0.1) == (aligned > 0)
+
+
+@pytest.mark.parametrize("gain", [True, False])
+def test_seam_blend_gain_reaches_the_compositor(udisd_pair, monkeypatch, gain):
+    """``seam_blend_gain``: the panorama is composited with the seam blend as relative gains (or grey
+    levels), and the offsets it is given are those (a few % against a few levels)."""
+    states = []
+    real = stitch.composite_image
+
+    def spy(img_src, img_tgt, plan, state, cfg, *args):
+        states.append(state)
+        return real(img_src, img_tgt, plan, state, cfg, *args)
+
+    monkeypatch.setattr(stitch, "composite_image", spy)
+    pano = stitch.stitch_images(*udisd_pair, Config(device="cpu", seam_blend_gain=gain))
+    state = states[-1]
+    assert state.relative_offsets is gain
+    applied = np.abs(state.offsets[0]).max()
+    assert applied == pytest.approx(np.abs(pano.maps.seam.offsets.relative()[0] if gain else pano.maps.seam.offsets.src).max(),
+                                    rel=1e-3, abs=1e-5)

@@ -183,9 +183,11 @@ def test_moving_rig_aligned_every_frame(bundled_dir, tmp_path):
     # of 1.02 (0 held): the warp follows the rig, and some of its measurement's noise.
     assert fig["misalignment_px"]["median"] < 1.0
     assert 0.0 < fig["stability"]["value"] < 3.0
-    # The warped source's footprint moves a little every frame: the uncovered share changes, smoothly
-    # (measured 0.06 % of the canvas a frame at most, of 1.8-2.2 %).
-    assert 0.0 < fig["uncovered_pct"]["largest_change"] < 0.5
+    # The warped source's footprint moves a little every frame and the output's window on the canvas
+    # follows the rig (``steady.py``): the uncovered share changes, smoothly (measured 0.62 % of the
+    # output a frame at most, the black band at the edge of an output 270 px wide; 0.06 % with the
+    # window held still).
+    assert 0.0 < fig["uncovered_pct"]["largest_change"] <= 1.0
 
 
 def test_sena_warp_video_figures_go_into_the_report(bundled_dir, tmp_path, warp_device, capfd):

@@ -320,9 +320,11 @@ class LagBoundedFilter:
         self.value = np.clip(value, measured - self.max_lag, measured + self.max_lag)
         return self.value
 
-    def reset(self, value: np.ndarray) -> None:
-        """Hold ``value`` from now on, at rest (a new key map's correction)."""
-        self.value, self._velocity = np.asarray(value, np.float64).copy(), np.zeros_like(value, np.float64)
+    def reset(self, value: np.ndarray, velocity: np.ndarray | None = None) -> None:
+        """Hold ``value`` from now on, at rest (a new key map's correction) or moving by ``velocity`` a
+        measurement."""
+        self.value = np.asarray(value, np.float64).copy()
+        self._velocity = np.zeros_like(self.value) if velocity is None else np.asarray(velocity, np.float64).copy()
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,9 @@ the seam band's difference and, on a static plan, the object band's (the whole o
 cells) come down together in one small block (:meth:`DeviceFrame.band`); the frame's seam and
 seam-blend offsets go up in one small block, with where the next frame's seam band lies, and both
 passes are composited, then the output planes come down in one block for the encoder
-(:meth:`DeviceFrame.composite`). Nothing in a frame waits for the device but those two downloads.
+(:meth:`DeviceFrame.composite`). A moving rig's output is a window on the composited canvas
+(``steady.py``): the output planes are cut out of the canvas's on the device (``kernels/shift.py``) and
+those come down instead. Nothing in a frame waits for the device but those two downloads.
 """
 
 from __future__ import annotations
@@ -23,8 +25,9 @@ import warp as wp
 from ..composite import (CompositePlan, FrameArrays, FrameState, band_difference, composite, composite_plan,
                          fixed_point, kernel_gains, with_runs)
 from ..config import Config
-from sena_warp.kernels import transfer
+from sena_warp.kernels import runtime, transfer
 from sena_warp.kernels.composite import BandCells, Gains, SeamState
+from sena_warp.kernels.shift import shifted_plane_kernel
 from .frame_objects import ObjectGrid
 from .frame_seam import BandFrame, BandGrid, BandPlace
 from .maps import BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps
@@ -128,13 +131,14 @@ class BandBlock:
 class DeviceFrame:
     """The device buffers of frames whose Y planes have (rows, cols) ``shapes`` (source, target),
     composited by plans of the fixed canvas (``canvas_shape`` (H, W), even) with the per-frame seam's
-    band ``grid``; on ``cfg.device``.
+    band ``grid``, shown as (H, W) ``output_shape`` windows on it (None: the output is the canvas); on
+    ``cfg.device``.
 
     Per frame: :meth:`load`, :meth:`band`, :meth:`composite` (:meth:`set_seams`, :meth:`composite_pass` for
     each pass, the download), in that order."""
 
     def __init__(self, shapes: tuple[tuple[int, int], tuple[int, int]], canvas_shape: tuple[int, int],
-                 grid: BandGrid, cfg: Config):
+                 output_shape: tuple[int, int] | None, grid: BandGrid, cfg: Config):
         self._cfg = cfg
         self.shapes = tuple(tuple(shape[:2]) for shape in shapes)
         device = cfg.device
@@ -146,6 +150,9 @@ class DeviceFrame:
             "uv_src": ((crows_s, ccols_s, 2), np.uint8), "uv_tgt": ((crows_t, ccols_t, 2), np.uint8)}, device, "planes")
         self._out = transfer.Staged({"y": ((height, width), np.uint8),
                                      "uv": ((height // 2, width // 2, 2), np.uint8)}, device, "output")
+        self._shown = None if output_shape is None else transfer.Staged(
+            {"y": (tuple(output_shape), np.uint8), "uv": ((output_shape[0] // 2, output_shape[1] // 2, 2), np.uint8)},
+            device, "output")
         self._grid = grid
         self._bands: tuple[ObjectGrid | None, BandBlock] | None = None  # made with the object grid it holds
         self._seam: transfer.Staged | None = None  # made with the first plan: its lines
@@ -214,17 +221,43 @@ class DeviceFrame:
         return self._seam
 
     def composite(self, plan: FramePlan, luma: FrameState, chroma: FrameState, gains: tuple[Gains, Gains],
-                  next_band: BandPlace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  next_band: BandPlace, window: np.ndarray | None = None, keep_canvas: bool = False
+                  ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """The loaded pair composited by ``plan`` with each pass's state (``luma`` with the seam blend's
-        offsets, ``chroma`` without) and ``gains`` (:meth:`gains`): the output's (y, u, v) planes, new
-        arrays (one upload of the seams, with the cells of the next frame's seam band at ``next_band``;
-        one download of the planes)."""
+        offsets, ``chroma`` without) and ``gains`` (:meth:`gains`): (output, canvas) (y, u, v) planes, new
+        arrays (one upload of the seams, with the cells of the next frame's seam band at ``next_band``; one
+        download of the planes). The output is the canvas, or with ``window`` (x, y) the output-shaped
+        window there (``kernels/shift.py``; the canvas then comes down too only with ``keep_canvas``, else
+        the canvas returned is the output)."""
         self.set_seams(plan, luma, chroma, next_band.x0)
         self.composite_pass("luma", plan.luma, gains[0])
         self.composite_pass("chroma", plan.chroma, gains[1])
-        self._out.download()
-        uv = self._out.host["uv"]
-        return self._out.host["y"].copy(), uv[:, :, 0].copy(), uv[:, :, 1].copy()
+        if window is None:
+            canvas = self._planes_of(self._out)
+            return canvas, canvas
+        self._shift(window)
+        shown = self._planes_of(self._shown)
+        return shown, (self._planes_of(self._out) if keep_canvas else shown)
+
+    def _shift(self, window: np.ndarray) -> None:
+        """The output planes, the canvas's at ``window`` (x, y) luma px (chroma: half that), on the device."""
+        out, shown = self._out.device, self._shown.device
+        x, y = (float(v) for v in window)
+        for name, origin, fill in (("y", wp.vec2(x, y), wp.vec2i(LUMA_FILL[0], 0)),
+                                   ("uv", wp.vec2(0.5 * x, 0.5 * y), wp.vec2i(*CHROMA_FILL))):
+            channels = 1 if name == "y" else 2
+            rows, cols = self._shown.host[name].shape[:2]
+            canvas = out[name].reshape((*self._out.host[name].shape[:2], channels))
+            runtime.launch_row_loops(shifted_plane_kernel, rows, cols,
+                                     [canvas, origin, fill, shown[name].reshape((rows, cols, channels))],
+                                     self._cfg.device, self._cfg.cpu_threads)
+
+    @staticmethod
+    def _planes_of(block: transfer.Staged) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``block``'s (y, u, v) planes, downloaded (one copy) into new host arrays."""
+        block.download()
+        uv = block.host["uv"]
+        return block.host["y"].copy(), uv[:, :, 0].copy(), uv[:, :, 1].copy()
 
     def set_seams(self, plan: FramePlan, luma: FrameState, chroma: FrameState, band_x0: np.ndarray) -> None:
         """Both passes' seams and the Y pass's seam-blend offsets onto the device, with the seam band's

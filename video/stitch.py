@@ -60,6 +60,7 @@ from .maps import (PlaneMaps, chroma_lines, map_change_px, maps_on_canvas, outpu
 from .reader import YuvFrame, probe_video
 from .align import Seam
 from .rig_motion import RigMotion
+from .steady import SteadyCanvas, margin_px, steady_crop
 from .timeline import Canvas, LastFrame, MapsTimeline, Reestimates, lookahead_frames, watch_frames
 from .writer import even_size
 
@@ -123,7 +124,9 @@ class CompositedFrame:
     ``composite_yuv`` was called without ``update``); ``source``: which input is the source, "left"
     or "right" (the other is the target). ``planes_src`` / ``planes_tgt``: the (y, u, v)
     uint8 planes of the source / target input as decoded (``plane[row, col]``); ``planes_out``: the
-    output's (y, u, v) on the canvas. ``maps``: the :class:`~sena_warp.video.maps.PlaneMaps` composited
+    composited (y, u, v) on the canvas; ``window``: (x, y, width, height) the output frame on the canvas
+    (x, y sub-pixel: a moving rig's steady canvas, ``steady.py``; it may reach off the canvas, where the
+    output is black). ``maps``: the :class:`~sena_warp.video.maps.PlaneMaps` composited
     with (the same object for as long as the maps do not change; input-frame (x, y) sample positions
     per canvas pixel). ``seam_home``: (L,) float32 the estimate's seam, the centre of the band in
     which the frame's seam may move, at most ``seam_reach_px`` from it; ``seam``: (L,) float32 the
@@ -143,15 +146,20 @@ class CompositedFrame:
     planes_src: tuple[np.ndarray, np.ndarray, np.ndarray]
     planes_tgt: tuple[np.ndarray, np.ndarray, np.ndarray]
     planes_out: tuple[np.ndarray, np.ndarray, np.ndarray]
+    window: tuple[float, float, int, int]
     maps: PlaneMaps
     seam_home: np.ndarray
     seam_reach_px: float
     seam: np.ndarray
-    lines_are_rows: bool
     gains_luma: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     knee_luma: tuple[float, float] | None
     offsets_luma: tuple[np.ndarray, np.ndarray]
     weights: Callable[[], tuple[np.ndarray, np.ndarray]]
+
+    @property
+    def lines_are_rows(self) -> bool:
+        """Whether a seam line is a canvas row (else a column)."""
+        return self.maps.seam_luma.lines_are_rows
 
 
 FirstEstimateHook = Callable[[StitchMaps, YuvFrame, YuvFrame], None]
@@ -212,19 +220,29 @@ class SenaFrameCompositor:
         """From the first estimate ``first`` (made on pair ``first_pair``; ``first_attempts``: every
         pair tried) for inputs at ``fps`` frames per second whose (rows, cols) are ``frame_shapes``
         (left, right); ``cfg.device`` resolved. With ``cfg.video_crop`` the fixed canvas is the largest
-        rectangle the first estimate covers. ``observer``: called with every composited frame."""
+        rectangle the first estimate covers and the output that less the steady canvas's margin
+        (``steady.py``) with ``--rig moving``. ``observer``: called with every composited frame."""
         self._cfg = cfg
         self._fps = fps
         self.observer = observer
         rig = first.rig
         x0, y0, width, height = fixed_canvas(first, rig.pick(*frame_shapes), cfg.video_crop)
-        self.crop_xywh = (x0, y0, width, height) if cfg.video_crop else None
-        # The output is the fixed canvas, or that canvas made at most video_max_width wide by the maps
-        # themselves (``maps.scaled_plane_maps``): each output pixel samples the inputs once.
+        # The canvas is the fixed canvas, or that canvas made at most video_max_width wide by the maps
+        # themselves (``maps.scaled_plane_maps``): each output pixel samples the inputs once. The output
+        # is the canvas, or with --crop the canvas less the steady canvas's margin.
         shape = output_shape((height, width), cfg.video_max_width)
-        self.output_size = (shape[1], shape[0])
         offset_tgt = target_offset(first.map_tgt_input) - np.array([x0, y0], np.float64)
         self._canvas = Canvas((height, width), shape, offset_tgt, band_half_width(shape, cfg), rig)
+        shown = (0, 0, shape[1], shape[0])
+        if cfg.video_crop:
+            shown = steady_crop(*shown, margin_px(cfg))
+            sx, sy = self._canvas.scale
+            self.crop_xywh = (x0 + round(shown[0] / sx), y0 + round(shown[1] / sy), round(shown[2] / sx),
+                              round(shown[3] / sy))
+        else:
+            self.crop_xywh = None
+        self.output_size = (shown[2], shown[3])
+        self._steady = SteadyCanvas(shape, (shown[3], shown[2]), self._canvas.scale, cfg)
         # A rig that may be static: its seam may go round what is in front anywhere in the overlap.
         static = rig.pick(*frame_shapes) if cfg.video_rig != "moving" else None
         maps = maps_on_canvas(first, self._canvas.stitched_shape, offset_tgt, self._canvas.band_px, shape, static)
@@ -349,6 +367,10 @@ class SenaFrameCompositor:
         before = self._timeline.maps
         y_src, y_tgt = (frame.y for frame in self.source_target(frame_l, frame_r))
         after = self._timeline.advance(frame_l, frame_r, y_src, y_tgt, self._prior_seam_tgt, self._last_frame())
+        if self._timeline.mode == "moving":
+            self._steady.follow(y_tgt)
+        else:
+            self._steady.hold()
         self._seam.set_jumps(self._timeline.mode == "static")
         changed = after is not before
         log.seam_jitter_px.append(seam_change_px(before, after) if changed else 0.0)
@@ -365,7 +387,8 @@ class SenaFrameCompositor:
                          None if shown is None else Seam(shown, self._timeline.maps.seam_luma.lines_are_rows))
 
     def composite_yuv(self, y_l, u_l, v_l, y_r, u_r, v_r) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Output (y, u, v) planes of ``output_size``; uncovered pixels are black (Y 16, U = V = 128).
+        """Output (y, u, v) planes of ``output_size``, the steady canvas's window on the composited canvas;
+        uncovered pixels are black (Y 16, U = V = 128).
 
         The exposure follows the frame's overlap, the seam is cut anew in its band on the frame's luma
         difference, and the seam blend's offsets come from the same difference.
@@ -388,11 +411,13 @@ class SenaFrameCompositor:
             band, object_band = device.band(plan, self._seam.place, objects.grid if objects is not None else None,
                                             gains[0])
             luma, chroma = self._frame_states(band, object_band, plan, luma_gains, chroma_gains)
-        out = device.composite(plan, luma, chroma, gains, self._seam.place)
+        window = self._steady.window_for(self._timeline.mode)
+        out, canvas = device.composite(plan, luma, chroma, gains, self._seam.place, window,
+                                       keep_canvas=self.observer is not None)
         self._last = (plan, luma, chroma)
         if self.observer is not None:
             with log.clock("observer"):
-                self.observer(self._composited(planes_src, planes_tgt, out, gains[0]))
+                self.observer(self._composited(planes_src, planes_tgt, canvas, gains[0]))
         log.transfers.append(transfer.tally() - counted)
         log.frames += 1
         log.time_s = None
@@ -424,7 +449,9 @@ class SenaFrameCompositor:
     def _device_for(self, shapes: tuple[tuple[int, int], tuple[int, int]]) -> DeviceFrame:
         """The device frame of planes of these Y shapes (made on the first frame)."""
         if self._device is None or self._device.shapes != shapes:
-            self._device = DeviceFrame(shapes, self._canvas.shape, self._seam.grid, self._cfg)
+            steady = self._steady
+            self._device = DeviceFrame(shapes, self._canvas.shape, steady.output_shape if steady.windowed else None,
+                                       self._seam.grid, self._cfg)
         return self._device
 
     def _composited(self, planes_src: tuple, planes_tgt: tuple, planes_out: tuple, gains_luma) -> CompositedFrame:
@@ -435,9 +462,10 @@ class SenaFrameCompositor:
         return CompositedFrame(
             index=self._log.frames, time_s=self._log.time_s,
             source="left" if self._canvas.rig.source == "a" else "right",
-            planes_src=planes_src, planes_tgt=planes_tgt, planes_out=planes_out, maps=maps,
+            planes_src=planes_src, planes_tgt=planes_tgt, planes_out=planes_out,
+            window=(*(float(v) for v in self._steady.window()), *self.output_size), maps=maps,
             seam_home=maps.seam_luma.positions, seam_reach_px=float(maps.seam_luma.band_px), seam=luma.seam.copy(),
-            lines_are_rows=maps.seam_luma.lines_are_rows, gains_luma=applied_gains(gains_luma, 1),
+            gains_luma=applied_gains(gains_luma, 1),
             knee_luma=plan.luma.knee, offsets_luma=offsets,
             weights=lambda: seam_weights(luma.seam, plan.luma.layout, plan.luma.canvas_shape, self._cfg))
 
@@ -459,7 +487,8 @@ class SenaFrameCompositor:
             "rig": {"mode": cfg.video_rig, "source": "left" if canvas.rig.source == "a" else "right",
                     "vertical": canvas.rig.vertical,
                     "reestimate_s": cfg.video_reestimate_s if reestimates is not None else None,
-                    "decisions": self._timeline.decisions, "alignment": self._timeline.alignment_log()},
+                    "decisions": self._timeline.decisions, "alignment": self._timeline.alignment_log(),
+                    "steady": self._steady.report()},
             "first_estimate": self._first_info,
             "canvas": {"width": self.output_size[0], "height": self.output_size[1],
                        "stitched_width": canvas.stitched_shape[1], "stitched_height": canvas.stitched_shape[0],

@@ -12,9 +12,10 @@ For every pair folder of DATA_DIR (one holding ``a.*`` and ``b.*``) it runs
 
 and records per method: success (or why not), time, overlap PSNR/SSIM (UDIS-D protocol of
 ``metrics``), the shape figures (how far the warp is locally from a similarity; how far long lines
-bend) and, for SENA's runs, the seam figures and the natural-appearance figures of ``naturalness``
+bend) and, for SENA's runs, the seam figures, the natural-appearance figures of ``naturalness``
 (duplicated / lost points, seam step, bend of the lines the panorama shows, continuity of the lines
-the seam cuts). SENA, affine and homography are compared with the target in
+the seam cuts) and the dense figures of ``dense`` (misalignment wherever the views switch, what is
+shown twice or nowhere, tone fidelity against a plain gain). SENA, affine and homography are compared with the target in
 the target frame (the source warped onto it); OpenCV's stitcher is compared in its own panorama
 frame, both views warped by the camera models it composed with, before its seams and blending.
 Shape figures cover both views of each method's panorama: SENA and the global models leave the
@@ -54,8 +55,8 @@ from sena_warp.warp_map import forward_points
 
 from .baselines import (OPENCV_MODES, affine_map_canvas, homography_forward, homography_to_target, opencv_forward,
                         opencv_stitch, opencv_views, sift_homography)
-from .figures import (identity, in_target_frame, map_in_target_frame, natural_figures, overlap_figures, seam_figures,
-                      shape_figures)
+from .figures import (dense_figures, identity, in_target_frame, map_in_target_frame, natural_figures, overlap_figures,
+                      seam_figures, shape_figures)
 from .metrics import overlap_psnr_ssim
 from .sheets import thumbnail, tile
 
@@ -63,7 +64,8 @@ SENA_RUNS = ("sena", "sena_ba", "sena_paper")
 METHODS = (*SENA_RUNS, "affine", "homography", *OPENCV_MODES)
 # SENA as the paper has it: every departure undone (docs/method.md; what each buys: docs/evaluation.md).
 PAPER_SETTINGS = dict(ffd_model="blend", gate_model="paper", seam_model="paper", gain_model="none",
-                      seam_blend_ratio=0.0, border_blend=False, transition_px=24, global_model_choice="inliers")
+                      seam_blend_ratio=0.0, border_blend=False, transition_px=24, global_model_choice="inliers",
+                      switch_align=False, thin_strip_ratio=0.0)
 # The methods that make a panorama (the pictures show them), with their names on the pictures.
 SHEET_METHODS = {"sena": "SENA", "sena_paper": "SENA (paper)", "opencv_panorama": "OpenCV PANORAMA",
                  "opencv_scans": "OpenCV SCANS"}
@@ -105,6 +107,20 @@ class MethodResult:
     visible_bend_max_pct: float = math.nan
     continuity_px: float = math.nan
     cut_lines: int = 0
+    seam_misalign_median_px: float = math.nan  # the dense figures (dense), SENA's runs
+    seam_misalign_p95_px: float = math.nan
+    border_misalign_median_px: float = math.nan
+    border_misalign_p95_px: float = math.nan
+    doubled_pct: float = math.nan
+    lost_pct: float = math.nan
+    dup_objects: int = 0
+    dup_object_px: int = 0
+    tone_spread_pct: float = math.nan
+    tone_spread_plain_pct: float = math.nan
+    tone_colour_pct: float = math.nan
+    tone_colour_plain_pct: float = math.nan
+    white_cast_grey: float = math.nan
+    white_cast_plain_grey: float = math.nan
     order_diff_grey: float = math.nan  # sena_ba: largest |panorama(b, a) - panorama(a, b)|
     panorama: np.ndarray | None = field(default=None, repr=False)  # BGR(A) uint8; not written to the CSV
 
@@ -163,7 +179,7 @@ def run_sena(pair: PairImages, method: str, cfg: Config) -> tuple[MethodResult, 
         return forward_points(seam.maps.map_src_canvas, warp.glob.affine_src_to_tgt, warp.overlap.canvas, pts, run_cfg)
 
     _set(result, **shape_figures([(src, forward), (tgt, identity)]), **seam_figures(img_a, img_b, pano, run_cfg),
-         **natural_figures(img_a, img_b, pano, run_cfg))
+         **natural_figures(img_a, img_b, pano, run_cfg), **dense_figures(img_a, img_b, pano, run_cfg))
     return result, pano
 
 
@@ -364,6 +380,7 @@ def summary_markdown(rows: list[MethodResult], data_dir: Path, cfg: Config, seco
         if r.ok:
             lines.append(f"| {p} | {r.anchors} | {r.anchor_residual_px:.3f} | {r.seam_mad:.2f} | {r.feather_mad:.2f} |")
     lines += natural_markdown(pairs, table)
+    lines += dense_markdown(pairs, table)
     failures = [r for r in rows if not r.ok]
     lines += ["", "## Failures", ""]
     lines += [f"- {r.pair}, {r.method}: {r.error}" for r in failures] or ["- none"]
@@ -382,7 +399,7 @@ def natural_markdown(pairs: list[str], table: dict) -> list[str]:
              "max | bend max % (pairs > 2 %) | continuity median px | seam MAD < feather MAD | order diff max |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for run in SENA_RUNS:
-        done = [table[p, run] for p in pairs if table[p, run].ok]
+        done = _done(pairs, table, run)
         lines.append(
             f"| {run} | {sum(r.dup_lost_over_4px > 0 for r in done)} | {sum(r.dup_lost_pct > 0.5 for r in done)} | "
             f"{_fmt(_max(r.dup_lost_pct for r in done), 2)} | {_fmt(_median(r.seam_step for r in done), 2)} / "
@@ -393,13 +410,55 @@ def natural_markdown(pairs: list[str], table: dict) -> list[str]:
             f"{_fmt(_max(r.order_diff_grey for r in done), 1)} |")
     lines += ["", "| pair | run | dup/lost % (> 4 px, worst px) | seam step | border step | bend max % | "
               "continuity px (cut lines) |", "|---|---|---:|---:|---:|---:|---:|"]
-    for p in pairs:
-        for run in SENA_RUNS:
-            r = table[p, run]
-            if r.ok:
-                lines.append(f"| {p} | {run} | {r.dup_lost_pct:.2f} ({r.dup_lost_over_4px}, {_fmt(r.dup_lost_worst_px, 1)}) | "
-                             f"{_fmt(r.seam_step, 2)} | {_fmt(r.border_step, 2)} | {_fmt(r.visible_bend_max_pct, 2)} | "
-                             f"{_fmt(r.continuity_px, 2)} ({r.cut_lines}) |")
+    lines += _pair_rows(pairs, table, lambda r: (
+        f"{r.dup_lost_pct:.2f} ({r.dup_lost_over_4px}, {_fmt(r.dup_lost_worst_px, 1)}) | {_fmt(r.seam_step, 2)} | "
+        f"{_fmt(r.border_step, 2)} | {_fmt(r.visible_bend_max_pct, 2)} | {_fmt(r.continuity_px, 2)} ({r.cut_lines})"))
+    return lines
+
+
+def _done(pairs: list[str], table: dict, run: str) -> list:
+    """The results of ``run`` on ``pairs`` that succeeded."""
+    return [table[p, run] for p in pairs if table[p, run].ok]
+
+
+def _pair_rows(pairs: list[str], table: dict, cells) -> list[str]:
+    """A table row per pair and SENA run that succeeded: ``| pair | run | cells(result) |``."""
+    return [f"| {p} | {run} | {cells(table[p, run])} |" for p in pairs for run in SENA_RUNS if table[p, run].ok]
+
+
+def dense_markdown(pairs: list[str], table: dict) -> list[str]:
+    """The summary's dense-figures section: per SENA run over all pairs, then each pair."""
+    lines = ["", "## Dense figures", "",
+             "Misalignment: optical flow between the views as the panorama shows them, at textured pixels within "
+             "T/2 of the seam and near the borders where the views switch beyond it (px, median / 95th percentile); "
+             "doubled / lost: of the consistent textured overlap pixels, % whose two copies (the flow) are > 2 px "
+             "apart and both shown or neither; objects: such regions of >= 60 px (largest px); tone: spread of "
+             "log(panorama / view) within 12 px blocks and the colour a block takes on, 99th percentile over blocks "
+             "(%), against the plain panorama (each view times its gains: 'plain'); white cast: channel spread of "
+             "clipped whites (grey levels) against the plain one's (`dense`).", "",
+             "| run | seam p95 median / max / pairs > 2 | border p95 median / max / pairs > 2 | pairs with an object | "
+             "tone spread worse than plain by > 1 (pairs) | tone colour worse than plain by > 1 (pairs) | white cast max |",
+             "|---|---:|---:|---:|---:|---:|---:|"]
+    for run in SENA_RUNS:
+        done = _done(pairs, table, run)
+        seam_p95 = [r.seam_misalign_p95_px for r in done]
+        border_p95 = [r.border_misalign_p95_px for r in done]
+        lines.append(
+            f"| {run} | {_fmt(_median(seam_p95), 2)} / {_fmt(_max(seam_p95), 2)} / {sum(v > 2 for v in seam_p95)} | "
+            f"{_fmt(_median(border_p95), 2)} / {_fmt(_max(border_p95), 2)} / {sum(v > 2 for v in border_p95)} | "
+            f"{sum(r.dup_objects > 0 for r in done)} | "
+            f"{sum(r.tone_spread_pct > r.tone_spread_plain_pct + 1 for r in done)} | "
+            f"{sum(r.tone_colour_pct > r.tone_colour_plain_pct + 1 for r in done)} | "
+            f"{_fmt(_max(r.white_cast_grey for r in done), 1)} |")
+    lines += ["", "| pair | run | seam px median / p95 | border px median / p95 | doubled / lost % (objects, largest px) | "
+              "tone spread / plain % | tone colour / plain % | white cast / plain |", "|---|---|---:|---:|---:|---:|---:|---:|"]
+    lines += _pair_rows(pairs, table, lambda r: (
+        f"{_fmt(r.seam_misalign_median_px, 2)} / {_fmt(r.seam_misalign_p95_px, 2)} | "
+        f"{_fmt(r.border_misalign_median_px, 2)} / {_fmt(r.border_misalign_p95_px, 2)} | "
+        f"{r.doubled_pct:.2f} / {r.lost_pct:.2f} ({r.dup_objects}, {r.dup_object_px}) | "
+        f"{_fmt(r.tone_spread_pct, 1)} / {_fmt(r.tone_spread_plain_pct, 1)} | "
+        f"{_fmt(r.tone_colour_pct, 1)} / {_fmt(r.tone_colour_plain_pct, 1)} | "
+        f"{_fmt(r.white_cast_grey, 1)} / {_fmt(r.white_cast_plain_grey, 1)}"))
     return lines
 
 

@@ -9,18 +9,21 @@ in the target frame (the UDIS-D protocol: the warped source against the target).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
 
 from sena_warp.config import Config
+from sena_warp.composite import FrameState, composite_image, composite_plan
 from sena_warp.gains import compensated, compensated_views
 from sena_warp.rig import image_to_working, matches_to_working
 from sena_warp.stitch import Panorama, Warp
-from sena_warp.warp_map import canvas_views, forward_points, remap_image
+from sena_warp.switch_align import shown_labels, switch_pixels
+from sena_warp.warp_map import CanvasViews, canvas_views, forward_points, remap_image
 from sena_warp.zone import overlap_x_extent
 
-from . import naturalness
+from . import dense, naturalness
 
 from .metrics import (Forward, anchor_residuals_px, forward_anisotropy, line_bend_pct, long_segments,
                       overlap_psnr_ssim, transition_mad)
@@ -80,7 +83,7 @@ def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Conf
                               cfg.transition_px)
     del seam_src, valid_seam_src  # one canvas image fewer alive at a time (a large pair's peak memory)
     step6_src, valid_step6_src = remap_image(img_src, warp.map_src_canvas, cfg)
-    residuals = anchor_residuals_px(warp.map_src_canvas, seam.maps.map_src_canvas,
+    residuals = anchor_residuals_px(seam.map_cut_canvas, seam.maps.map_src_canvas,
                                     seam.anchors_src_canvas, seam.anchors_tgt_canvas)
     finite = residuals[np.isfinite(residuals)]
     return {
@@ -126,6 +129,15 @@ def identity(pts: np.ndarray) -> np.ndarray:
     return np.asarray(pts, np.float64)
 
 
+def panorama_views(img_src: np.ndarray, img_tgt: np.ndarray, pano: Panorama, cfg: Config) -> CanvasViews:
+    """Both working-frame views on the canvas as the panorama samples them (before their gains): the
+    source by the seam maps, the target at its offset, each valid only where its seam map samples it
+    (a thin strip left out is not shown)."""
+    maps = pano.maps.seam.maps
+    views = canvas_views(img_src, img_tgt, maps.map_src_canvas, pano.maps.warp.overlap.canvas, cfg)
+    return replace(views, valid_tgt=views.valid_tgt & np.isfinite(maps.map_tgt_canvas[..., 0]))
+
+
 def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
     """The natural-appearance figures of a finished stitch (``naturalness``), in the working frame on the canvas.
 
@@ -139,7 +151,7 @@ def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: C
     warp, seam = maps.warp, maps.seam
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
     canvas = warp.overlap.canvas
-    views = compensated_views(canvas_views(img_src, img_tgt, seam.maps.map_src_canvas, canvas, cfg), seam.gains)
+    views = compensated_views(panorama_views(img_src, img_tgt, pano, cfg), seam.gains)
     weight_src, weight_tgt = naturalness.view_weights(seam.maps.alpha_canvas, views.valid_src, views.valid_tgt)
 
     def forward(pts: np.ndarray) -> np.ndarray:
@@ -167,6 +179,69 @@ def natural_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: C
         "continuity_px": float(np.median(continuity)) if continuity.size else math.nan,
         "cut_lines": int(continuity.size),
     }
+
+
+def dense_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:
+    """Issue 35's dense figures of a finished stitch (``dense``), in the working frame on the canvas.
+
+    ``seam_misalign_*_px``, ``border_misalign_*_px``: median and 95th percentile of the flow between the
+    views as the panorama shows them, at the seam's textured band and at the borders' (NaN: no such
+    pixel); ``doubled_pct``, ``lost_pct``: of the consistent textured overlap pixels, those shown twice
+    or nowhere; ``dup_objects``, ``dup_object_px``: such regions of at least ``dense.OBJECT_MIN_PX``
+    pixels, the largest; ``tone_spread_pct``, ``tone_colour_pct``: tone fidelity of the panorama
+    against the views as the same compositor shows them (:func:`rendered`), ``*_plain_pct`` of the plain
+    panorama (each view times its gains, nothing else); ``white_cast_grey`` and
+    ``white_cast_plain_grey`` likewise. ``cfg.device`` resolved.
+    """
+    maps = pano.maps
+    seam = maps.seam
+    img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
+    raw = panorama_views(img_src, img_tgt, pano, cfg)
+    views = compensated_views(raw, seam.gains)
+    weight_src, weight_tgt = naturalness.view_weights(seam.maps.alpha_canvas, views.valid_src, views.valid_tgt)
+    seam_px, border_px = switch_pixels(shown_labels(weight_src, weight_tgt), views.valid_src, views.valid_tgt)
+    src8, tgt8, flow, flow_back = dense.flows(*views.grey(), views.valid_src, views.valid_tgt)
+    texture_ok, across, ratio = dense.structure(src8, tgt8)
+    shift = dense.visible_shift(flow, across, ratio)
+    at_seam, at_border = dense.misalignment(shift, seam_px, border_px, views.both, texture_ok, seam.maps.seam_x_canvas,
+                                            cfg.transition_px)
+    shown = dense.copies(flow, flow_back, shift, weight_src, weight_tgt, views.both, texture_ok)
+    pures = (weight_src >= dense.PURE_WEIGHT, weight_tgt >= dense.PURE_WEIGHT)
+    view, plain = (rendered(img_a, img_b, pano, cfg, with_gains) for with_gains in (False, True))
+    pano_working = image_to_working(pano.image, maps.rig)[:, :, :3]
+    spread, colour = dense.tone_figures(pano_working, (view, view), pures)
+    spread_plain, colour_plain = dense.tone_figures(plain, (view, view), pures)
+    return {
+        "seam_misalign_median_px": at_seam.median_px,
+        "seam_misalign_p95_px": at_seam.p95_px,
+        "border_misalign_median_px": at_border.median_px,
+        "border_misalign_p95_px": at_border.p95_px,
+        "doubled_pct": shown.doubled_pct,
+        "lost_pct": shown.lost_pct,
+        "dup_objects": shown.objects,
+        "dup_object_px": shown.largest_px,
+        "tone_spread_pct": spread,
+        "tone_spread_plain_pct": spread_plain,
+        "tone_colour_pct": colour,
+        "tone_colour_plain_pct": colour_plain,
+        "white_cast_grey": dense.white_cast(pano_working, view, pures[0] | pures[1]),
+        "white_cast_plain_grey": dense.white_cast(plain, view, pures[0] | pures[1]),
+    }
+
+
+def rendered(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config, with_gains: bool) -> np.ndarray:
+    """(H, W, 3) uint8 working-canvas panorama of a finished stitch composited again with no seam blend:
+    each view as it is (``with_gains`` False) or times its gains alone (the plain panorama). The same
+    compositor and sampling as the panorama's, so that comparing them sees tones, not resampling."""
+    maps = pano.maps
+    img_src, img_tgt = maps.rig.pick(img_a, img_b)
+    plan = composite_plan(maps.map_src_input, maps.map_tgt_input, maps.seam_input, (img_src.shape, img_tgt.shape), cfg)
+    gains = maps.seam.gains
+    channels = len(gains.gain_src)
+    ones, zeros = np.ones(channels), np.zeros(channels)
+    values = (gains.gain_src, gains.bias_src, gains.gain_tgt, gains.bias_tgt) if with_gains else (ones, zeros, ones, zeros)
+    image = composite_image(img_src, img_tgt, plan, FrameState(maps.seam_input.positions, values), cfg)
+    return image_to_working(image, maps.rig)
 
 
 def report_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Config) -> dict:

@@ -42,6 +42,7 @@ import numpy as np
 
 from sena_warp.bilinear import sample_bilinear
 from sena_warp.features import neighbour_supported
+from sena_warp.switch_align import view_weights  # noqa: F401 - the figures' weights are the stitch's
 
 VISIBLE_WEIGHT = 0.25  # a copy shown at a quarter or more is seen (a ghost in a blend counts)
 COINCIDE_PX = 2.0  # copies closer than this are one point
@@ -93,13 +94,6 @@ def reliable_matches(pts_src: np.ndarray, pts_tgt: np.ndarray, affine_src_to_tgt
     predicted = pts_src @ np.asarray(affine_src_to_tgt)[:, :2].T + np.asarray(affine_src_to_tgt)[:, 2]
     supported = neighbour_supported(pts_src, pts_tgt, SUPPORT_NEIGHBOURS, SUPPORT_TOL_PX, SUPPORT_MIN)
     return mask.ravel().astype(bool) & (np.hypot(*(predicted - pts_tgt).T) <= MAX_DISPARITY_PX) & supported
-
-
-def view_weights(alpha_canvas: np.ndarray, valid_src: np.ndarray, valid_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(weight of the source, weight of the target) per canvas pixel, float32 (H, W): what each view
-    contributes to the panorama, given the source alpha and where each view is defined."""
-    alpha = np.where(valid_src, np.where(valid_tgt, alpha_canvas, 1.0), 0.0).astype(np.float32)
-    return alpha, np.where(valid_tgt, 1.0 - alpha, 0.0).astype(np.float32)
 
 
 def copy_figures(copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray, weight_src: np.ndarray,

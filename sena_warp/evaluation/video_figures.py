@@ -29,9 +29,16 @@ rig), in a band of :data:`BAND_MARGIN_PX` beyond the per-frame seam's reach arou
   ``sum_d w_d mean((P_{t-d} - P_t)^2 + (P_{t+d} - P_t)^2)`` over d = 1, 2, 3 with w = 0.9, 0.3, 0.1,
   the mean over t = 3 .. T-4, the lattice points on the canvas in every frame and both coordinates.
   This is the warp's own shake: maps that never change (a static rig) score 0 whatever the cameras do.
-* *Uncovered share* (% of the canvas): the canvas pixels neither view samples (where the output is
-  black), per frame from the frame's maps; its largest frame-to-frame change says whether black areas
-  flash in or out.
+* *Uncovered share* (% of the output): the output pixels neither view samples (where the output is
+  black: off the canvas, or canvas pixels the frame's maps leave unsampled), per frame from the frame's
+  maps and its window on the canvas; its largest frame-to-frame change says whether black areas flash
+  in or out.
+* *Output shake* (output px): how the picture as shown moves from frame to frame (phase correlation of
+  the canvas's Y, made about ``steady.PATH_SHORT_PX`` rows small, less the frame's window's move on the
+  canvas), summed into a path; its second
+  difference ``|P_{t-1} - 2 P_t + P_{t+1}|`` (mean and 95th percentile): 0 for a still picture and for
+  a steady pan, large where the picture shakes (a moving rig's steady canvas, ``video/steady.py``, is
+  what lowers it).
 
 :class:`FrameClock` is a second, nearly free observer: the process's CPU time per frame (every
 thread: decoding, stitching, encoding), for a run apart from the figures' (they cost more than the
@@ -56,6 +63,7 @@ from sena_warp.config import Config
 from sena_warp.gains import tone_curve
 from sena_warp.video.frame_seam import lines_near
 from sena_warp.video.maps import sampled_mask
+from sena_warp.video.steady import frame_shift, small_y
 from sena_warp.video.stitch import CompositedFrame
 from sena_warp.warp_map import forward_points
 
@@ -192,12 +200,30 @@ def band_flow(src: np.ndarray, tgt: np.ndarray, valid_src: np.ndarray, valid_tgt
     return dis.calc(tgt8, src8, None)
 
 
-def uncovered_pct(frame: CompositedFrame) -> float:
-    """% of the canvas neither view samples with the frame's maps (where the output is the fill)."""
+def covered_canvas(frame: CompositedFrame) -> np.ndarray:
+    """(Hc, Wc) bool: the canvas pixels a view samples with the frame's maps."""
     maps = frame.maps
-    covered = (sampled_mask(maps.map_src_luma, frame.planes_src[0].shape)
-               | sampled_mask(maps.map_tgt_luma, frame.planes_tgt[0].shape))
-    return 100.0 * (1.0 - float(covered.mean()))
+    return (sampled_mask(maps.map_src_luma, frame.planes_src[0].shape)
+            | sampled_mask(maps.map_tgt_luma, frame.planes_tgt[0].shape))
+
+
+def uncovered_pct(covered: np.ndarray, window: tuple[int, int, int, int]) -> float:
+    """% of the output window (x, y, width, height) on the canvas (x, y to the nearest pixel) that no view
+    samples (``covered``: the canvas's :func:`covered_canvas`; off the canvas counts as uncovered): where
+    the output is the fill."""
+    x, y = (int(round(v)) for v in window[:2])
+    width, height = window[2:]
+    rows, cols = covered.shape
+    inside = covered[max(y, 0):min(y + height, rows), max(x, 0):min(x + width, cols)]
+    return 100.0 * (1.0 - float(inside.sum()) / float(width * height))
+
+
+def second_difference(path: np.ndarray) -> np.ndarray:
+    """(T - 2,) float64: ``|P_{t-1} - 2 P_t + P_{t+1}|`` of a (T, 2) path (empty below 3 frames)."""
+    path = np.asarray(path, np.float64).reshape(-1, 2)
+    if len(path) < 3:
+        return np.zeros(0)
+    return np.linalg.norm(path[:-2] - 2.0 * path[1:-1] + path[2:], axis=1)
 
 
 def _stats(values, percentile: float | None = None) -> float | None:
@@ -232,7 +258,10 @@ class VideoFigures:
         self._lattice: np.ndarray | None = None
         self._scale = np.ones(2)
         self._path: np.ndarray | None = None
-        self._uncovered = 0.0  # % of the canvas the current maps leave uncovered
+        self._covered: np.ndarray | None = None  # the canvas pixels the current maps sample
+        self._shown: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last canvas's small Y, its
+        # Hanning window and the output window's corner
+        self.shown_path: list[np.ndarray] = []  # the output picture's path (output shake), output px
         self.per_frame: dict[str, list] = {name: [] for name in (
             "time_s", "maps_changed", "seam_motion_px", "seam_motion_still_px", "still_lines_pct",
             "exposure_step", "exposure_step_change", "misalignment_px", "uncovered_pct")}
@@ -278,7 +307,8 @@ class VideoFigures:
         record["exposure_step_change"].append(change)
         record["misalignment_px"].append(
             self._misalignment(src_g, tgt_g, band, seam_band) if frame.index % self.flow_every == 0 else None)
-        record["uncovered_pct"].append(self._uncovered)
+        record["uncovered_pct"].append(uncovered_pct(self._covered, frame.window))
+        self._follow_output(y_out, frame.window)
         self.paths.append(self._path)
         if self.strip_every and frame.index % self.strip_every == 0:
             self.strips.append((frame.index, np.clip(np.rint(out), 0, 255).astype(np.uint8), seam_band.copy(),
@@ -297,7 +327,21 @@ class VideoFigures:
             self._lattice = source_lattice(shape_src)
             self._scale = np.array([STABILITY_SIZE[0] / shape_src[1], STABILITY_SIZE[1] / shape_src[0]])
         self._path = forward_on_canvas(frame.maps.map_src_luma, self._lattice, self.cfg) * self._scale
-        self._uncovered = uncovered_pct(frame)
+        self._covered = covered_canvas(frame)
+
+    def _follow_output(self, y_canvas: np.ndarray, window: tuple[float, float, int, int]) -> None:
+        """The output picture's path (module docstring, output shake) one frame on: the canvas's move less
+        the window's."""
+        small = small_y(y_canvas)
+        factor = np.array([y_canvas.shape[1] / small.shape[1], y_canvas.shape[0] / small.shape[0]])
+        corner = np.asarray(window[:2], np.float64)
+        if self._shown is None or self._shown[0].shape != small.shape:
+            self._shown = (small, cv2.createHanningWindow(small.shape[::-1], cv2.CV_32F), corner)
+            self.shown_path.append(np.zeros(2) if not self.shown_path else self.shown_path[-1])
+            return
+        moved, _ = frame_shift(self._shown[0], small, self._shown[1])
+        self.shown_path.append(self.shown_path[-1] + moved * factor - (corner - self._shown[2]))
+        self._shown = (small, self._shown[1], corner)
 
     def _still_lines(self, src, tgt, last_src, last_tgt) -> np.ndarray:
         """(L,) bool: lines where neither view changed within the band, nor within the dilation."""
@@ -365,6 +409,7 @@ class VideoFigures:
         pooled = np.concatenate(self._flow_cells) if self._flow_cells else np.zeros(0)
         cross = np.concatenate(self._flow_cross) if self._flow_cross else np.zeros(0)
         value, per_point = self.stability()
+        shake = second_difference(np.asarray(self.shown_path))
         figures = {
             "frames": len(times),
             "band_half_px": self._half,
@@ -399,6 +444,7 @@ class VideoFigures:
             },
             "uncovered_pct": {"mean": _stats(record["uncovered_pct"]), "max": _stats(record["uncovered_pct"], 100),
                               "largest_change": _stats(np.abs(np.diff(record["uncovered_pct"])), 100) or 0.0},
+            "output_shake_px": {"mean": _stats(shake), "p95": _stats(shake, 95), "max": _stats(shake, 100)},
             "stability": {"value": None if not np.isfinite(value) else round(value, 4),
                           "points": int(np.isfinite(per_point).sum()), "scale_to": list(STABILITY_SIZE),
                           "map_sets": int(sum(record["maps_changed"])),
