@@ -2,13 +2,12 @@
 
 The band's difference, sum and change since the last frame come from
 ``composite.band_difference_kernel`` on the frame's device (``NOT_BOTH`` and 0 where a cell does not
-hold both views), downloaded in one small block. Three kernels follow it each frame on Warp's CPU
-device (:data:`DEVICE`), where the band's few thousand cells are, so the band is read a few times
-rather than by a dozen array expressions: what is in front of the background model (a static rig),
-what each cell costs the seam's paths, and the difference next to the chosen seam (the seam blend's).
-The first runs over ``runtime.launch_row_loops`` (thread i does line ``row0 + i``, cells j, j +
-col_step, ... < width), the others one thread per line (``runtime.launch_rows`` with width 1): they
-reduce along it.
+hold both views), downloaded in one small block; what is in front of the background on a static rig
+from ``kernels/frame_objects.py``. Two kernels follow on Warp's CPU device (:data:`DEVICE`), where the
+band's few thousand cells are, so the band is read a few times rather than by a dozen array
+expressions: what each cell costs the seam's paths, and the difference next to the chosen seam (the
+seam blend's). Both run one thread per line (``runtime.launch_rows`` with width 1): they reduce along
+it.
 """
 
 from __future__ import annotations
@@ -24,29 +23,16 @@ DEVICE = "cpu"  # the band's cells are on the host, whatever the frame's device
 
 
 @wp.struct
-class BackgroundModel:
-    """The band's background model (``background_kernel``): per cell the source-plus-target luma of the
-    background and its mean absolute deviation, learnt at rate ``learn``; ``off`` 1 where a frame's cell
-    is off it by more than ``noise`` and ``spread_factor`` deviations."""
-
-    background: wp.array2d(dtype=float)
-    spread: wp.array2d(dtype=float)
-    off: wp.array2d(dtype=wp.uint8)
-    noise: float
-    spread_factor: float
-    learn: float
-
-
-@wp.struct
 class SeamCosts:
     """What a band cell costs the per-frame seam (``band_cost_kernel``): per px away from the last seam
     ``stay_cost``, the glide's reach ``speed`` px, the noise floor ``noise`` of the difference,
-    ``motion_cost`` where something is in front, ``blocked_cost`` without both views, ``block_cost`` off
-    limits."""
+    ``motion_cost`` where something is in front, ``object_cost`` on the strips an object's copies span,
+    ``blocked_cost`` without both views, ``block_cost`` off limits."""
 
     speed: float
     noise: float
     motion_cost: float
+    object_cost: float
     blocked_cost: float
     stay_cost: float
     block_cost: float
@@ -74,49 +60,11 @@ class CellCosts:
 
 
 @wp.kernel
-def background_kernel(
-    row0: int,
-    col_step: int,
-    width: int,
-    diff: wp.array2d(dtype=float),
-    total: wp.array2d(dtype=float),
-    gain_less_one: float,
-    offset: float,
-    model: BackgroundModel,
-):
-    """One frame of the band's background model: ``model.off`` 1 where the cell's source-plus-target
-    ``total`` is off its background beyond what the whole band's gain and offset explain
-    (``gain_less_one * background + offset``) by more than the noise and ``spread_factor`` x the cell's
-    mean absolute deviation; then both learn at rate ``learn``. Cells without both views neither count
-    nor learn."""
-    i, j0 = wp.tid()
-    k = row0 + i
-    for j in range(j0, width, col_step):
-        both = holds_both(diff[k, j])
-        background = model.background[k, j]
-        change = float(0.0)
-        if both:
-            change = total[k, j] - background
-        explained = gain_less_one * background
-        explained = explained + offset
-        deviation = wp.abs(change - explained)
-        spread_now = model.spread[k, j]
-        limit = wp.max(model.noise, model.spread_factor * spread_now)
-        model.off[k, j] = wp.uint8(0)
-        if both and deviation > limit:
-            model.off[k, j] = wp.uint8(1)
-        step = model.learn * change
-        model.background[k, j] = background + step
-        if both:
-            step = model.learn * (deviation - spread_now)
-            model.spread[k, j] = spread_now + step
-
-
-@wp.kernel
 def band_cost_kernel(
     row0: int,
     diff: wp.array2d(dtype=float),
     moving: wp.array2d(dtype=wp.uint8),
+    kept_off: wp.array2d(dtype=wp.uint8),
     home_term: wp.array2d(dtype=float),
     band_x0: wp.array(dtype=int),
     cell: int,
@@ -127,7 +75,8 @@ def band_cost_kernel(
     """What each band cell costs a path (band cell j of line k at ``band_x0[k] + cell j``):
 
     - ``out.change``: its difference beyond ``noise``, plus ``motion_cost`` where something is in front
-      (``moving``), or ``blocked_cost`` without both views;
+      (``moving``), or ``blocked_cost`` without both views; plus ``object_cost`` on the strips an
+      object's copies span (``kept_off``);
     - the path's cost: that plus ``home_term`` and ``stay_cost`` per px from the last frame's seam
       ``last.last``; ``out.free`` adds ``block_cost`` off the last seam on still lines (``last.still``);
     - ``out.glide`` (K, G): the path's cost on the G cells from ``last.glide_first[k]``, plus
@@ -154,6 +103,7 @@ def band_cost_kernel(
         c = c + costs.motion_cost * float(moving[k, j])
         if not holds_both(d):
             c = costs.blocked_cost
+        c = c + costs.object_cost * float(kept_off[k, j])
         out.change[k, j] = c
         lowest = wp.min(lowest, c)
         pos = x0 + cell * j

@@ -262,7 +262,7 @@ def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: 
     if matches is None:
         with clock("features"):
             matches = match_images(img_a, img_b, cfg, transparent)
-    rig = detect_rig(matches.pts_a, matches.pts_b, reference)
+    rig = detect_rig(matches.pts_a, matches.pts_b, img_a.shape, reference)
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
     warp = estimate_warp(img_src, img_tgt, pts_src, pts_tgt, cfg, clock)

@@ -109,7 +109,7 @@ def _working_matches(img_a, img_b):
     from sena_warp.rig import detect_rig, matches_to_working
 
     matches = match_images(img_a, img_b, Config())
-    rig = detect_rig(matches.pts_a, matches.pts_b, "auto")
+    rig = detect_rig(matches.pts_a, matches.pts_b, img_a.shape, "auto")
     return matches_to_working(matches.pts_a, matches.pts_b, rig)
 
 

@@ -6,12 +6,13 @@ pass's (U and V composited as two channels at half resolution), made once per ma
 
 :class:`DeviceFrame` holds the frame's device memory, allocated once, and moves it as few times as a
 frame allows (``kernels/transfer.py``): the decoded planes go up in one block (:meth:`DeviceFrame.load`);
-the seam band's difference comes down in one small block (:meth:`DeviceFrame.band`); the frame's seam
-and seam-blend offsets go up in one small block and both passes are composited, then the output
-planes come down in one block for the encoder (:meth:`DeviceFrame.composite`). A moving rig's output is
-a window on the composited canvas (``steady.py``): the output planes are cut out of the canvas's on the
-device (``kernels/shift.py``) and those come down instead. Nothing in a frame waits for the device but
-those two downloads.
+the seam band's difference and, on a static plan, the object band's (the whole overlap on coarse
+cells) come down together in one small block (:meth:`DeviceFrame.band`); the frame's seam and
+seam-blend offsets go up in one small block, with where the next frame's seam band lies, and both
+passes are composited, then the output planes come down in one block for the encoder
+(:meth:`DeviceFrame.composite`). A moving rig's output is a window on the composited canvas
+(``steady.py``): the output planes are cut out of the canvas's on the device (``kernels/shift.py``) and
+those come down instead. Nothing in a frame waits for the device but those two downloads.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from ..config import Config
 from sena_warp.kernels import runtime, transfer
 from sena_warp.kernels.composite import BandCells, Gains, SeamState
 from sena_warp.kernels.shift import shifted_plane_kernel
+from .frame_objects import ObjectGrid
 from .frame_seam import BandFrame, BandGrid, BandPlace
 from .maps import BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps
 
@@ -86,6 +88,46 @@ class Plans:
         return self._plan
 
 
+BAND_FIELDS = ("diff", "total", "delta")  # what ``composite.band_difference`` fills on a band's cells
+
+
+@dataclass(frozen=True)
+class BandCellsOn:
+    """One band of a :class:`BandBlock`: its (K, width) ``shape``, its cells as the kernel takes them
+    (``cells``), and its difference, sum and change on the host (``frame``)."""
+
+    shape: tuple[int, int]
+    cells: BandCells
+    frame: BandFrame
+
+
+class BandBlock:
+    """Bands of cells on the device, each by name in ``bands``: (``lines`` (K,) the seam lines, cells
+    ``cell`` px, ``shape`` (K, width), ``x0`` the device array of each line's first cell (px)), and
+    their differences, sums and changes on the host, all moved in one block counted as ``"band"``."""
+
+    def __init__(self, bands: dict[str, tuple[np.ndarray, int, tuple[int, int], wp.array]], device: str):
+        self._block = transfer.Staged({f"{name}_{field}": (shape, np.float32) for name, (_, _, shape, _) in
+                                       bands.items() for field in BAND_FIELDS}, device, "band")
+        self._block.zero()  # the first frame's "last difference"
+        self._bands = {}
+        for name, (lines, cell, shape, x0) in bands.items():
+            cells = BandCells()
+            cells.lines, cells.cell, cells.x0 = transfer.to_device(lines, int, device, "plan"), cell, x0
+            frame = BandFrame.of(*(self._block.host[f"{name}_{field}"] for field in BAND_FIELDS))
+            self._bands[name] = BandCellsOn(shape, cells, frame)
+
+    def difference(self, frame: FrameArrays, plan: CompositePlan, gains_luma: Gains) -> dict[str, BandFrame]:
+        """``composite.band_difference`` of the pair loaded in ``frame`` on each band's cells, on the host
+        (one small download)."""
+        device = self._block.device
+        for name, band in self._bands.items():
+            band_difference(frame, plan, band.cells, gains_luma, band.shape[1],
+                            tuple(device[f"{name}_{field}"].reshape(band.shape) for field in BAND_FIELDS))
+        self._block.download()
+        return {name: band.frame for name, band in self._bands.items()}
+
+
 class DeviceFrame:
     """The device buffers of frames whose Y planes have (rows, cols) ``shapes`` (source, target),
     composited by plans of the fixed canvas (``canvas_shape`` (H, W), even) with the per-frame seam's
@@ -112,15 +154,9 @@ class DeviceFrame:
             {"y": (tuple(output_shape), np.uint8), "uv": ((output_shape[0] // 2, output_shape[1] // 2, 2), np.uint8)},
             device, "output")
         self._grid = grid
-        self._band = transfer.Staged({name: (grid.shape, np.float32) for name in ("diff", "total", "delta")}, device,
-                                     "band")
-        self._band.zero()  # the first frame's "last difference"
-        self._band_frame = BandFrame.of(*(self._band.host[name] for name in ("diff", "total", "delta")))
+        self._bands: tuple[ObjectGrid | None, BandBlock] | None = None  # made with the object grid it holds
         self._seam: transfer.Staged | None = None  # made with the first plan: its lines
-        self._cells = BandCells()
-        self._cells.lines = transfer.to_device(grid.lines, int, device, "plan")
-        self._cells.cell = grid.cell
-        self._place: BandPlace | None = None
+        self._band_x0: np.ndarray | None = None  # the seam band's cells (``BandPlace.x0``) on the device
         planes, out = self._planes.device, self._out.device
         self._passes = {"luma": (planes["y_src"], planes["y_tgt"], out["y"]),
                         "chroma": (planes["uv_src"], planes["uv_tgt"], out["uv"])}
@@ -149,40 +185,51 @@ class DeviceFrame:
         return (kernel_gains(luma, 1, plan.luma.tone, self.frame_arrays("luma", plan.luma).table),
                 kernel_gains(chroma, 2, plan.chroma.tone, self.frame_arrays("chroma", plan.chroma).table))
 
-    def band(self, plan: FramePlan, place: BandPlace, gains_luma: Gains) -> BandFrame:
+    def band(self, plan: FramePlan, place: BandPlace, objects: ObjectGrid | None, gains_luma: Gains
+             ) -> tuple[BandFrame, BandFrame | None]:
         """The seam band's difference, sum and change of the loaded pair on the band's cells at ``place``
-        (``composite.band_difference`` with the Y pass's gains), on the host (one small download; its
-        cells go up when the band moves). The arrays are this frame's: the next call overwrites them."""
-        if place is not self._place:
-            self._cells.x0 = transfer.to_device(place.x0, int, plan.luma.device, "plan")
-            self._place = place
-        device = self._band.device
-        band_difference(self.frame_arrays("luma", plan.luma), plan.luma, self._cells, gains_luma, self._grid.width,
-                        (device["diff"].reshape(self._grid.shape), device["total"].reshape(self._grid.shape),
-                         device["delta"].reshape(self._grid.shape)))
-        self._band.download()
-        return self._band_frame
+        (``composite.band_difference`` with the Y pass's gains) and, on a static plan, the object band's
+        on ``objects`` (``frame_objects.ObjectGrid``, the whole overlap on coarse cells), on the host in
+        one small download. The seam band's cells went up with the last frame's seam (:meth:`composite`),
+        or go up now where the band moved otherwise (a new map set's). The arrays are this frame's: the
+        next call overwrites them."""
+        block = self._seam_block(plan)
+        if place.x0 is not self._band_x0:
+            np.copyto(block.host["band_x0"], place.x0)
+            transfer.upload(block.device["band_x0"], place.x0, "plan")
+            self._band_x0 = place.x0
+        if self._bands is None or self._bands[0] is not objects:
+            grid = self._grid
+            bands = {"seam": (grid.lines, grid.cell, grid.shape, block.device["band_x0"])}
+            if objects is not None:
+                bands["objects"] = (objects.lines, objects.cell, objects.shape,
+                                    transfer.to_device(objects.x0, int, self._cfg.device, "plan"))
+            self._bands = objects, BandBlock(bands, self._cfg.device)
+        frames = self._bands[1].difference(self.frame_arrays("luma", plan.luma), plan.luma, gains_luma)
+        return frames["seam"], frames.get("objects")
 
     def _seam_block(self, plan: FramePlan) -> transfer.Staged:
-        """The block the frame's seam and offsets go up in (made once: the canvas's lines are fixed)."""
+        """The block the frame's seam and offsets, and the next frame's seam band's cells, go up in (made
+        once: the canvas's lines are fixed)."""
         if self._seam is None:
             luma, chroma = plan.luma.lines, plan.chroma.lines
             self._seam = transfer.Staged({
                 "seam_luma": ((luma,), np.float32), "offsets_luma": ((2, luma), np.int32),
-                "seam_chroma": ((chroma,), np.float32), "offsets_chroma": ((2, chroma * 2), np.int32)},
-                self._cfg.device, "seam")
+                "seam_chroma": ((chroma,), np.float32), "offsets_chroma": ((2, chroma * 2), np.int32),
+                "band_x0": ((len(self._grid.lines),), np.int32)}, self._cfg.device, "seam")
             self._seam.host["offsets_chroma"].fill(0)  # the U/V pass has no seam offsets
         return self._seam
 
     def composite(self, plan: FramePlan, luma: FrameState, chroma: FrameState, gains: tuple[Gains, Gains],
-                  window: np.ndarray | None = None, keep_canvas: bool = False
+                  next_band: BandPlace, window: np.ndarray | None = None, keep_canvas: bool = False
                   ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """The loaded pair composited by ``plan`` with each pass's state (``luma`` with the seam blend's
         offsets, ``chroma`` without) and ``gains`` (:meth:`gains`): (output, canvas) (y, u, v) planes, new
-        arrays (one upload of the seams, one download of the planes). The output is the canvas, or with
-        ``window`` (x, y) the output-shaped window there (``kernels/shift.py``; the canvas then comes
-        down too only with ``keep_canvas``, else the canvas returned is the output)."""
-        self.set_seams(plan, luma, chroma)
+        arrays (one upload of the seams, with the cells of the next frame's seam band at ``next_band``; one
+        download of the planes). The output is the canvas, or with ``window`` (x, y) the output-shaped
+        window there (``kernels/shift.py``; the canvas then comes down too only with ``keep_canvas``, else
+        the canvas returned is the output)."""
+        self.set_seams(plan, luma, chroma, next_band.x0)
         self.composite_pass("luma", plan.luma, gains[0])
         self.composite_pass("chroma", plan.chroma, gains[1])
         if window is None:
@@ -212,13 +259,16 @@ class DeviceFrame:
         uv = block.host["uv"]
         return block.host["y"].copy(), uv[:, :, 0].copy(), uv[:, :, 1].copy()
 
-    def set_seams(self, plan: FramePlan, luma: FrameState, chroma: FrameState) -> None:
-        """Both passes' seams and the Y pass's seam-blend offsets onto the device, in one copy."""
+    def set_seams(self, plan: FramePlan, luma: FrameState, chroma: FrameState, band_x0: np.ndarray) -> None:
+        """Both passes' seams and the Y pass's seam-blend offsets onto the device, with the seam band's
+        cells ``band_x0`` (``BandPlace.x0``) for the next :meth:`band`, in one copy."""
         block = self._seam_block(plan)
         host = block.host
         np.copyto(host["seam_luma"], luma.seam)
         host["offsets_luma"][:] = np.stack([fixed_point(v) for v in luma.offsets])
         np.copyto(host["seam_chroma"], chroma.seam)
+        np.copyto(host["band_x0"], band_x0)
+        self._band_x0 = band_x0
         block.upload()
 
     def composite_pass(self, name: str, plan: CompositePlan, gains: Gains, per_pixel: bool | None = None) -> None:

@@ -123,7 +123,7 @@ def screen_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: st
     count (raises StitchError)."""
     screen = screening_config(cfg, (frame_l.y.shape, frame_r.y.shape))
     matches = match_images(frame_l.to_bgr(), frame_r.to_bgr(), screen)
-    rig = detect_rig(matches.pts_a, matches.pts_b, reference)
+    rig = detect_rig(matches.pts_a, matches.pts_b, frame_l.y.shape, reference)
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
     return matches, fit_global_affine(pts_src, pts_tgt, screen).n_inliers
 

@@ -9,27 +9,33 @@ a cell costs its difference beyond the noise floor, plus ``video_seam_stay_cost`
 the last frame's seam and ``video_seam_home_cost`` per pixel away from the estimate's.
 
 *Glide and jump.* The seam glides: it moves at most ``video_seam_speed_px`` per line from the last
-frame's (one cell where cells are wider). On a static rig, while something is in front of the
-background (below), a second path, free in the band, is taken instead when the gliding one would cost
-``video_seam_jump_cost`` per line more: something moved across the seam and the seam steps round it
-at once. (On a moving rig everything
-shifts a little every frame; there the seam only glides.) A new path replaces the last one only when
-it is cheaper by ``video_seam_margin`` per line: while nothing moves the costs only carry noise.
+frame's (one cell where cells are wider). While the rig's plan is static and something is in front
+of the background (below), a second path, free in the band, is taken instead when the gliding one
+would cost ``video_seam_jump_cost`` per line more: something moved across the seam and the seam steps
+round it at once. (While the plan is a moving rig's, everything shifts a little every frame; there
+the seam only glides, and keeps the two copies of what the frame's warp left apart on one side,
+:func:`separation_band_cost`.) A new path replaces the last one only when it is cheaper by
+``video_seam_margin`` per line: while nothing moves the costs only carry noise.
 
 *Still lines.* A line is still when no box of ``video_seam_still_box_px`` cells of the band's
 difference changed by more than ``video_seam_noise`` since the last frame on it or within a band's
 width of lines (room for the path to leave and come back); there every cell but the last frame's
 seam is blocked, and a frame whose lines are all still solves nothing.
 
-*In front of the background* (static rigs). The band keeps a background model: each cell's
-source-plus-target luma as a running mean with time constant ``video_seam_background_s``, and its
-mean absolute deviation. A cell is in front when it is off the model by more than twice the noise and
-three deviations (leaves in the wind and a drifting camera's edges keep changing), beyond what one
-gain and offset over the whole band explain (a camera's exposure step, a flickering light), in most
-of a box twice ``video_seam_still_box_px`` wide (an object, not thin edges). Such cells cost
-``video_seam_motion_cost`` more, so the seam goes round a moving object whole (both its copies), not
-only round where the views differ: inside a smooth object its two copies differ little, and a seam
-through it would lose a strip of it.
+*In front of the background* (a static plan, ``frame_objects.ObjectBand``). Over the whole overlap, on
+cells four times as wide, each view keeps a background model; what is off it in either view (an object,
+both its copies) costs ``video_seam_motion_cost`` more, so the seam goes round a moving object whole,
+not only round where the views differ: inside a smooth object its two copies differ little, and a
+seam through it would lose a strip of it. Each object's two copies (paired across the views) and the
+strip between them cost ``video_seam_object_cost``: the seam keeps off them and shows the object once
+and whole from one view. Where an object stands on the band's home, the next frame's band moves
+to where the object band's route passes it, on the side it passed before (a jump when the route
+switches sides, round the object); where the band left the seam last shown behind, the seam goes with
+it, freely in the band, that frame. The object band and the seam's band come down in one block, so
+the band is placed a frame after the objects that place it (the strips the seam keeps off are
+this frame's). (The plan keeps both views wherever the
+band may go: about the estimate's seam and, where the rig may be static, over the overlap.) When the
+plan turns moving the object band is dropped; when it turns static a new one learns.
 
 All of it runs on the host, on the band's few thousand cells (``kernels/frame_seam.py`` on Warp's
 CPU device, numpy, OpenCV); the frame's seam and the seam blend's offsets go back to the device in
@@ -55,12 +61,10 @@ from ..partition import running_mean
 from ..seam_path import BandPath, separation_spans
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.kernels.frame_seam import (DEVICE, BackgroundModel, CellCosts, LastSeam, SeamCosts, background_kernel,
-                                          band_cost_kernel, strip_mean_kernel)
+from sena_warp.kernels.frame_objects import CellGrid, coarse_masks_kernel
+from sena_warp.kernels.frame_seam import DEVICE, CellCosts, LastSeam, SeamCosts, band_cost_kernel, strip_mean_kernel
 from sena_warp.kernels.transfer import host_array
-
-FIT_STRIDE = 4  # the whole band's gain and offset are fitted on every this-th line and cell
-SPREAD_FACTOR = 3.0  # a band cell is off its background beyond this x its mean absolute deviation there
+from .frame_objects import ObjectBand, ObjectGrid
 
 
 def band_half_width(shape: tuple[int, int], cfg: Config) -> int:
@@ -87,7 +91,7 @@ class BandGrid:
     """The band's cells, fixed for a video: ``lines`` (K,) int32 the solved seam lines (every ``step``-th
     of the ``count`` lines, and the last), ``width`` cells of ``cell`` px each; a path moves at most
     ``max_step`` cells between solved lines, at ``step_cost`` per cell; it glides at most ``speed`` px
-    a frame, on ``glide_width`` cells; ``box``: an object's box (``FrameSeam.foreground``), in cells."""
+    a frame, on ``glide_width`` cells."""
 
     count: int
     lines: np.ndarray
@@ -98,7 +102,6 @@ class BandGrid:
     step_cost: float
     speed: float
     glide_width: int
-    box: int
 
     @staticmethod
     def of(count: int, band: int, cell: int, cfg: Config) -> "BandGrid":
@@ -108,8 +111,7 @@ class BandGrid:
         lines = np.unique(np.append(np.arange(0, count, step), count - 1)).astype(np.int32)
         speed = max(cfg.video_seam_speed_px, cell)  # px a frame: at least one cell, or it could not glide
         return BandGrid(count, lines, cell, width, step, int(np.ceil(cfg.seam_max_step_px * step / cell)),
-                        cfg.seam_step_cost * cell, speed, min(width, 2 * int(np.ceil(speed / cell)) + 1),
-                        2 * max(1, cfg.video_seam_still_box_px) + 1)
+                        cfg.seam_step_cost * cell, speed, min(width, 2 * int(np.ceil(speed / cell)) + 1))
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -119,7 +121,8 @@ class BandGrid:
 
 @dataclass(frozen=True)
 class BandPlace:
-    """Where the band lies for one estimate's seam ``home`` (L,) float32: each solved line's first cell
+    """Where the band lies for one estimate's seam ``home`` (L,) float32 (centred on it, or where a static
+    rig's objects move it): each solved line's first cell
     ``x0`` (K,) int32 px, on the grid of cells so that cells line up from line to line, every cell's
     position ``cells`` (K, width), and the cost of leaving home per cell ``home_term`` (K, width)
     float32 (with its Warp view on the host, as the kernels take it)."""
@@ -132,10 +135,11 @@ class BandPlace:
     home_term_wp: wp.array
 
     @staticmethod
-    def of(home: np.ndarray, grid: BandGrid, cfg: Config) -> "BandPlace":
+    def of(home: np.ndarray, grid: BandGrid, cfg: Config, centre: np.ndarray | None = None) -> "BandPlace":
+        """The band about ``centre`` (K,) px on the solved lines, or about ``home`` without one."""
         half = grid.width // 2
-        x0 = ((np.floor_divide(np.rint(home[grid.lines]).astype(np.int32), grid.cell) - half) * grid.cell
-              ).astype(np.int32)
+        centre = home[grid.lines] if centre is None else centre
+        x0 = ((np.floor_divide(np.rint(centre).astype(np.int32), grid.cell) - half) * grid.cell).astype(np.int32)
         cells = x0[:, None] + grid.cell * np.arange(grid.width, dtype=np.int32)[None, :]
         home_term = np.empty(grid.shape, np.float32)
         np.copyto(home_term, cfg.video_seam_home_cost * np.abs(cells - home[grid.lines, None]), casting="unsafe")
@@ -161,50 +165,14 @@ class BandFrame:
         return BandFrame(diff, total, delta, host_array(diff, float), host_array(total, float))
 
 
-class BandModel:
-    """The band's background model (module docstring), for static rigs: per cell the source-plus-target
-    luma of the background and its mean absolute deviation (``kernels/frame_seam.py``'s
-    ``BackgroundModel``), learnt at the rate of ``video_seam_background_s`` at ``fps``."""
-
-    def __init__(self, grid: BandGrid, fps: float, cfg: Config):
-        self.noise = np.float32(2.0 * cfg.video_seam_noise)
-        self.modelled = False  # whether the model holds the band's current place
-        self._arrays = [np.zeros(grid.shape, np.float32), np.zeros(grid.shape, np.float32),
-                        np.zeros(grid.shape, np.uint8)]  # background, spread, off
-        model = BackgroundModel()
-        model.background, model.spread = (host_array(a, float) for a in self._arrays[:2])
-        model.off = host_array(self._arrays[2], wp.uint8)
-        model.noise, model.spread_factor = float(self.noise), SPREAD_FACTOR
-        model.learn = float(np.float32(1.0 / max(1.0, fps * cfg.video_seam_background_s)))
-        self.kernel = model
-        self._box = (grid.box, np.ones((grid.box, grid.box), np.uint8))
-
-    def foreground(self, band: BandFrame) -> np.ndarray:
-        """(K, width) uint8 1 on cells off the model in ``band`` (module docstring), grown by
-        ``video_seam_still_box_px``; none on the first frame of a place. Updates the model."""
-        background, spread, off = self._arrays
-        if band.diff.shape != background.shape or band.total.shape != background.shape:
-            raise ValueError(f"band of {band.diff.shape} / {band.total.shape} cells for a model of {background.shape}")
-        if not self.modelled:
-            np.copyto(background, band.total)
-            spread.fill(float(self.noise / SPREAD_FACTOR))
-            self.modelled = True
-        fit = (slice(None, None, FIT_STRIDE),) * 2
-        gain, offset = whole_band_fit(background[fit], band.total[fit], band.diff[fit] < 0.5 * NOT_BOTH,
-                                      float(self.noise))
-        runtime.launch_row_loops(background_kernel, background.shape[0], background.shape[1], [
-            band.diff_wp, band.total_wp, float(np.float32(gain - 1.0)), float(np.float32(offset)), self.kernel],
-            DEVICE, runtime.BAND_THREADS)
-        box, kernel = self._box
-        solid = (cv2.blur(off, (box, box)) > 0).view(np.uint8)
-        return cv2.dilate(solid, kernel)
-
-
 class BandCosts:
     """The host arrays ``band_cost_kernel`` and ``strip_mean_kernel`` fill for the band's paths, and
     what they cost (``SeamCosts`` of ``cfg``): a path's cells from the last seam (``last``, ``still``,
     ``glide_first``), each cell's costs (``change``, ``free``, ``glide``, ``line_min``), the frame's
-    ``path`` and the difference next to it (``strip_mean``, ``strip_count``)."""
+    ``path`` and the difference next to it (``strip_mean``, ``strip_count``); what is in front
+    (``moving``) and the strips kept off (``kept_off``) on a static plan, the last frame's difference
+    (``last_diff``, for lines where the band moved), and a frame's cost of leaving home with its
+    separation cost added (``home_frame``, :meth:`FrameSeam.next`'s ``copies``)."""
 
     def __init__(self, grid: BandGrid, cfg: Config):
         solved, width = grid.shape
@@ -214,7 +182,9 @@ class BandCosts:
                      "glide": np.zeros((solved, grid.glide_width), np.float32),
                      "line_min": np.zeros(solved, np.float32), "path": np.zeros(solved, np.int32),
                      "strip_mean": np.zeros(solved, np.float32), "strip_count": np.zeros(solved, np.int32),
-                     "moving": np.zeros(grid.shape, np.uint8)}
+                     "moving": np.zeros(grid.shape, np.uint8), "kept_off": np.zeros(grid.shape, np.uint8),
+                     "lines": grid.lines.astype(np.int32), "last_diff": np.zeros(grid.shape, np.float32),
+                     "home_frame": np.zeros(grid.shape, np.float32)}
         dtypes = {np.dtype(np.int32): int, np.dtype(np.float32): float, np.dtype(np.uint8): wp.uint8}
         self.views = {name: host_array(a, dtypes[a.dtype]) for name, a in self.host.items()}
         self.last = LastSeam()
@@ -226,6 +196,7 @@ class BandCosts:
         self.costs = SeamCosts()
         self.costs.speed, self.costs.noise = float(grid.speed), float(cfg.video_seam_noise)
         self.costs.motion_cost = float(cfg.video_seam_motion_cost)
+        self.costs.object_cost = float(cfg.video_seam_object_cost)
         self.costs.blocked_cost = float(cfg.video_seam_blocked_cost)
         self.costs.stay_cost = float(cfg.video_seam_stay_cost)
         self.costs.block_cost = float(cfg.video_seam_blocked_cost * 10)  # a blocked cell; still lines keep their seam
@@ -233,33 +204,41 @@ class BandCosts:
 
 class FrameSeam:
     """The per-frame seam of a luma plane whose plan keeps both views within ``band`` px of the
-    estimate's seam ``home`` (L,) float32 (positions per line), on cells ``cell`` px wide
-    (:func:`cell_px`); ``jumps``: whether it may leave its gliding path and keeps a background model (a
-    static rig); ``fps``: the video's frame rate.
+    estimate's seam ``home`` (L,) float32 (positions per line) and, where the rig may be static, over
+    the whole overlap, on cells ``cell`` px wide (:func:`cell_px`); ``overlap`` (L, 2) int: per line the
+    first and the last position holding both views (None: the plan keeps only the band); ``jumps``:
+    whether the rig's plan is static, so that the seam may jump and goes round what is in front of
+    the background (``frame_objects.ObjectBand``, kept where there is an overlap), not on a moving rig
+    (whose seam only glides; :meth:`set_jumps` when the plan changes); ``fps``: the video's frame rate.
 
     The seam is solved on the grid's lines (:class:`BandGrid`) and interpolated between them;
-    ``positions``, ``shown`` and ``still`` are per line. :meth:`reset` follows a new estimate's seam,
-    :meth:`next` takes a frame's band (:class:`BandFrame`)."""
+    ``positions``, ``shown`` and ``still`` are per line. :meth:`reset` follows a new estimate's seam; per
+    frame :meth:`next` takes the frame's band (:class:`BandFrame`, at ``place``) and, with an object
+    band, the object band's (on ``objects.grid``), both from one download: the objects are found, the
+    seam is solved, and the band is placed for the next frame where the objects' route passes."""
 
-    def __init__(self, home: np.ndarray, band: int, cell: int, jumps: bool, fps: float, cfg: Config):
+    def __init__(self, home: np.ndarray, band: int, cell: int, overlap: np.ndarray | None, jumps: bool, fps: float,
+                 cfg: Config):
         self.cfg = cfg
+        self.fps = fps
+        self._jumps = jumps
+        self._overlap: np.ndarray | None = None
         self.band = band
         self.grid = BandGrid.of(len(home), band, cell, cfg)
-        self._fps = fps
-        self.model = BandModel(self.grid, fps, cfg) if jumps else None
         self.work = BandCosts(self.grid, cfg)
-        # A frame's cost of leaving home with its separation cost added (``next``'s ``copies``).
-        self._home_frame = np.zeros(self.grid.shape, np.float32)
-        self._home_frame_wp = host_array(self._home_frame, float)
         segment = np.array([[0, len(self.grid.lines) - 1, -1, -1]])  # one, free at both ends
         self._solvers = (BandPath(len(self.grid.lines), self.grid.width, segment, cfg.cpu_threads),  # free
                          BandPath(len(self.grid.lines), self.grid.glide_width, segment, cfg.cpu_threads))  # glide
-        self.place: BandPlace | None = None  # where the band lies (``reset``)
+        self.objects: ObjectBand | None = None  # a static plan's (``reset``, ``set_jumps``)
+        self.place: BandPlace | None = None  # where the band lies (``reset``, ``_follow``)
+        self._moved = False  # whether ``_follow`` moved the band off the seam last shown since the last solve
         self._path: np.ndarray | None = None  # (K,) the solved lines' seam (px, on the grid of cells)
         self._shown: np.ndarray | None = None  # (K,) the solved lines' seam the last frame was composited with
         self._still = np.zeros(len(self.grid.lines), bool)  # the solved lines the last frame found still
-        self._has_last = False  # whether the band's ``delta`` compares with the last frame on this place
-        self.reset(home)
+        # Per solved line, how many cells the band moved since the last frame (``_follow``): 0 where the
+        # band's ``delta`` compares with the last frame, a band's width or more where nothing does.
+        self._shift = np.full(len(self.grid.lines), self.grid.width, np.int32)
+        self.reset(home, overlap)
 
     @property
     def cell(self) -> int:
@@ -271,33 +250,62 @@ class FrameSeam:
 
     @property
     def home(self) -> np.ndarray:
-        """(L,) float32 the estimate's seam, the band's centre."""
+        """(L,) float32 the estimate's seam, the band's centre where nothing is in the way."""
         return self.place.home
 
     @property
     def jumps(self) -> bool:
-        return self.model is not None
+        """Whether the seam may jump round what is in front (a static plan): the object band is kept."""
+        return self._jumps
 
     def set_jumps(self, jumps: bool) -> None:
-        """Whether it may jump and keeps a background model from now on (a rig that stopped or started
-        moving); a new model learns the band from the next frame."""
-        if jumps != self.jumps:
-            self.model = BandModel(self.grid, self._fps, self.cfg) if jumps else None
+        """Whether the seam may jump and keeps the object band from now on (a rig that stopped or started
+        moving): a new object band's models learn from the next frame; without one the band goes back
+        to the estimate's seam."""
+        if jumps != self._jumps:
+            self._jumps = jumps
+            self._place_home(self.place.home)
 
-    def reset(self, home: np.ndarray) -> None:
-        """A new estimate's seam: the band follows it; the last path is kept where it still fits. The
-        glide still starts from the seam last shown (``shown``), so a band that moves with a blend does
-        not add its own step to the seam's. A seam that did not move (a static rig's maps moved with a
-        camera's drift) keeps its band, its last difference and its background model: the band's
-        content moved by a pixel or two, which the model's own learning follows."""
+    def reset(self, home: np.ndarray, overlap: np.ndarray | None) -> None:
+        """A new estimate's seam and overlap (as the constructor's): the band follows it; the last path
+        is kept where it still fits. The glide still starts from the seam last shown (``shown``), so a
+        band that moves with a blend does not add its own step to the seam's. A seam that did not move
+        (a static rig's maps moved with a camera's drift) keeps its band, its last difference and its
+        background models: the band's content moved by a pixel or two, which the models' own learning
+        follows."""
         home = np.asarray(home, np.float32)
         if self.place is not None and np.array_equal(home, self.place.home):
             return
+        self._overlap = overlap
+        self._place_home(home)
+
+    def _place_home(self, home: np.ndarray) -> None:
+        """The band about ``home``, and a new object band over the overlap where the seam may jump."""
+        keeps = self._jumps and self._overlap is not None
+        self.objects = ObjectBand(ObjectGrid.of(home, self._overlap, self.grid.cell), self.fps, self.cfg) \
+            if keeps else None
         self.place = BandPlace.of(home, self.grid, self.cfg)
-        self._has_last = False  # the band's cells moved: the last difference no longer lines up
-        if self.model is not None:
-            self.model.modelled = False
+        for name in ("moving", "kept_off"):  # filled again each frame while there is an object band
+            self.work.host[name].fill(0)
+        self._shift[:] = self.grid.width  # the band's cells moved: the last difference no longer lines up
+        self._moved = False
         self._path = self._on_grid(home[self.grid.lines] if self._path is None else self._path)
+
+    def _follow(self) -> None:
+        """After a frame whose objects changed their route: the band of the next frame centred where the
+        route passes (``ObjectBand.centre``), moved as gently as a path can follow. On lines whose cells
+        moved, the last frame's difference moves with the cells it was taken on (``still_lines``); where
+        the band left the seam last shown behind, the next solve is free in the band."""
+        grid, place = self.grid, self.place
+        centre = gentle(self.objects.centre(grid.lines), max(grid.max_step - 1, 1) * grid.cell)
+        moved = BandPlace.of(place.home, grid, self.cfg, centre)
+        if np.array_equal(moved.x0, place.x0):
+            return
+        self._shift = np.where(np.abs(self._shift) >= grid.width, self._shift,
+                               (moved.x0 - place.x0) // grid.cell).astype(np.int32)
+        self._moved = bool(np.any((self._shown < moved.x0) | (self._shown > moved.cells[:, -1])))
+        self.place = moved
+        self._path = self._on_grid(self._path)
 
     def _on_grid(self, path: np.ndarray) -> np.ndarray:
         """(K,) int32 the band cells' positions nearest to ``path`` (K,) px on the solved lines."""
@@ -329,23 +337,29 @@ class FrameSeam:
     def _per_line(self, path: np.ndarray) -> np.ndarray:
         return np.rint(np.interp(np.arange(self.grid.count), self.grid.lines, path)).astype(np.int32)
 
-    def next(self, band: BandFrame, copies: tuple[np.ndarray, np.ndarray] | None = None
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def next(self, band: BandFrame, objects: BandFrame | None = None,
+             copies: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The seam of the frame whose band is ``band`` and its seam blend's offsets (``band_offsets``):
         (positions (L,) int32, offsets off the source (L, 1), onto the target (L, 1) float32).
-        ``copies``: (target's, source's) (M, 2) (line, position) of points the warp leaves apart this
-        frame: the seam keeps each pair on one side (:func:`separation_band_cost`)."""
+        ``objects``: the frame's object band (on ``objects.grid``; None without an object band): what is
+        in front, kept off, and where the next frame's band lies. ``copies``: (target's, source's) (M, 2)
+        (line, position) of points the warp leaves apart this frame: the seam keeps each pair on one
+        side (:func:`separation_band_cost`)."""
+        route_changed = self.objects is not None and objects is not None and self.objects.update(objects)
         self._still = self.still_lines(band)
-        self._has_last = True
+        if self._moved:  # the band left the seam shown last behind: no line keeps it, the seam follows the band
+            self._still[:] = False
+        self._shift[:] = 0
+        np.copyto(self.work.host["last_diff"], band.diff)
         last = self._path if self._shown is None else self._shown
-        if not self._still.all():  # else nothing changed on any line: the seam and the background model stay
-            moving = self.model.foreground(band) if self.model is not None else None
+        if not self._still.all():  # else nothing changed on any line: the seam stays
+            moving = self.foreground() if self.objects is not None else None
             home_term = self.place.home_term_wp
             if copies is not None and len(copies[0]):  # this frame's home term carries the separation's cost
                 separation = separation_band_cost(self.grid.lines, self.place.x0, self.grid.cell, self.grid.width,
                                                   *copies, self.cfg)
-                np.add(self.place.home_term, separation, out=self._home_frame)
-                home_term = self._home_frame_wp
+                np.add(self.place.home_term, separation, out=self.work.host["home_frame"])
+                home_term = self.work.views["home_frame"]
             self._path = self._solve(band, moving, last, home_term)
         self._shown = self._path.copy()
         work, grid = self.work, self.grid
@@ -355,13 +369,16 @@ class FrameSeam:
             work.views["strip_mean"], work.views["strip_count"]], DEVICE, runtime.BAND_THREADS)
         offsets_src, offsets_tgt = band_offsets(work.host["strip_mean"], work.host["strip_count"], grid.lines,
                                                 grid.step, self.cfg)
-        return self.positions, offsets_src, offsets_tgt
+        positions = self.positions
+        if route_changed:
+            self._follow()
+        return positions, offsets_src, offsets_tgt
 
     def _solve(self, band: BandFrame, moving: np.ndarray | None, last: np.ndarray, home_term: wp.array
                ) -> np.ndarray:
         """The solved lines' new path (module docstring); ``moving``: the cells in front of the
-        background (``BandModel.foreground``), None on a moving rig; ``home_term``: each cell's cost of
-        leaving home (with the frame's separation cost, if any).
+        background (:meth:`foreground`, which also filled the strips kept off), None without an object
+        band; ``home_term``: each cell's cost of leaving home (with the frame's separation cost, if any).
 
         The glide moves at most ``video_seam_speed_px`` (or one cell) per solved line from ``last`` (K,)
         and not at all on still lines: it is solved on the few cells it may take, from ``first``."""
@@ -369,13 +386,14 @@ class FrameSeam:
         first = np.clip((last - place.x0) // grid.cell - grid.glide_width // 2, 0, grid.width - grid.glide_width)
         for name, values in (("last", last), ("still", self._still), ("glide_first", first)):
             np.copyto(work.host[name], values, casting="unsafe")
-        if moving is not None:
-            np.copyto(work.host["moving"], moving)
         runtime.launch_rows(band_cost_kernel, len(grid.lines), 1, [
-            band.diff_wp, work.views["moving"], home_term, place.x0_wp, grid.cell, work.last, work.costs,
-            work.out], DEVICE, runtime.BAND_THREADS)
+            band.diff_wp, work.views["moving"], work.views["kept_off"], home_term, place.x0_wp, grid.cell, work.last,
+            work.costs, work.out], DEVICE, runtime.BAND_THREADS)
         change = work.host["change"]
         free_solver, glide_solver = self._solvers
+        if self._moved:  # the band left the seam behind (round an object): the seam follows, anywhere in the band
+            self._moved = False
+            return self._solve_band(free_solver, work.views["free"], place.x0)
         glide = self._solve_band(glide_solver, work.views["glide"], place.x0 + grid.cell * first)
         solved = np.arange(len(grid.lines))
 
@@ -394,41 +412,50 @@ class FrameSeam:
             return path.astype(np.int32)
         return self._path
 
+    def foreground(self) -> np.ndarray:
+        """(K, width) uint8 over the solved lines' band: 1 on cells in front of either view's background
+        (the object band's, grown by an object's box), with the strips the seam keeps off
+        (``work.host["kept_off"]``) filled from it too (``frame_objects``)."""
+        objects, work, grid = self.objects, self.work, self.grid
+        fine = CellGrid()
+        fine.x0, fine.cell, fine.step = self.place.x0_wp, grid.cell, grid.step
+        runtime.launch_row_loops(coarse_masks_kernel, len(grid.lines), grid.width, [
+            work.views["lines"], fine, objects.grid.kernel, objects.views["moving"], objects.views["kept_off"],
+            work.views["moving"], work.views["kept_off"]], DEVICE, runtime.BAND_THREADS)
+        return work.host["moving"]
+
     def still_lines(self, band: BandFrame) -> np.ndarray:
         """(K,) bool: solved lines where nothing changed since the last frame (module docstring), from the
-        band's ``delta``; none without a last frame on this place."""
-        if not self._has_last:
+        band's ``delta`` (on lines where the band moved, from the last frame's difference moved with its
+        cells); none on a line without the last frame's difference."""
+        width = self.grid.width
+        missing = np.abs(self._shift) >= width
+        if missing.all():
             return np.zeros(len(self.grid.lines), bool)
+        delta = band.delta
+        shifted = np.flatnonzero((self._shift != 0) & ~missing)
+        if shifted.size:
+            delta = delta.copy()
+            taken = np.arange(width)[None, :] + self._shift[shifted, None]
+            inside = (taken >= 0) & (taken < width)
+            last = np.take_along_axis(self.work.host["last_diff"][shifted], np.clip(taken, 0, width - 1), axis=1)
+            now = band.diff[shifted]
+            both = inside & (now < 0.5 * NOT_BOTH) & (last < 0.5 * NOT_BOTH)
+            delta[shifted] = np.where(both, np.abs(now - last), 0.0)
         box = max(1, self.cfg.video_seam_still_box_px)
-        moved = (cv2.blur(band.delta, (box, box)) > self.cfg.video_seam_noise).any(axis=1)
+        moved = (cv2.blur(delta, (box, box)) > self.cfg.video_seam_noise).any(axis=1) | missing
         return ~lines_near(moved, int(np.ceil(self.grid.width * self.grid.cell / self.grid.step)))
 
 
-def whole_band_fit(background: np.ndarray, total: np.ndarray, both: np.ndarray, noise: float) -> tuple[float, float]:
-    """(gain, offset): how ``total`` changed from ``background`` over the whole band (a camera's exposure
-    step, a flickering light): their least-squares fit on the cells in ``both`` (the caller takes every
-    :data:`FIT_STRIDE`-th line and cell), fitted again without the cells more than ``noise`` (and twice
-    the median residual) off the first fit (an object in front). ``(gain - 1) x background + offset``
-    is the change they explain."""
-    x = background[both].astype(np.float64)
-    y = total[both].astype(np.float64)
-    gain, offset = _gain_offset(x, y)
-    residual = np.abs(y - gain * x - offset)
-    kept = residual <= max(noise, 2.0 * float(np.median(residual))) if residual.size else residual > 0
-    return _gain_offset(x[kept], y[kept])
-
-
-def _gain_offset(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """Least squares y = gain x + offset; gain 1 where x does not vary, (1, 0) without points."""
-    if x.size == 0:
-        return 1.0, 0.0
-    x_mean, y_mean = x.sum() / x.size, y.sum() / y.size
-    dx = x - x_mean
-    x_var = float(dx @ dx) / x.size
-    if x.size < 2 or x_var <= 1e-6:
-        return 1.0, float(y_mean - x_mean)
-    gain = float(dx @ (y - y_mean)) / x.size / x_var
-    return gain, float(y_mean - gain * x_mean)
+def gentle(positions: np.ndarray, most: float) -> np.ndarray:
+    """(K,) float64 ``positions`` (K,) moved as little as it takes to change by at most ``most`` from
+    one line to the next (clamped forwards, then backwards)."""
+    out = np.asarray(positions, np.float64).copy()
+    for k in range(1, len(out)):
+        out[k] = min(max(out[k], out[k - 1] - most), out[k - 1] + most)
+    for k in range(len(out) - 2, -1, -1):
+        out[k] = min(max(out[k], out[k + 1] - most), out[k + 1] + most)
+    return out
 
 
 def separation_band_cost(lines: np.ndarray, x0: np.ndarray, cell: int, width: int, copies_tgt: np.ndarray,

@@ -39,6 +39,8 @@ class PlaneMaps:
     where the estimate's canvas does not reach. ``inliers``: global-affine inliers of the estimate.
     ``border_luma``: the estimate's border blend on the Y plane (``partition.border_offsets``): lines
     (2,), source offsets (2, P, 1), target offsets (2, P, 1) in the compositor's terms, or None.
+    ``overlap_luma``: a static rig's overlap per seam line of the Y plane (:func:`overlap_lines`), over
+    which its per-frame seam may go round what is in front; None for a moving rig.
 
     A value: its arrays are made read-only, so a plan may use them where they are (``composite_plan``)
     and anything that moves the maps makes new ones.
@@ -55,10 +57,12 @@ class PlaneMaps:
     seam_x_working: np.ndarray
     inliers: int
     border_luma: BorderBlend | None
+    overlap_luma: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         border = () if self.border_luma is None else (self.border_luma.src, self.border_luma.tgt)
-        for array in (self.map_src_luma, self.map_tgt_luma, self.alpha_luma, self.map_src_chroma, self.map_tgt_chroma,
+        overlap = () if self.overlap_luma is None else (self.overlap_luma,)
+        for array in (*overlap, self.map_src_luma, self.map_tgt_luma, self.alpha_luma, self.map_src_chroma, self.map_tgt_chroma,
                       self.alpha_chroma, self.seam_luma.positions, self.seam_chroma.positions, self.seam_x_working,
                       *border):
             array.flags.writeable = False
@@ -146,15 +150,24 @@ def plane_maps(maps: StitchMaps, shape: tuple[int, int], offset_fixed: np.ndarra
 
 
 def maps_on_canvas(maps: StitchMaps, shape: tuple[int, int], offset_fixed: np.ndarray, band_px: int,
-                   shape_out: tuple[int, int]) -> PlaneMaps:
+                   shape_out: tuple[int, int],
+                   static_shapes: tuple[tuple[int, int], tuple[int, int]] | None = None) -> PlaneMaps:
     """:func:`plane_maps` of an estimate on the fixed canvas of ``shape``, scaled to the output of
     ``shape_out`` (:func:`scaled_plane_maps`), its plan's band widened by ``band_px``, the reach of the
     per-frame seam (``frame_seam.band_half_width``, output pixels), so both views are kept wherever the
-    frame's seam may go."""
+    frame's seam may go. ``static_shapes``: for a static rig, the (rows, cols) of the source's and the
+    target's Y planes: its seam may go round what is in front anywhere in the overlap, so the overlap is
+    kept (``overlap_luma``, output pixels) and the plan's band reaches over all of it."""
     plane = scaled_plane_maps(plane_maps(maps, shape, offset_fixed), shape_out)
     reach = band_px + plane.seam_luma.band_px
+    overlap = None
+    if static_shapes is not None:
+        overlap = overlap_lines(plane, *static_shapes)
+        home, inside = plane.seam_luma.positions, overlap[:, 1] >= overlap[:, 0]
+        far = np.maximum(home - overlap[:, 0], overlap[:, 1] - home)[inside & np.isfinite(home)]
+        reach += float(far.max()) if far.size else 0.0
     return replace(plane, seam_luma=replace(plane.seam_luma, band_px=reach),
-                   seam_chroma=replace(plane.seam_chroma, band_px=0.5 * reach))
+                   seam_chroma=replace(plane.seam_chroma, band_px=0.5 * reach), overlap_luma=overlap)
 
 
 def border_on_canvas(maps: StitchMaps, shift_xy: np.ndarray, shape: tuple[int, int]) -> BorderBlend | None:
@@ -373,6 +386,19 @@ def sampled_mask(map_canvas: np.ndarray, plane_shape: tuple[int, int]) -> np.nda
     """(H, W) bool: where the map's (x, y) has its bilinear footprint inside a plane of ``plane_shape`` (rows, cols)."""
     x, y = map_canvas[:, :, 0], map_canvas[:, :, 1]
     return (x >= 0) & (y >= 0) & (x <= plane_shape[1] - 1) & (y <= plane_shape[0] - 1)
+
+
+def overlap_lines(maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[int, int]) -> np.ndarray:
+    """(L, 2) int32: per seam line of the luma plane (a canvas row, or a column for a vertical rig) the
+    first and the last position where ``maps`` sample both views, planes of (rows, cols) ``shape_src``
+    / ``shape_tgt``; (0, -1) on a line where they sample both nowhere."""
+    both = sampled_mask(maps.map_src_luma, shape_src) & sampled_mask(maps.map_tgt_luma, shape_tgt)
+    if not maps.seam_luma.lines_are_rows:
+        both = both.T
+    has = both.any(axis=1)
+    first = np.argmax(both, axis=1)
+    last = both.shape[1] - 1 - np.argmax(both[:, ::-1], axis=1)
+    return np.stack([np.where(has, first, 0), np.where(has, last, -1)], axis=1).astype(np.int32)
 
 
 def seam_change_px(before: PlaneMaps, after: PlaneMaps) -> float:

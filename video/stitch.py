@@ -10,10 +10,12 @@ paper's per-frame path, one stage per line (:meth:`SenaFrameCompositor.composite
    auto``'s switches between the two), a value per map set;
 2. their plan on the device, made once per map set (``device_frame.Plans``);
 3. the frame's gains (``exposure.py``: they follow the cameras' exposure);
-4. the pair on the device, and its seam band's difference back (``device_frame.DeviceFrame``);
-5. the frame's seam, cut anew in its band (``frame_seam.py``; on a moving rig keeping the two copies
-   of what its warp could not align on one side), and the seam blend's offsets: with the gains, the
-   frame's state (``composite.FrameState``);
+4. the pair on the device, and its seam band's difference back (``device_frame.DeviceFrame``): with
+   a static plan's object band's over the whole overlap in the same block (``frame_objects.py``);
+5. the frame's seam, cut anew in its band (``frame_seam.py``; on a static plan round what is in front,
+   each object shown once and whole, the band placed for the next frame where the objects' route
+   passes; on a moving rig keeping the two copies of what its warp could not align on one side), and
+   the seam blend's offsets: with the gains, the frame's state (``composite.FrameState``);
 6. the compositing step, the plan and the state on the pair, and the output planes back;
 7. the run log (``RunLog``), which the report reads.
 
@@ -241,7 +243,9 @@ class SenaFrameCompositor:
             self.crop_xywh = None
         self.output_size = (shown[2], shown[3])
         self._steady = SteadyCanvas(shape, (shown[3], shown[2]), self._canvas.scale, cfg)
-        maps = maps_on_canvas(first, self._canvas.stitched_shape, offset_tgt, self._canvas.band_px, shape)
+        # A rig that may be static: its seam may go round what is in front anywhere in the overlap.
+        static = rig.pick(*frame_shapes) if cfg.video_rig != "moving" else None
+        maps = maps_on_canvas(first, self._canvas.stitched_shape, offset_tgt, self._canvas.band_px, shape, static)
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": maps.inliers, "seconds": round(sum(first.seconds.values()), 4)}
         first_s = next(a.time_s for a in first_attempts if a.pair == first_pair)
@@ -251,7 +255,8 @@ class SenaFrameCompositor:
                                       watch_frames(fps, pair_mib(frame_shapes), cfg), cfg)
         self._plans = Plans(cfg)
         cell = max(1, round(cell_px(frame_shapes, cfg) * float(self._canvas.scale.min())))
-        self._seam = FrameSeam(maps.seam_luma.positions, self._canvas.band_px, cell, mode == "static", fps, cfg)
+        self._seam = FrameSeam(maps.seam_luma.positions, self._canvas.band_px, cell, maps.overlap_luma,
+                               mode == "static", fps, cfg)
         self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
         self._device: DeviceFrame | None = None  # likewise
         self._last: tuple[FramePlan, FrameState, FrameState] | None = None  # the last frame's plan and states
@@ -395,17 +400,20 @@ class SenaFrameCompositor:
         maps = self._timeline.maps
         with log.clock("maps_upload"):
             plan = self._plans.plan(maps, shapes)
-            self._seam.reset(maps.seam_luma.positions)
+            self._seam.reset(maps.seam_luma.positions, maps.overlap_luma)
         with log.clock("exposure"):
             luma_gains, chroma_gains = self._gains(maps, planes_src, planes_tgt)
         device = self._device_for(shapes)
         device.load(planes_src, planes_tgt)
         gains = device.gains(plan, luma_gains, chroma_gains)
         with log.clock("frame_seam"):
-            band = device.band(plan, self._seam.place, gains[0])
-            luma, chroma = self._frame_states(band, plan, luma_gains, chroma_gains)
+            objects = self._seam.objects
+            band, object_band = device.band(plan, self._seam.place, objects.grid if objects is not None else None,
+                                            gains[0])
+            luma, chroma = self._frame_states(band, object_band, plan, luma_gains, chroma_gains)
         window = self._steady.window_for(self._timeline.mode)
-        out, canvas = device.composite(plan, luma, chroma, gains, window, keep_canvas=self.observer is not None)
+        out, canvas = device.composite(plan, luma, chroma, gains, self._seam.place, window,
+                                       keep_canvas=self.observer is not None)
         self._last = (plan, luma, chroma)
         if self.observer is not None:
             with log.clock("observer"):
@@ -415,13 +423,14 @@ class SenaFrameCompositor:
         log.time_s = None
         return out
 
-    def _frame_states(self, band: BandFrame, plan: FramePlan, luma_gains: tuple, chroma_gains: tuple
-                      ) -> tuple[FrameState, FrameState]:
-        """Each pass's state of the frame whose seam band is ``band``: its seam (``frame_seam``), kept in
-        the band, with the seam blend's offsets on the Y pass, and its gains."""
+    def _frame_states(self, band: BandFrame, objects: BandFrame | None, plan: FramePlan, luma_gains: tuple,
+                      chroma_gains: tuple) -> tuple[FrameState, FrameState]:
+        """Each pass's state of the frame whose seam band is ``band`` (and object band ``objects``, on a
+        static plan): its seam (``frame_seam``), kept in the band, with the seam blend's offsets on the
+        Y pass, and its gains."""
         last = self._seam.positions if self._seam.shown is None else self._seam.shown  # a new array either way
         copies = self._timeline.copies(plan.maps.seam_luma.lines_are_rows)
-        positions, offsets_src, offsets_tgt = self._seam.next(band, copies)
+        positions, offsets_src, offsets_tgt = self._seam.next(band, objects, copies)
         self._log.seam_motion_px.append(float(np.abs(positions - last).max()))
         positions = positions.astype(np.float32)
         return (FrameState(clipped_seam(positions, plan.luma.layout), luma_gains, (offsets_src, offsets_tgt)),

@@ -194,7 +194,10 @@ class Reestimates:
                 estimate = estimate_pair(frame_l, frame_r, cfg, canvas.rig.target, prior_seam_tgt=prior)
             if estimate.rig.vertical != canvas.rig.vertical:
                 return None, "rig orientation changed"
-            candidate = maps_on_canvas(estimate, canvas.stitched_shape, canvas.offset_tgt, canvas.band_px, canvas.shape)
+            # Under --rig auto the key may be kept by a static plan later: its overlap is kept too.
+            static = (shape_src, shape_tgt) if cfg.video_rig == "auto" else None
+            candidate = maps_on_canvas(estimate, canvas.stitched_shape, canvas.offset_tgt, canvas.band_px, canvas.shape,
+                                       static)
             reason = rejection_reason(candidate, current(), self._first_inliers, shape_src, shape_tgt, cfg)
             return (candidate, None) if reason is None else (None, reason)
         except StitchError as exc:

@@ -72,7 +72,7 @@ def load_pair(folder: Path, cfg: Config) -> PairInputs:
     img_a, img_b = read_image(next(folder.glob("a.*"))), read_image(next(folder.glob("b.*")))
     matches = match_images(img_a, img_b, cfg)
     sift = match_images(img_a, img_b, cfg.replace(features="sift"))
-    rig = detect_rig(matches.pts_a, matches.pts_b)
+    rig = detect_rig(matches.pts_a, matches.pts_b, img_a.shape)
     img_src, img_tgt = (image_to_working(img, rig) for img in rig.pick(img_a, img_b))
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
     sift_src, sift_tgt = matches_to_working(sift.pts_a, sift.pts_b, rig)

@@ -283,7 +283,7 @@ def order_difference(pano_ab: np.ndarray, pano_ba: np.ndarray) -> float:
 
 def _sift_rig(img_a: np.ndarray, img_b: np.ndarray, cfg: Config) -> Rig:
     sift = match_images(img_a, img_b, cfg.replace(features="sift"))
-    return detect_rig(sift.pts_a, sift.pts_b)
+    return detect_rig(sift.pts_a, sift.pts_b, img_a.shape)
 
 
 def input_cells(folder: Path, images: list[np.ndarray | None], box_wh: tuple[int, int]) -> list[np.ndarray]:

@@ -39,17 +39,14 @@ rig), in a band of :data:`BAND_MARGIN_PX` beyond the per-frame seam's reach arou
   difference ``|P_{t-1} - 2 P_t + P_{t+1}|`` (mean and 95th percentile): 0 for a still picture and for
   a steady pan, large where the picture shakes (a moving rig's steady canvas, ``video/steady.py``, is
   what lowers it).
-* *Duplicated / lost* (a clip with known ground truth, ``truth``): per frame, the object's points in
-  both views mapped to the canvas and judged from the frame's seam weights by
-  ``naturalness.copy_figures``; a frame is duplicated (lost) when any point is.
 
 :class:`FrameClock` is a second, nearly free observer: the process's CPU time per frame (every
 thread: decoding, stitching, encoding), for a run apart from the figures' (they cost more than the
 stitch).
 
 Cost: the band views are two small remaps per frame; the flow runs every :data:`FLOW_EVERY` frames;
-the lattice is inverted only when the maps change; the seam weights (a kernel over the canvas) are
-computed only for frames with ground truth.
+the lattice is inverted only when the maps change. (What a crossing clip's figure looks like in each
+frame is measured by ``crossing.CrossingFigures``.)
 """
 
 from __future__ import annotations
@@ -57,7 +54,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Callable
 
 import cv2
 import numpy as np
@@ -66,7 +62,7 @@ from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.gains import tone_curve
 from sena_warp.video.frame_seam import lines_near
-from sena_warp.video.maps import sampled_mask, target_offset
+from sena_warp.video.maps import sampled_mask
 from sena_warp.video.steady import frame_shift, small_y
 from sena_warp.video.stitch import CompositedFrame
 from sena_warp.warp_map import forward_points
@@ -89,12 +85,6 @@ STABILITY_SIZE = (480, 360)  # (width, height) StabStitch resizes its frames to
 STABILITY_WEIGHTS = {1: 0.9, 2: 0.3, 3: 0.1}  # frame distance d -> weight
 STRIP_EVERY = 10  # the band of every this-th output frame is kept for a seam-over-time strip
 AFFINE_STEP_PX = 8  # the map is sampled every this many canvas px to fit the inversion's start affine
-
-
-Truth = Callable[[int, str], "tuple[np.ndarray, np.ndarray] | None"]
-"""Ground truth of a clip: ``truth(index, source)`` -> (points in the source input, the same points in
-the target input), each (N, 2) float64 input-frame (x, y), for output frame ``index`` whose source is
-``source`` ("left" or "right"); None where the frame has none."""
 
 
 @dataclass(frozen=True)
@@ -246,18 +236,16 @@ def _stats(values, percentile: float | None = None) -> float | None:
 class VideoFigures:
     """The observer measuring a stitched video (module docstring); :meth:`figures` when the run is done.
 
-    ``cfg``: the stitch's settings (transition width, inversion tolerances). ``truth``: the clip's ground
-    truth (:data:`Truth`) for the duplicated / lost figure, or None. ``strip_every``: keep the output's
+    ``cfg``: the stitch's settings (transition width, inversion tolerances). ``strip_every``: keep the output's
     band of every this-th frame (``strips``: (index, band (L, W) uint8, seam (L,) in band cells, the
     band's first cell per line (L,))) for a
     seam-over-time picture; ``keep_frames``: output frame indices whose (y, u, v) planes are kept
     (``frames``: index -> (planes, seam (L,) canvas positions)).
     """
 
-    def __init__(self, cfg: Config, truth: Truth | None = None, strip_every: int = 0,
+    def __init__(self, cfg: Config, strip_every: int = 0,
                  keep_frames: tuple[int, ...] = (), flow_every: int = FLOW_EVERY):
         self.cfg = cfg
-        self.truth = truth
         self.strip_every = strip_every
         self.keep_frames = set(keep_frames)
         self.flow_every = max(1, flow_every)
@@ -270,7 +258,6 @@ class VideoFigures:
         self._lattice: np.ndarray | None = None
         self._scale = np.ones(2)
         self._path: np.ndarray | None = None
-        self._valid: tuple[np.ndarray, np.ndarray] | None = None
         self._covered: np.ndarray | None = None  # the canvas pixels the current maps sample
         self._shown: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # the last canvas's small Y, its
         # Hanning window and the output window's corner
@@ -282,7 +269,6 @@ class VideoFigures:
         self._flow_cells: list[np.ndarray] = []
         self._flow_cross: list[np.ndarray] = []
         self._steps: list[np.ndarray] = []  # every frame's signed step per seam line (NaN where undefined)
-        self.copies: list[dict] = []
 
     def __call__(self, frame: CompositedFrame) -> None:
         changed = frame.maps is not self._maps
@@ -324,8 +310,6 @@ class VideoFigures:
         record["uncovered_pct"].append(uncovered_pct(self._covered, frame.window))
         self._follow_output(y_out, frame.window)
         self.paths.append(self._path)
-        if self.truth is not None:
-            self._copies(frame)
         if self.strip_every and frame.index % self.strip_every == 0:
             self.strips.append((frame.index, np.clip(np.rint(out), 0, 255).astype(np.uint8), seam_band.copy(),
                                 band.x0.copy()))
@@ -343,7 +327,6 @@ class VideoFigures:
             self._lattice = source_lattice(shape_src)
             self._scale = np.array([STABILITY_SIZE[0] / shape_src[1], STABILITY_SIZE[1] / shape_src[0]])
         self._path = forward_on_canvas(frame.maps.map_src_luma, self._lattice, self.cfg) * self._scale
-        self._valid = None
         self._covered = covered_canvas(frame)
 
     def _follow_output(self, y_canvas: np.ndarray, window: tuple[float, float, int, int]) -> None:
@@ -400,26 +383,6 @@ class VideoFigures:
                            "mean": round(float(np.abs(part[known]).mean()), 4) if known.any() else None,
                            "known_pct": round(100.0 * float(known.mean()), 1)})
         return groups
-
-    def _copies(self, frame: CompositedFrame) -> None:
-        points = self.truth(frame.index, frame.source)
-        if points is None:
-            return
-        pts_src, pts_tgt = points
-        copies_src = forward_on_canvas(frame.maps.map_src_luma, pts_src, self.cfg)
-        copies_tgt = np.asarray(pts_tgt, np.float64) + target_offset(frame.maps.map_tgt_luma)
-        alpha, _ = frame.weights()
-        if self._valid is None:
-            self._valid = (sampled_mask(frame.maps.map_src_luma, frame.planes_src[0].shape),
-                           sampled_mask(frame.maps.map_tgt_luma, frame.planes_tgt[0].shape))
-        valid_src, valid_tgt = self._valid
-        weight_src, weight_tgt = naturalness.view_weights(alpha, valid_src, valid_tgt)
-        found = naturalness.copy_figures(copies_src, copies_tgt, weight_src, weight_tgt, valid_src & valid_tgt)
-        apart = np.hypot(*(copies_src - copies_tgt).T)
-        apart = apart[np.isfinite(apart)]
-        self.copies.append({"frame": frame.index, "points": found.points, "duplicated": found.duplicated,
-                            "lost": found.lost, "worst_px": round(found.worst_px, 3),
-                            "apart_px": round(float(np.median(apart)), 3) if apart.size else None})
 
     def stability(self) -> tuple[float, np.ndarray]:
         """(StabStitch stability, each lattice point's (63,), NaN for the points not on the canvas in
@@ -489,14 +452,6 @@ class VideoFigures:
             "per_frame": {name: [None if v is None else (round(v, 4) if isinstance(v, float) else v) for v in values]
                           for name, values in record.items()},
         }
-        if self.truth is not None:
-            counted = [c for c in self.copies if c["points"] > 0]
-            figures["copies"] = {
-                "frames_counted": len(counted),
-                "frames_duplicated": [c["frame"] for c in counted if c["duplicated"] > 0],
-                "frames_lost": [c["frame"] for c in counted if c["lost"] > 0],
-                "per_frame": self.copies,
-            }
         return figures
 
 

@@ -1,0 +1,173 @@
+"""What moves in each view, on the per-frame seam's cells (``video/frame_objects.py``).
+
+The band's cells hold, per solved seam line and cell, the source minus the target (``diff``,
+``NOT_BOTH`` where a cell lacks a view) and their sum (``total``), as
+``composite.band_difference_kernel`` gives them; each view's own luma there is half their sum and
+half their difference. Two kernels: each view's background model (a running mean and mean absolute
+deviation per cell, which flags the cells where that view is off it), and the cells inside the
+strips the seam must keep off (one or a few intervals per line). Both run over
+``runtime.launch_row_loops`` (thread i does line ``row0 + i``, cells j, j + col_step, ... < width).
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from sena_warp.kernels import MODULE_OPTIONS
+from sena_warp.kernels.composite import holds_both
+
+wp.set_module_options(MODULE_OPTIONS)  # see the package docstring
+
+
+@wp.struct
+class ViewModels:
+    """Both views' background models over the band's cells, index 0 the source's, 1 the target's:
+    ``background`` (2, K, width) float32 each cell's luma; ``spread`` how much it changes from one frame
+    to the next as a rule (a running mean of that change: leaves in the wind, a flickering screen);
+    ``last`` its luma in the last frame; ``off`` (2, K, width) uint8 1 where the last frame was off the
+    background by more than ``noise`` and ``spread_factor`` x the spread. Both learn at ``learn`` per
+    frame, the background at ``learn_off`` where the cell is off (what stands still in front of the
+    background stays in front for a while)."""
+
+    background: wp.array3d(dtype=float)
+    spread: wp.array3d(dtype=float)
+    last: wp.array3d(dtype=float)
+    off: wp.array3d(dtype=wp.uint8)
+    noise: float
+    spread_factor: float
+    learn: float
+    learn_off: float
+
+
+@wp.func
+def view_luma(diff: float, total: float, view: int) -> float:
+    """A view's luma from the band's difference (source minus target) and sum: view 0 the source's."""
+    if view == 0:
+        return 0.5 * (total + diff)
+    return 0.5 * (total - diff)
+
+
+@wp.kernel
+def view_background_kernel(
+    row0: int,
+    col_step: int,
+    width: int,
+    diff: wp.array2d(dtype=float),
+    total: wp.array2d(dtype=float),
+    explained: wp.vec4,
+    models: ViewModels,
+):
+    """One frame of both views' background models: ``off`` 1 where a view's luma is off its
+    background beyond what that view's whole-band gain and offset explain (``explained``: gain - 1
+    and offset of the source, then of the target: ``(gain - 1) * background + offset``), by more than
+    the noise and the spread factor x the cell's spread; then both learn. Cells without both views
+    neither count nor learn."""
+    i, j0 = wp.tid()
+    k = row0 + i
+    for j in range(j0, width, col_step):
+        d = diff[k, j]
+        both = holds_both(d)
+        for view in range(2):
+            model = models.background[view, k, j]
+            models.off[view, k, j] = wp.uint8(0)
+            if both:
+                luma = view_luma(d, total[k, j], view)
+                change = luma - model
+                deviation = wp.abs(change - (explained[2 * view] * model + explained[2 * view + 1]))
+                spread_now = models.spread[view, k, j]
+                rate = models.learn
+                if deviation > wp.max(models.noise, models.spread_factor * spread_now):
+                    models.off[view, k, j] = wp.uint8(1)
+                    rate = models.learn_off
+                models.background[view, k, j] = model + rate * change
+                step = wp.abs(luma - models.last[view, k, j]) - spread_now
+                models.spread[view, k, j] = spread_now + models.learn * step
+                models.last[view, k, j] = luma
+
+
+@wp.kernel
+def strip_cells_kernel(
+    row0: int,
+    col_step: int,
+    width: int,
+    starts: wp.array2d(dtype=int),
+    ends: wp.array2d(dtype=int),
+    inside: wp.array2d(dtype=wp.uint8),
+):
+    """``inside`` 1 on the cells of line k = row0 + i that lie in one of its strips, cells
+    ``starts[k, m] <= j < ends[k, m]`` (an empty strip has start >= end)."""
+    i, j0 = wp.tid()
+    k = row0 + i
+    for j in range(j0, width, col_step):
+        found = wp.uint8(0)
+        for m in range(starts.shape[1]):
+            if j >= starts[k, m] and j < ends[k, m]:
+                found = wp.uint8(1)
+        inside[k, j] = found
+
+
+@wp.struct
+class CellGrid:
+    """A band's cells: solved line k's first cell at position ``x0[k]``, cells ``cell`` px wide; its
+    solved lines are every ``step``-th seam line (the last one too)."""
+
+    x0: wp.array(dtype=int)
+    cell: int
+    step: int
+
+
+@wp.kernel
+def route_cost_kernel(
+    row0: int,
+    col_step: int,
+    width: int,
+    diff: wp.array2d(dtype=float),
+    kept_off: wp.array2d(dtype=wp.uint8),
+    grid: CellGrid,
+    home: wp.array(dtype=float),
+    object_cost: float,
+    home_cost: float,
+    blocked_cost: float,
+    cost: wp.array2d(dtype=float),
+):
+    """What each cell of the object band costs the seam's route: ``object_cost`` on the strips it
+    keeps off (``kept_off``), ``blocked_cost`` without both views, and ``home_cost`` per px from the
+    estimate's seam ``home`` (per solved line)."""
+    i, j0 = wp.tid()
+    k = row0 + i
+    for j in range(j0, width, col_step):
+        pos = float(grid.x0[k] + j * grid.cell)
+        c = home_cost * wp.abs(pos - home[k]) + object_cost * float(kept_off[k, j])
+        if not holds_both(diff[k, j]):
+            c = c + blocked_cost
+        cost[k, j] = c
+
+
+@wp.kernel
+def coarse_masks_kernel(
+    row0: int,
+    col_step: int,
+    width: int,
+    lines: wp.array(dtype=int),
+    fine: CellGrid,
+    coarse: CellGrid,
+    moving_coarse: wp.array2d(dtype=wp.uint8),
+    kept_coarse: wp.array2d(dtype=wp.uint8),
+    moving: wp.array2d(dtype=wp.uint8),
+    kept_off: wp.array2d(dtype=wp.uint8),
+):
+    """The object band's ``moving`` and ``kept_off`` cells on a finer band's (solved line k = row0 + i,
+    seam line ``lines[k]``, cells of ``fine``): each fine cell takes the coarse cell it lies in, on
+    the nearest coarse line; 0 outside the coarse band."""
+    i, j0 = wp.tid()
+    k = row0 + i
+    kc = wp.min((lines[k] + coarse.step / 2) / coarse.step, moving_coarse.shape[0] - 1)
+    for j in range(j0, width, col_step):
+        pos = fine.x0[k] + j * fine.cell
+        jc = (pos - coarse.x0[kc]) / coarse.cell
+        if pos >= coarse.x0[kc] and jc < moving_coarse.shape[1]:
+            moving[k, j] = moving_coarse[kc, jc]
+            kept_off[k, j] = kept_coarse[kc, jc]
+        else:
+            moving[k, j] = wp.uint8(0)
+            kept_off[k, j] = wp.uint8(0)

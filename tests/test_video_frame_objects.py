@@ -1,0 +1,215 @@
+"""``video/frame_objects.py`` on made-up bands: each view's background model, the objects' blobs,
+their copies paired across the views, the strips the seam keeps off, and the route round them. The
+per-frame seam that uses them is tested in test_video_frame_seam.py, on a real recording in
+test_crossing.py."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sena_warp.config import Config
+from sena_warp.kernels.composite import NOT_BOTH
+from sena_warp.video.frame_objects import (ObjectBand, ObjectGrid, ViewBackground, blobs, keep_off_strips, merge_strips,
+                                           pair_copies, solid, strip_cells, whole_band_fit)
+from sena_warp.video.frame_seam import BandFrame
+
+CFG = Config(device="cpu")
+LINES, CELLS = 120, 61
+FPS = 30.0
+
+
+def textured(seed: int, shape: tuple[int, int] = (LINES, CELLS)) -> np.ndarray:
+    """A textured view's luma on a band, float32, 20-200 grey levels."""
+    return np.random.default_rng(seed).uniform(20.0, 200.0, shape).astype(np.float32)
+
+
+def band_of(src: np.ndarray, tgt: np.ndarray, both: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(difference, sum) as ``band_difference`` gives them for the views' luma ``src`` / ``tgt``."""
+    both = np.ones(src.shape, bool) if both is None else both
+    return (np.where(both, src - tgt, NOT_BOTH).astype(np.float32),
+            np.where(both, src + tgt, 0.0).astype(np.float32))
+
+
+def test_an_exposure_step_over_the_whole_band_is_explained_by_its_gain_and_offset():
+    background = textured(1)
+    both = np.ones(background.shape, bool)
+    both[:, :5] = False  # cells outside the overlap do not enter the fit
+    luma = np.where(both, 1.15 * background + 7.0, 900.0).astype(np.float32)
+
+    def unexplained(now):
+        gain, offset = whole_band_fit(background, now, both, 12.0)
+        return now - background - ((gain - 1.0) * background + offset)
+
+    assert np.abs(unexplained(luma)[both]).max() < 0.01
+    # An object over 15 % of the band does not enter the fit: the rest stays explained.
+    luma[40:80, 18:46] += 80.0
+    outside = both.copy()
+    outside[40:80, 18:46] = False
+    assert np.abs(unexplained(luma)[outside]).max() < 0.5
+
+
+def test_each_view_s_foreground_is_its_own():
+    models = ViewBackground((LINES, CELLS), FPS, CFG)
+    src, tgt = textured(2), textured(3)
+    rng = np.random.default_rng(4)
+    noisy = [(src + rng.normal(0, 1.5, src.shape), tgt + rng.normal(0, 1.5, tgt.shape)) for _ in range(20)]
+    assert not models.update(*band_of(*noisy[0])).any()  # the first frame is the model
+    for pair in noisy[1:]:
+        assert not models.update(*band_of(*pair)).any()  # encoder-like noise: nothing in front
+    # Both cameras' exposure steps, by 12 % and 5 levels, by 5 % and -3: still nothing in front.
+    now_src, now_tgt = 1.12 * noisy[-1][0] + 5.0, 1.05 * noisy[-1][1] - 3.0
+    assert not models.update(*band_of(now_src, now_tgt)).any()
+    # An object in front, 40 px nearer than the background: its copies lie 40 cells apart.
+    now_src, now_tgt = now_src.copy(), now_tgt.copy()
+    now_src[50:80, 45:55] = 250.0
+    now_tgt[50:80, 5:15] = 250.0
+    off = models.update(*band_of(now_src, now_tgt))
+    expected = np.zeros((2, LINES, CELLS), bool)
+    expected[0, 50:80, 45:55] = expected[1, 50:80, 5:15] = True
+    assert (off.astype(bool) == expected).mean() > 0.98 and off[0, 55:75, 47:53].all() and off[1, 55:75, 7:13].all()
+    # Cells without both views are no one's foreground.
+    both = np.ones((LINES, CELLS), bool)
+    both[:, :20] = False
+    assert not models.update(*band_of(now_src, now_tgt, both))[:, :, :20].any()
+
+
+def test_cells_that_keep_changing_stop_being_foreground():
+    # Leaves in the wind: a patch of one view that changes by +-30 every frame stops counting as
+    # something in front once the model has learnt its spread (about the model's time constant).
+    models = ViewBackground((LINES, CELLS), FPS, CFG)
+    src, tgt = textured(5), textured(6)
+    rng = np.random.default_rng(7)
+    for _ in range(int(FPS)):  # a second of the still scene: the model settles
+        models.update(*band_of(src, tgt))
+    found = []
+    for _ in range(int(3 * FPS * CFG.video_seam_background_s)):
+        now = src.copy()
+        now[10:40, 5:25] += rng.choice([-30.0, 30.0], (30, 20)).astype(np.float32)
+        found.append(bool(solid(models.update(*band_of(now, tgt))[0], 3)[10:40, 5:25].any()))
+    assert found[0] and not any(found[-int(FPS):])
+
+
+def test_someone_standing_still_stays_in_front_for_a_while():
+    # The model learns video_seam_foreground_learn as fast where a view is off it: once it has seen the
+    # empty scene for a time constant (its first frames are learnt as their running mean).
+    models = ViewBackground((LINES, CELLS), FPS, CFG)
+    src, tgt = textured(8), textured(9)
+    for _ in range(int(FPS * CFG.video_seam_background_s)):
+        models.update(*band_of(src, tgt))
+    now = src.copy()
+    now[30:60, 20:30] = 240.0
+    frames = int(2 * FPS * CFG.video_seam_background_s)  # two time constants
+    assert all(models.update(*band_of(now, tgt))[0, 35:55, 22:28].all() for _ in range(frames))
+
+
+def rectangle(shape: tuple[int, int], lines: slice, cells: slice) -> np.ndarray:
+    mask = np.zeros(shape, np.uint8)
+    mask[lines, cells] = 1
+    return mask
+
+
+def test_blobs_are_the_connected_parts_with_their_extent_on_each_line():
+    mask = rectangle((LINES, CELLS), slice(10, 30), slice(5, 12)) | rectangle((LINES, CELLS), slice(50, 53), slice(40, 42))
+    mask[20, 12:20] = 1  # an arm on one line
+    found = blobs(mask, 9)
+    assert len(found) == 1  # the 3 x 2 speck is below the least
+    blob = found[0]
+    assert (blob.first_line, blob.last_line, blob.area) == (10, 29, 20 * 7 + 8)
+    assert blob.starts.tolist() == [5] * 20 and blob.ends[10] == 20 and blob.ends[0] == 12
+
+
+def test_copies_on_the_same_lines_pair_and_the_rest_stay_alone():
+    shape = (LINES, CELLS)
+    near = blobs(rectangle(shape, slice(20, 80), slice(40, 52)), 1)[0]  # the source's copy
+    far = blobs(rectangle(shape, slice(22, 82), slice(10, 22)), 1)[0]  # the target's, 30 cells left
+    other = blobs(rectangle(shape, slice(90, 110), slice(10, 40)), 1)[0]  # someone else, on other lines
+    pairs = pair_copies([near], [far, other], reach=CELLS)
+    assert (near, far) in pairs and (None, other) in pairs and len(pairs) == 2
+    assert pair_copies([near], [far], reach=20) == [(near, None), (None, far)]  # further apart than reach
+
+
+def test_the_strip_spans_both_copies_and_runs_on_to_a_border_that_cuts_one():
+    shape = (LINES, 101)
+    both = np.zeros(shape, bool)
+    both[:, 10:91] = True  # the overlap: cells 10 to 90
+    first = np.zeros(LINES, np.int64)
+    src = blobs(rectangle(shape, slice(20, 60), slice(50, 60)), 1)[0]
+    tgt = blobs(rectangle(shape, slice(20, 60), slice(30, 40)), 1)[0]
+    starts, ends = keep_off_strips([(src, tgt)], both, first, margin_cells=2, margin_lines=3, most=4)
+    assert starts[17, 0] == 28 and ends[17, 0] == 62 and starts[16, 0] == ends[16, 0] == 0  # 3 lines above
+    assert np.all(starts[17:63, 0] == 28) and np.all(ends[17:63, 0] == 62) and not ends[63:].any()
+    # The source's copy at the source's border (its right end): on to the band's end, shown from the target.
+    cut = blobs(rectangle(shape, slice(20, 60), slice(82, 91)), 1)[0]
+    starts, ends = keep_off_strips([(cut, tgt)], both, first, 2, 3, 4)
+    assert starts[30, 0] == 28 and ends[30, 0] == 101
+    # A target's copy at the target's border (its left end) on a band whose lines begin 5 cells
+    # further on every line: the extents are taken where each line begins.
+    shifted = first + 5 * (np.arange(LINES) // 40)
+    cut = blobs(rectangle(shape, slice(20, 60), slice(10, 20)), 1)[0]
+    starts, ends = keep_off_strips([(src, cut)], both, shifted, 2, 3, 4)
+    assert starts[30, 0] == starts[45, 0] == 0 and ends[30, 0] == ends[45, 0] == 62
+
+
+def test_strips_merge_and_the_narrowest_gaps_close_beyond_the_most():
+    assert merge_strips([(10, 20), (15, 30), (40, 50)], 4) == [(10, 30), (40, 50)]
+    assert merge_strips([(0, 5), (8, 10), (30, 40), (45, 70)], 2) == [(0, 10), (30, 70)]
+    starts = np.array([[2, 10], [0, 0]], np.int32)
+    ends = np.array([[5, 12], [0, 0]], np.int32)
+    cells = strip_cells(starts, ends, 15, np.zeros((2, 15), np.uint8))
+    assert cells[0].tolist() == [0, 0, 1, 1, 1, 0, 0, 0, 0, 0, 1, 1, 0, 0, 0] and not cells[1].any()
+
+
+class Overlap:
+    """A stand-in for the device frame over an overlap of (LINES, ``width``) px from position 0: the
+    views' luma ``src`` / ``tgt`` sampled on an object band's cells, as ``DeviceFrame.objects`` gives them."""
+
+    def __init__(self, src: np.ndarray, tgt: np.ndarray):
+        self.src, self.tgt = src, tgt
+
+    def band(self, grid: ObjectGrid) -> BandFrame:
+        taken = grid.x0[:, None] + grid.cell * np.arange(grid.width)[None, :]
+        inside = taken < self.src.shape[1]
+        taken = np.clip(taken, 0, self.src.shape[1] - 1)
+        src, tgt = (np.take_along_axis(v[grid.lines], taken, axis=1) for v in (self.src, self.tgt))
+        diff, total = band_of(src, tgt, inside)
+        return BandFrame.of(diff, total, np.zeros(diff.shape, np.float32))
+
+
+def test_the_route_leaves_home_only_to_go_round_an_object_and_keeps_its_side():
+    width, home = 400, 200.0
+    overlap = np.tile(np.int32([0, width - 1]), (LINES, 1))
+    objects = ObjectBand(ObjectGrid.of(np.full(LINES, home, np.float32), overlap, 1), FPS, CFG)
+    src, tgt = textured(10, (LINES, width)), textured(11, (LINES, width))
+    frames = Overlap(src, tgt)
+    for _ in range(int(FPS)):  # a second of the empty scene: the models settle
+        assert not objects.update(frames.band(objects.grid))  # the route did not change
+    np.testing.assert_array_equal(objects.centre(np.arange(LINES)), home)  # nothing in front: home
+    # A figure 60 px wide and 20 px nearer than the background, walking right across the seam's home.
+    sides = []
+    for left in range(100, 300, 8):
+        frames.src, frames.tgt = src.copy(), tgt.copy()
+        frames.src[30:90, left + 20:left + 80] = 240.0
+        frames.tgt[30:90, left:left + 60] = 240.0
+        objects.update(frames.band(objects.grid))
+        centre = objects.centre(np.arange(30, 90))
+        assert np.all((centre <= left - 8) | (centre >= left + 80 + 8))  # clear of both copies and the strip
+        sides.append("left" if centre.mean() < left else "right")
+    assert sides[0] == "right" and sides[-1] == "left" and sides.count("right") == sides.index("left")  # one jump
+
+
+def test_a_camera_settling_over_its_first_frames_leaves_nothing_in_front():
+    # A webcam's first frames: the first one far off (60 levels darker on a third of the band, as the
+    # office recording's left camera starts), the exposure settling over the next five. A model that
+    # kept its first frame saw a third of the band in front for seconds; the running mean of the first
+    # frames forgets it within a second.
+    models = ViewBackground((LINES, CELLS), FPS, CFG)
+    src, tgt = textured(12), textured(13)
+    rng = np.random.default_rng(14)
+    first = src.copy()
+    first[:, :20] -= 60.0
+    models.update(*band_of(first, tgt))
+    for gain in (0.8, 0.9, 0.95, 0.98, 1.0):
+        models.update(*band_of(gain * src, tgt))
+    found = [bool(solid(models.update(*band_of(src + rng.normal(0.0, 2.0, src.shape).astype(np.float32), tgt))[0],
+                        3).any()) for _ in range(int(FPS))]
+    assert not any(found[int(FPS) // 3:])

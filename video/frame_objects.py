@@ -1,0 +1,415 @@
+"""What stands in front of the background on the per-frame seam's band, in each view, and where the
+seam must keep off so that each object is shown once and whole, from one view.
+
+An object nearer than the background lies at two places on the canvas, one copy per view, its
+parallax apart (the warp aligns the background, not it). A seam between the copies shows neither
+copy's middle (the strip between them is lost, or all of a narrow object), and a seam through both
+shows a part of each, a parallax apart: the object is torn. Only a seam clear of both copies shows it
+whole, from the view on the other side. So, on the band's cells (solved seam lines x cells along
+them, as ``composite.band_difference`` fills them):
+
+1. *Foreground in each view* (:class:`ViewBackground`): each view's luma against its own background
+   model (``kernels/frame_objects.py``), beyond the view's whole-band gain and offset (an exposure
+   step, a flickering light) and the cell's usual change from one frame to the next (leaves in the
+   wind); cells off it in most of a box are the view's foreground (:func:`solid`), its connected parts
+   the view's blobs (:func:`blobs`). Where most of a view is off, the camera or the light changed: no
+   objects then.
+2. *Copies* (:func:`pair_copies`): a source blob and a target blob on the same lines, of a like
+   size, within the band of each other are one object's two copies; their displacement along the
+   lines is its parallax. A blob without a partner is an object whose other copy is off the band.
+3. *Strips to keep off* (:func:`keep_off_strips`): per object, the lines its copies cover and the
+   cells from the first copy's start to the second's end, widened by the seam's transition; where
+   that reaches to within the same margin of the band's end of the overlap, on to the band's end: an
+   object cut by a view's border is shown from the other view, where it is whole.
+4. *The route* (:class:`ObjectBand`): the cheapest path over the whole overlap with the strips at
+   ``video_seam_object_cost`` and ``video_seam_home_cost`` per px from the estimate's seam; it replaces
+   the last route only where that saves ``video_seam_margin`` per line, so the seam passes each object
+   on the side it passed it before, until that side is closed (the object reached the view's border)
+   or much further from home: then it jumps round the object once, never through it. The per-frame
+   seam's band is centred on the route (``FrameSeam``), which is the estimate's seam where nothing is
+   in the way.
+
+All of it runs on the object band (:class:`ObjectGrid`): the overlap on cells :data:`COARSE_CELLS` x
+the per-frame seam's, solved on every such cell's line; an object is found when it covers a few of
+them. Its difference and sum come from the frame's device in one small block
+(``device_frame.DeviceFrame.objects``); the rest runs on the host (Warp's CPU device, numpy, OpenCV).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import warp as wp
+
+from ..config import Config
+from ..seam_path import BandPath
+from sena_warp.kernels import runtime
+from sena_warp.kernels.composite import NOT_BOTH
+from sena_warp.kernels.frame_objects import (CellGrid, ViewModels, route_cost_kernel, strip_cells_kernel,
+                                             view_background_kernel)
+from sena_warp.kernels.frame_seam import DEVICE
+from sena_warp.kernels.transfer import host_array
+
+FIT_STRIDE = 4  # each view's whole-band gain and offset are fitted on every this-th line and cell
+SPREAD_FACTOR = 3.0  # a cell is off its background beyond this x its mean absolute deviation there
+
+PAIR_OVERLAP = 0.5  # two blobs are copies when they share this much of the shorter one's lines
+PAIR_AREA = 0.3  # ... and the smaller has this share of the larger's area at least (a copy cut by a border)
+COARSE_CELLS = 4  # the object band's cells are this many of the per-frame seam's cells wide
+FOREGROUND_MOST = 0.5  # a view off its background on more of the band: the camera or the light changed
+MOST_STRIPS = 8  # strips kept off per line at most
+SETTLE_S = 0.25  # nothing is in front while the models have learnt from less than this much video
+OBJECT_BOXES = 2  # an object covers this x this of an object's boxes at least (smaller things only cost motion)
+
+
+@dataclass(frozen=True)
+class Blob:
+    """A connected part of one view's foreground on the band: ``first_line`` its first solved line,
+    ``starts`` / ``ends`` (n,) int32 its first cell and one past its last on each of its n lines (an
+    empty line has start = end = 0), ``area`` in cells, ``centre`` its mean cell."""
+
+    first_line: int
+    starts: np.ndarray
+    ends: np.ndarray
+    area: int
+    centre: float
+
+    @property
+    def last_line(self) -> int:
+        return self.first_line + len(self.starts) - 1
+
+    def shared_lines(self, other: "Blob") -> float:
+        """The share of the shorter blob's lines that both cover."""
+        shared = min(self.last_line, other.last_line) - max(self.first_line, other.first_line) + 1
+        shorter = min(len(self.starts), len(other.starts))
+        return max(shared, 0) / shorter
+
+
+class ViewBackground:
+    """Each view's background model over a band of ``shape`` (K solved lines, cells) (module
+    docstring, 1), learnt with time constant ``video_seam_background_s`` at ``fps`` (``video_seam_foreground_learn``
+    x as fast where the view is off it); on Warp's CPU device, on the host."""
+
+    def __init__(self, shape: tuple[int, int], fps: float, cfg: Config):
+        self.cfg = cfg
+        self.noise = np.float32(2.0 * cfg.video_seam_noise)
+        self._learn = 1.0 / max(1.0, fps * cfg.video_seam_background_s)
+        self._settle = max(2, int(np.ceil(SETTLE_S * fps)))  # frames
+        self._arrays = (np.zeros((2, *shape), np.float32), np.zeros((2, *shape), np.float32),
+                        np.zeros((2, *shape), np.float32), np.zeros((2, *shape), np.uint8))  # background, spread, last, off
+        models = ViewModels()
+        models.background, models.spread, models.last = (host_array(a, float) for a in self._arrays[:3])
+        models.off = host_array(self._arrays[3], wp.uint8)
+        models.noise, models.spread_factor = float(self.noise), SPREAD_FACTOR
+        self._models = models
+        self._learn_off = self._learn * cfg.video_seam_foreground_learn
+        self.frames = 0  # frames the models have learnt from
+
+    def update(self, diff: np.ndarray, total: np.ndarray) -> np.ndarray:
+        """(2, K, cells) uint8: 1 where the source (index 0) or the target (1) is off its background in
+        the frame whose band has difference ``diff`` and sum ``total`` ((K, cells) float32, as
+        ``band_difference`` fills them); none on the first frame (the models start from it). Learns: over
+        the first frames at least as fast as their running mean (a webcam's exposure settles over its
+        first frames; a model that kept the first frame saw the whole scene in front for seconds), then
+        at the model's rate. Nothing is off them over the first :data:`SETTLE_S` of video (a camera
+        settling)."""
+        background, spread, last, off = self._arrays
+        if diff.shape != background.shape[1:] or total.shape != background.shape[1:]:
+            raise ValueError(f"band of {diff.shape} / {total.shape} cells for models of {background.shape[1:]}")
+        both = diff < 0.5 * NOT_BOTH
+        views = np.stack([0.5 * (total + diff), 0.5 * (total - diff)]).astype(np.float32)
+        self.frames += 1
+        if self.frames == 1:
+            np.copyto(background, np.where(both, views, 0.0))
+            np.copyto(last, background)
+            spread.fill(float(self.noise / SPREAD_FACTOR))
+            off.fill(0)
+            return off
+        mean = 1.0 / self.frames  # the running mean's rate
+        self._models.learn = float(np.float32(max(self._learn, mean)))
+        self._models.learn_off = float(np.float32(max(self._learn_off, mean)))
+        fit = (slice(None, None, FIT_STRIDE),) * 2
+        explained = []
+        for view in range(2):  # on the cells that were on the background last frame: an object is no exposure step
+            gain, offset = whole_band_fit(background[view][fit], views[view][fit], both[fit] & (off[view][fit] == 0),
+                                          float(self.noise))
+            explained += [np.float32(gain - 1.0), np.float32(offset)]
+        runtime.launch_row_loops(view_background_kernel, diff.shape[0], diff.shape[1], [
+            host_array(diff, float), host_array(total, float), wp.vec4(*explained), self._models], DEVICE,
+            runtime.BAND_THREADS)
+        if self.frames < self._settle:
+            off.fill(0)
+        return off
+
+
+def whole_band_fit(background: np.ndarray, total: np.ndarray, both: np.ndarray, noise: float) -> tuple[float, float]:
+    """(gain, offset): how ``total`` changed from ``background`` over the whole band (a camera's exposure
+    step, a flickering light): their least-squares fit on the cells in ``both`` (the caller takes every
+    :data:`FIT_STRIDE`-th line and cell), fitted again without the cells more than ``noise`` (and twice
+    the median residual) off the first fit (an object in front). ``(gain - 1) x background + offset``
+    is the change they explain."""
+    x = background[both].astype(np.float64)
+    y = total[both].astype(np.float64)
+    gain, offset = _gain_offset(x, y)
+    residual = np.abs(y - gain * x - offset)
+    kept = residual <= max(noise, 2.0 * float(np.median(residual))) if residual.size else residual > 0
+    return _gain_offset(x[kept], y[kept])
+
+
+def _gain_offset(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Least squares y = gain x + offset; gain 1 where x does not vary, (1, 0) without points."""
+    if x.size == 0:
+        return 1.0, 0.0
+    x_mean, y_mean = x.sum() / x.size, y.sum() / y.size
+    dx = x - x_mean
+    x_var = float(dx @ dx) / x.size
+    if x.size < 2 or x_var <= 1e-6:
+        return 1.0, float(y_mean - x_mean)
+    gain = float(dx @ (y - y_mean)) / x.size / x_var
+    return gain, float(y_mean - gain * x_mean)
+
+
+def solid(off: np.ndarray, box: int) -> np.ndarray:
+    """(K, cells) uint8: 1 on the cells most of whose ``box`` x ``box`` neighbourhood is ``off``
+    (K, cells) uint8 0/1: an object, not the thin edges a flickering light or a leaf leaves."""
+    return (cv2.blur(off, (box, box)) > 0).view(np.uint8)
+
+
+def blobs(foreground: np.ndarray, least: int) -> list[Blob]:
+    """The connected parts (8-neighbours) of ``foreground`` (K, cells) uint8 of at least ``least`` cells."""
+    count, labels, stats, centroids = cv2.connectedComponentsWithStats(foreground, connectivity=8)
+    found = []
+    for label in range(1, count):
+        x, y, w, h, area = (int(v) for v in stats[label])
+        if area < least:
+            continue
+        part = labels[y:y + h, x:x + w] == label
+        on = part.any(axis=1)
+        starts = np.where(on, x + np.argmax(part, axis=1), 0).astype(np.int32)
+        ends = np.where(on, x + w - np.argmax(part[:, ::-1], axis=1), 0).astype(np.int32)
+        found.append(Blob(y, starts, ends, area, float(centroids[label, 0])))
+    return found
+
+
+def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float
+                ) -> list[tuple[Blob | None, Blob | None]]:
+    """Each object's (source copy, target copy), one of them None where its other copy was not found:
+    source and target blobs sharing :data:`PAIR_OVERLAP` of the shorter one's lines, the smaller
+    :data:`PAIR_AREA` of the larger's area, their centres at most ``reach`` cells apart, paired best
+    first (the most lines shared, the likest size)."""
+    candidates = []
+    for i, src in enumerate(blobs_src):
+        for j, tgt in enumerate(blobs_tgt):
+            shared = src.shared_lines(tgt)
+            likeness = min(src.area, tgt.area) / max(src.area, tgt.area)
+            if shared >= PAIR_OVERLAP and likeness >= PAIR_AREA and abs(src.centre - tgt.centre) <= reach:
+                candidates.append((shared * likeness, i, j))
+    pairs, used_src, used_tgt = [], set(), set()
+    for _, i, j in sorted(candidates, reverse=True):
+        if i not in used_src and j not in used_tgt:
+            pairs.append((blobs_src[i], blobs_tgt[j]))
+            used_src.add(i)
+            used_tgt.add(j)
+    pairs += [(blob, None) for i, blob in enumerate(blobs_src) if i not in used_src]
+    pairs += [(None, blob) for j, blob in enumerate(blobs_tgt) if j not in used_tgt]
+    return pairs
+
+
+def keep_off_strips(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarray, first_cell: np.ndarray,
+                    margin_cells: int, margin_lines: int, most: int) -> tuple[np.ndarray, np.ndarray]:
+    """(starts, ends) (K, ``most``) int32: per solved line the strips of cells the seam must keep off
+    (``starts[k, m] <= cell < ends[k, m]``; unused ones empty), for the objects ``pairs``
+    (:func:`pair_copies`) on a band whose cells hold both views where ``both`` (K, cells) bool and
+    whose line k begins at the line's cell ``first_cell[k]`` (K,) int (its position / the cell width:
+    the band follows the estimate's seam): on each line, from the first position either copy covers
+    within ``margin_lines`` lines to the last, widened by ``margin_cells``.
+
+    A copy the overlap's border cuts (within ``margin_cells`` of the first cell holding both views,
+    where the target begins, or of the last, where the source ends) is not whole in its view: the
+    strip goes on to the band's end there, so that the seam passes on the other side and shows the
+    object from the other view. A lone copy near either border: its other copy lies beyond it.
+    Overlapping strips merge; a line with more than ``most`` has its narrowest gaps closed."""
+    lines, cells = both.shape
+    first_cell = np.asarray(first_cell, np.int64)
+    has_both = both.any(axis=1)
+    first_both = np.where(has_both, np.argmax(both, axis=1), cells) + first_cell
+    last_both = np.where(has_both, cells - 1 - np.argmax(both[:, ::-1], axis=1), -1) + first_cell
+    per_line: list[list[tuple[int, int]]] = [[] for _ in range(lines)]
+    for src, tgt in pairs:
+        copies = [blob for blob in (src, tgt) if blob is not None]
+        top = max(min(b.first_line for b in copies) - margin_lines, 0)
+        bottom = min(max(b.last_line for b in copies) + margin_lines, lines - 1)
+        extents = {name: line_extents(blob, first_cell, top, bottom, margin_lines)
+                   for name, blob in (("src", src), ("tgt", tgt)) if blob is not None}
+        start = np.min([e[0] for e in extents.values()], axis=0) - margin_cells
+        end = np.max([e[1] for e in extents.values()], axis=0) + margin_cells
+        near_first = {name: e[0] - margin_cells <= first_both[top:bottom + 1] for name, e in extents.items()}
+        near_last = {name: e[1] + margin_cells > last_both[top:bottom + 1] for name, e in extents.items()}
+        lone = len(extents) == 1
+        cut_left = near_first["tgt"] if "tgt" in extents and not lone else next(iter(near_first.values()))
+        cut_right = near_last["src"] if "src" in extents and not lone else next(iter(near_last.values()))
+        for i in np.flatnonzero(end > start + 2 * margin_cells):
+            k = top + i
+            lo = 0 if cut_left[i] else int(np.clip(start[i] - first_cell[k], 0, cells))
+            hi = cells if cut_right[i] else int(np.clip(end[i] - first_cell[k], 0, cells))
+            per_line[k].append((lo, hi))
+    starts = np.zeros((lines, most), np.int32)
+    ends = np.zeros((lines, most), np.int32)
+    for k, strips in enumerate(per_line):
+        for m, (lo, hi) in enumerate(merge_strips(strips, most)):
+            starts[k, m], ends[k, m] = lo, hi
+    return starts, ends
+
+
+def line_extents(blob: Blob, first_cell: np.ndarray, top: int, bottom: int, reach: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(first position, one past the last) (bottom - top + 1,) int64, in cells along the line from
+    the line's own origin (band line k begins at ``first_cell[k]``), of ``blob`` on each line from
+    ``top`` to ``bottom``, each line taking its neighbours' within ``reach`` lines too; an empty
+    extent (start > end) where none."""
+    big = np.iinfo(np.int64).max // 4
+    start = np.full(bottom - top + 1, big, np.int64)
+    end = np.full(bottom - top + 1, -big, np.int64)
+    lines = np.arange(blob.first_line, blob.last_line + 1)
+    on = blob.ends > blob.starts
+    at = lines[on] - top
+    starts = blob.starts[on] + first_cell[lines[on]]
+    ends = blob.ends[on] + first_cell[lines[on]]
+    for shift in range(-reach, reach + 1):
+        near = at + shift
+        keep = (near >= 0) & (near < len(start))
+        np.minimum.at(start, near[keep], starts[keep])
+        np.maximum.at(end, near[keep], ends[keep])
+    return start, end
+
+
+def merge_strips(strips: list[tuple[int, int]], most: int) -> list[tuple[int, int]]:
+    """``strips`` [(start, end)] merged where they overlap or touch, at most ``most`` of them (the
+    gaps between the last ones closed when there are more)."""
+    merged: list[list[int]] = []
+    for lo, hi in sorted(strips):
+        if merged and lo <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], hi)
+        else:
+            merged.append([lo, hi])
+    while len(merged) > most:  # close the narrowest gap
+        gap = int(np.argmin([merged[m + 1][0] - merged[m][1] for m in range(len(merged) - 1)]))
+        merged[gap][1] = merged.pop(gap + 1)[1]
+    return [(lo, hi) for lo, hi in merged]
+
+
+def strip_cells(starts: np.ndarray, ends: np.ndarray, cells: int, out: np.ndarray) -> np.ndarray:
+    """``out`` (K, cells) uint8 filled with 1 inside the strips ``starts`` / ``ends`` (K, M), 0 elsewhere."""
+    runtime.launch_row_loops(strip_cells_kernel, starts.shape[0], cells, [
+        host_array(starts, int), host_array(ends, int), host_array(out, wp.uint8)], DEVICE, runtime.BAND_THREADS)
+    return out
+
+
+@dataclass(frozen=True)
+class ObjectGrid:
+    """The object band's cells over the whole overlap of a static rig, fixed for an estimate's seam:
+    ``lines`` (Kc,) int32 the seam lines it is solved on (every ``cell``-th, and the last), line k's first
+    cell at ``x0[k]`` px, ``width`` cells of ``cell`` px (:data:`COARSE_CELLS` x the per-frame seam's);
+    ``home`` (Kc,) float64 the estimate's seam on its lines; ``kernel`` the same as the host kernels take
+    it (``CellGrid``)."""
+
+    lines: np.ndarray
+    x0: np.ndarray
+    width: int
+    cell: int
+    home: np.ndarray
+    kernel: CellGrid
+
+    @staticmethod
+    def of(home: np.ndarray, overlap: np.ndarray, seam_cell: int) -> "ObjectGrid":
+        """The grid for the estimate's seam ``home`` (L,) and ``overlap`` (L, 2) int (per seam line the
+        first and the last position whose canvas pixel holds both views; first > last: none), on cells
+        :data:`COARSE_CELLS` x the seam's ``seam_cell`` px."""
+        cell = seam_cell * COARSE_CELLS
+        count = len(home)
+        lines = np.unique(np.append(np.arange(0, count, cell), count - 1)).astype(np.int32)
+        first, last = (np.asarray(overlap, np.int64)[lines, k] for k in (0, 1))
+        inside = last >= first
+        near_home = np.rint(np.asarray(home, np.float64)[lines]).astype(np.int64)
+        x0 = ((np.where(inside, first, near_home) // cell) * cell).astype(np.int32)
+        width = max(1, int(np.max(np.where(inside, (last - x0) // cell + 1, 1))))
+        kernel = CellGrid()
+        kernel.x0, kernel.cell, kernel.step = host_array(x0, int), cell, cell
+        return ObjectGrid(lines, x0, width, cell, np.asarray(home, np.float64)[lines], kernel)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(lines, cells): the shape of the object band's per-cell arrays."""
+        return len(self.lines), self.width
+
+
+class ObjectBand:
+    """The objects in front of the background over the whole overlap of a static rig, and the route the
+    per-frame seam takes round them (module docstring), on the cells of ``grid`` (:class:`ObjectGrid`);
+    ``fps``: the video's frame rate.
+
+    Each frame, :meth:`update` on the object band's difference gives ``moving`` (cells in front of
+    either view's background, grown by an object's box), ``kept_off`` (the strips each object keeps the
+    seam off), both (Kc, width) uint8 on the host with their Warp views in ``views``, and the route: per
+    line, where the seam's band must be centred so that the seam can keep off every object (the
+    estimate's seam where it can; :meth:`centre`)."""
+
+    def __init__(self, grid: ObjectGrid, fps: float, cfg: Config):
+        self.cfg = cfg
+        self.grid = grid
+        box = 2 * max(1, round(cfg.video_seam_still_box_px / COARSE_CELLS)) + 1
+        self._box = (box, np.ones((box, box), np.uint8))
+        self._margin_cells = int(np.ceil((0.5 * cfg.transition_px + 2.0) / grid.cell)) + 1
+        self._solver = BandPath(len(grid.lines), grid.width, np.array([[0, len(grid.lines) - 1, -1, -1]]),
+                                cfg.cpu_threads)
+        self._views = ViewBackground(grid.shape, fps, cfg)
+        self.host = {"moving": np.zeros(grid.shape, np.uint8), "kept_off": np.zeros(grid.shape, np.uint8),
+                     "cost": np.zeros(grid.shape, np.float32), "home": grid.home.astype(np.float32)}
+        self.views = {name: host_array(a, wp.uint8 if a.dtype == np.uint8 else float) for name, a in self.host.items()}
+        self.pairs: list[tuple[Blob | None, Blob | None]] = []
+        self.route = grid.home.copy()  # (Kc,) px: where the seam's band is centred, per object-band line
+
+    def update(self, band) -> bool:
+        """The objects and the route of the frame whose object band is ``band`` (``frame_seam.BandFrame``
+        on :attr:`grid`) (class docstring); whether the route changed."""
+        cfg, grid, host = self.cfg, self.grid, self.host
+        off = self._views.update(band.diff, band.total)
+        box, kernel = self._box
+        solids = [solid(view, box) for view in off]
+        np.copyto(host["moving"], cv2.dilate(solids[0] | solids[1], kernel))
+        both = band.diff < 0.5 * NOT_BOTH
+        crowded = max(float(s[both].mean()) if both.any() else 0.0 for s in solids) > FOREGROUND_MOST
+        # Most of a view off its background: the camera or the light changed, not an object in front.
+        least = (OBJECT_BOXES * box) ** 2  # a person's size, not a head turning or a screen's flicker
+        self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), grid.width)
+        starts, ends = keep_off_strips(self.pairs, both, grid.x0 // grid.cell, self._margin_cells,
+                                       self._margin_cells, MOST_STRIPS)
+        strip_cells(starts, ends, grid.width, host["kept_off"])
+        runtime.launch_row_loops(route_cost_kernel, len(grid.lines), grid.width, [
+            band.diff_wp, self.views["kept_off"], grid.kernel, self.views["home"], float(cfg.video_seam_object_cost),
+            float(cfg.video_seam_home_cost), float(cfg.video_seam_blocked_cost), self.views["cost"]], DEVICE,
+            runtime.BAND_THREADS)
+        cost = host["cost"]
+        route = (self._solver.solve(self.views["cost"], grid.x0 // grid.cell, max(1, int(cfg.seam_max_step_px)), 0.0)
+                 * grid.cell).astype(np.int64)  # no steeper than the seam between its lines
+        lines = np.arange(len(grid.lines))
+
+        def along(path: np.ndarray) -> float:
+            at = np.clip((np.rint(path).astype(np.int64) - grid.x0) // grid.cell, 0, grid.width - 1)
+            return float(cost[lines, at].sum())
+
+        # A new route only where it saves more than the margin: while objects only move a little, the
+        # seam keeps the side of each it was on.
+        if along(self.route) - along(route) <= cfg.video_seam_margin * len(lines):
+            return False
+        route = np.where(np.abs(route - grid.home) <= grid.cell, grid.home, route)
+        changed = not np.array_equal(route, self.route)
+        self.route = route
+        return changed
+
+    def centre(self, lines: np.ndarray) -> np.ndarray:
+        """(n,) float64: where the seam's band is centred on seam lines ``lines``: the estimate's seam
+        moved as the route moved it from there (interpolated between object-band lines)."""
+        return np.interp(lines, self.grid.lines, self.route)
