@@ -292,7 +292,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", nargs="*",
                         help="RECORDING:MODE[:OFFSET_S] (default: every recording, every mode, offset 0)")
     parser.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE",
-                        help="Config changes for every run of this branch's code (e.g. video_align_follow=0.5)")
+                        help="Config changes for every run of this tree's code (e.g. video_align_follow=0.5)")
     parser.add_argument("--code", choices=("branch", "main"), default="branch")
     parser.add_argument("--main-repo", type=Path, default=REPO.parent / "main")
     parser.add_argument("--tables", type=Path, nargs="+", metavar="DIR", help="only print the tables of these reports")
