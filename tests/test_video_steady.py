@@ -109,10 +109,16 @@ def test_a_moving_rig_is_shown_steady_without_flashing_black(rooftop, tmp_path):
     assert found["uncovered_pct"]["largest_change"] <= 1.0
 
 
-def test_crop_gives_up_the_margin_on_every_side(rooftop, tmp_path):
+@pytest.fixture(scope="module")
+def static_crop(rooftop, tmp_path_factory) -> dict:
+    """The report of a cropped stitch of the rooftop as a fixed rig: the rectangle the crop tests compare with."""
+    return steady_run(rooftop, tmp_path_factory.mktemp("static"), CFG.replace(video_rig="static", video_crop=True))[1]
+
+
+def test_crop_gives_up_the_margin_on_every_side(rooftop, static_crop, tmp_path):
     cfg = CFG.replace(video_rig="moving", video_crop=True)
     _, report = steady_run(rooftop, tmp_path, cfg)
-    _, static = steady_run(rooftop, tmp_path, cfg.replace(video_rig="static"))
+    static = static_crop
     margin = margin_px(cfg)
     canvas = report["stitch"]["canvas"]
     shown = static["stitch"]["canvas"]  # a static rig's crop: the first estimate's whole rectangle
@@ -120,13 +126,12 @@ def test_crop_gives_up_the_margin_on_every_side(rooftop, tmp_path):
     assert steady_crop(0, 0, 3, 100, margin) == (0, 0, 3, 100)  # too narrow to give anything up: kept
 
 
-def test_crop_under_auto_is_the_whole_rectangle_unmoved(rooftop, tmp_path):
+def test_crop_under_auto_is_the_whole_rectangle_unmoved(rooftop, static_crop, tmp_path):
     """--rig auto fixes the output's size before it has judged the rig: a cropped output keeps a fixed rig's
     whole rectangle, and no window moves over it (its edges would show black)."""
     cfg = CFG.replace(video_rig="auto", video_crop=True)
     figures, report = steady_run(rooftop, tmp_path, cfg)
-    _, static = steady_run(rooftop, tmp_path, cfg.replace(video_rig="static"))
-    assert margin_px(cfg) == 0 and report["stitch"]["canvas"] == static["stitch"]["canvas"]
+    assert margin_px(cfg) == 0 and report["stitch"]["canvas"] == static_crop["stitch"]["canvas"]
     assert report["stitch"]["rig"]["decisions"][0]["mode"] == "moving"  # the rooftop is hand-held
     assert report["stitch"]["rig"]["steady"]["frames"] == 0  # never followed: the window stays on the rectangle
     assert figures.figures()["uncovered_pct"]["largest_change"] <= 1.0  # measured: 0.014 % (the moving maps)
