@@ -179,10 +179,9 @@ def main_compositor_class(observer: VideoFigures):
             observer(CompositedFrame(
                 index=self.frames, time_s=self.time_s, source="left" if self.rig.source == "a" else "right",
                 planes_src=planes_src, planes_tgt=planes_tgt, planes_out=out,
-                window=(0.0, 0.0, out[0].shape[1], out[0].shape[0]), maps=maps, seam_home=home,
-                seam_reach_px=0.0, seam=home, gains_luma=identity,
+                window=(0.0, 0.0, out[0].shape[1], out[0].shape[0]), maps=maps, seam=home, gains_luma=identity,
                 knee_luma=None, offsets_luma=(zeros, zeros),
-                weights=lambda: (maps.alpha_luma, np.zeros_like(maps.alpha_luma))))
+                weights=lambda: (maps.alpha_luma, np.zeros_like(maps.alpha_luma)), canvas=lambda: out))
             self.frames += 1
             return out
     return main_stitch, Observed

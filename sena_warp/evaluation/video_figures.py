@@ -275,7 +275,8 @@ class VideoFigures:
         if changed:
             self._new_maps(frame)
         band = self._band
-        y_src, y_tgt, y_out = frame.planes_src[0], frame.planes_tgt[0], frame.planes_out[0]
+        canvas = frame.canvas()
+        y_src, y_tgt, y_out = frame.planes_src[0], frame.planes_tgt[0], canvas[0]
         src, tgt = band.views(y_src, y_tgt)
         out = band.output(y_out)
         gain_src, bias_src, gain_tgt, bias_tgt = (float(v[0]) for v in frame.gains_luma)
@@ -314,7 +315,7 @@ class VideoFigures:
             self.strips.append((frame.index, np.clip(np.rint(out), 0, 255).astype(np.uint8), seam_band.copy(),
                                 band.x0.copy()))
         if frame.index in self.keep_frames:
-            self.frames[frame.index] = (tuple(p.copy() for p in frame.planes_out), np.asarray(frame.seam).copy())
+            self.frames[frame.index] = (tuple(p.copy() for p in canvas), np.asarray(frame.seam).copy())
         self._last = {"seam": np.asarray(frame.seam, np.float64).copy(), "src": src, "tgt": tgt, "steps": steps}
 
     def _new_maps(self, frame: CompositedFrame) -> None:
