@@ -102,7 +102,7 @@ def test_aligned_lines_are_those_whose_views_agree_next_to_the_seam():
     flow[10:20, :, 0] = 20.0  # a near door 20 px apart in the two views on these lines ...
     flow[25:30, 20:, 0] = 20.0  # ... and on these, but farther from the seam than the step's strips reach
     both = np.ones((40, 30), bool)
-    both[35:] = False  # neither view there: nothing says these lines are not aligned
+    both[35:] = False  # no textured cell with both views there: nothing says these lines are not aligned
     seam = np.full(40, 8.0)
     aligned = aligned_lines(flow, np.arange(30)[None, :], seam, both)
     assert not aligned[10:20].any() and aligned[:10].all() and aligned[20:].all()

@@ -14,8 +14,8 @@ rig), in a band of :data:`BAND_MARGIN_PX` beyond the per-frame seam's reach arou
   just before the seam minus just after, less the two views' own change across those pixels (the
   views as they enter the output: warped, with the frame's gains; the seam blend's offsets are part
   of the output, not of the views), on the lines where the views are aligned at the seam (the median
-  dense flow of the misalignment below within ``naturalness.STEP_FAR_PX`` of the seam at most
-  :data:`STEP_ALIGNED_PX`, as last measured): where they are not, the two strips show each view
+  flow of the misalignment below at its textured cells within ``naturalness.STEP_FAR_PX`` of the seam
+  at most :data:`STEP_ALIGNED_PX`, as last measured): where they are not, the two strips show each view
   something else (a near door in one, the room behind it in the other), the step is the scene's and
   the misalignment figure counts it; ``all_lines_mean`` the same over every line. Its
   *frame-to-frame change*: the mean over lines of |change of the row-averaged signed step|
@@ -209,9 +209,10 @@ def band_flow(src: np.ndarray, tgt: np.ndarray, valid_src: np.ndarray, valid_tgt
 
 def aligned_lines(flow: np.ndarray, cells: np.ndarray, seam: np.ndarray, both: np.ndarray) -> np.ndarray:
     """(L,) bool: the lines whose views are aligned at the seam (``seam`` (L,) positions): the median
-    magnitude of the dense ``flow`` (L, W, 2) over the cells at ``cells`` (1, W) within
-    ``naturalness.STEP_FAR_PX`` of the seam where ``both`` (L, W) views are, at most
-    :data:`STEP_ALIGNED_PX`; True on a line without such a cell (nothing says otherwise)."""
+    magnitude of the ``flow`` (L, W, 2) over the cells at ``cells`` (1, W) within
+    ``naturalness.STEP_FAR_PX`` of the seam where ``both`` (L, W) holds (both views, textured: the flow
+    of a flat sky is DIS's guess), at most :data:`STEP_ALIGNED_PX`; True on a line without such a cell
+    (nothing says otherwise: a step on a flat line is the exposure's)."""
     strips = (np.abs(cells - np.asarray(seam, np.float64)[:, None]) <= naturalness.STEP_FAR_PX) & both
     magnitude = np.where(strips, np.hypot(flow[..., 0], flow[..., 1]), np.nan)
     any_cell = strips.any(axis=1)
@@ -383,17 +384,16 @@ class VideoFigures:
 
     def _misalignment(self, src_g, tgt_g, band: SeamBand, seam_band: np.ndarray) -> float | None:
         """The frame's median flow magnitude at the seam's textured cells; their values are pooled. Also
-        which lines' views are aligned at the seam (``_aligned``: the median dense flow where both views
-        are within ``naturalness.STEP_FAR_PX`` of the seam at most :data:`STEP_ALIGNED_PX`; True where
-        no cell there has both)."""
+        which lines' views are aligned at the seam (``_aligned``, :func:`aligned_lines`)."""
         lo = max(0, int(np.floor(seam_band.min())) - FLOW_MARGIN_PX)
         hi = min(src_g.shape[1], int(np.ceil(seam_band.max())) + FLOW_MARGIN_PX + 1)
         src_g, tgt_g, valid_src, valid_tgt = (a[:, lo:hi] for a in (src_g, tgt_g, band.valid_src, band.valid_tgt))
         flow = band_flow(src_g, tgt_g, valid_src, valid_tgt)
         cells = np.arange(lo, hi)[None, :]
         near = np.abs(cells - seam_band[:, None]) <= 0.5 * self.cfg.transition_px
-        self._aligned = aligned_lines(flow, cells, seam_band, valid_src & valid_tgt)
-        chosen = near & valid_src & valid_tgt & (texture(tgt_g) >= TEXTURE_GREY_PER_PX)
+        textured = valid_src & valid_tgt & (texture(tgt_g) >= TEXTURE_GREY_PER_PX)
+        self._aligned = aligned_lines(flow, cells, seam_band, textured)
+        chosen = near & textured
         if not chosen.any():
             return None
         magnitude = np.hypot(flow[..., 0], flow[..., 1])[chosen]
