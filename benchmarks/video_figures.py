@@ -179,10 +179,9 @@ def main_compositor_class(observer: VideoFigures):
             observer(CompositedFrame(
                 index=self.frames, time_s=self.time_s, source="left" if self.rig.source == "a" else "right",
                 planes_src=planes_src, planes_tgt=planes_tgt, planes_out=out,
-                window=(0.0, 0.0, out[0].shape[1], out[0].shape[0]), maps=maps, seam_home=home,
-                seam_reach_px=0.0, seam=home, gains_luma=identity,
+                window=(0.0, 0.0, out[0].shape[1], out[0].shape[0]), maps=maps, seam=home, gains_luma=identity,
                 knee_luma=None, offsets_luma=(zeros, zeros),
-                weights=lambda: (maps.alpha_luma, np.zeros_like(maps.alpha_luma))))
+                weights=lambda: (maps.alpha_luma, np.zeros_like(maps.alpha_luma)), canvas=lambda: out))
             self.frames += 1
             return out
     return main_stitch, Observed
@@ -239,10 +238,11 @@ def table(recording: str, reports: dict[str, dict]) -> str:
     """The Markdown table of one recording's runs."""
     lines = [f"**{recording}**", "",
              "| run | frames | seam motion mean / p99 / max px | frames the seam moved | where nothing moves: max px "
-             "(frames moved / with still lines) | exposure step mean / p99 (settled) | step change p99 (settled) "
+             "(frames moved / with still lines) | exposure step mean / p99 (settled) | every line: mean (lines aligned %) "
+             "| step change p99 (settled) "
              "| misalignment median / p95 px | stability | output shake mean / p95 px "
              "| uncovered max / largest change % | CPU ms/frame | re-est. acc/rej |",
-             "|---|---:|---|---:|---|---|---|---|---:|---|---|---:|---|"]
+             "|---|---:|---|---:|---|---|---|---|---|---:|---|---|---:|---|"]
     for run, report in reports.items():
         fig, st = report["figures"], report["stitch"]
         motion, step, change = fig["seam_motion_px"], fig["exposure_step_grey"], fig["exposure_step_change_grey"]
@@ -252,7 +252,8 @@ def table(recording: str, reports: dict[str, dict]) -> str:
             f"| {run} | {fig['frames']} | {_fmt(motion['mean'])} / {_fmt(motion['p99'])} / {_fmt(motion['max'])} "
             f"| {motion['frames_moving']} | {_fmt(motion['where_still_max'])} ({motion['frames_moving_where_still']} / "
             f"{motion['frames_with_still_lines']}) | {_fmt(step['mean'])} / {_fmt(step['p99'])} "
-            f"({_fmt(step['settled_mean'])} / {_fmt(step['settled_p99'])}) | {_fmt(change['p99'])} "
+            f"({_fmt(step['settled_mean'])} / {_fmt(step['settled_p99'])}) "
+            f"| {_fmt(step.get('all_lines_mean'))} ({_fmt(step.get('aligned_lines_pct'), 1)}) | {_fmt(change['p99'])} "
             f"({_fmt(change['settled_p99'])}) | {_fmt(mis['median'])} / {_fmt(mis['p95'])} "
             f"| {_fmt(fig['stability']['value'], 3)} | {_fmt(shake.get('mean'))} / {_fmt(shake.get('p95'))} "
             f"| {_fmt(uncovered.get('max'))} / "

@@ -662,11 +662,13 @@ def holds_both(diff: float) -> bool:
 @wp.struct
 class BandCells:
     """The per-frame seam's band of cells: band line k is seam line ``lines[k]``; its cell j is at
-    position ``x0[k] + cell j`` along the line (canvas pixels)."""
+    position ``x0[k] + cell j`` along the line (canvas pixels), read at pixel (x, y) - ``origin`` of the
+    plan (one whose pixel (0, 0) shows canvas pixel ``origin``, to the nearest pixel: a steady window's)."""
 
     lines: wp.array(dtype=int)
     x0: wp.array(dtype=int)
     cell: int
+    origin: wp.vec2i
 
 
 @wp.kernel
@@ -702,6 +704,8 @@ def band_difference_kernel(
         if layout.lines_are_rows == 0:
             x = line
             y = pos
+        x = x - band.origin[0]
+        y = y - band.origin[1]
         value = float(NOT_BOTH)
         both_sum = float(0.0)
         if x >= 0 and y >= 0 and x < canvas_width and y < canvas_height:

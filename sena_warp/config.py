@@ -205,7 +205,7 @@ class Config:
     video_align_points: int = 300  # target corners tracked in the overlap
     video_align_min_share: float = 0.7  # topped up with new corners when fewer than this share remain
     video_align_min_points: int = 20  # fewer points measured: the frame keeps the predicted warp
-    video_align_window_px: int = 15  # Lucas-Kanade window (tracks and the warp's residual flow), reduced px
+    video_align_window_px: int = 11  # Lucas-Kanade window (tracks and the warp's residual flow), reduced px (15: 2.3x the CPU, docs/benchmarks.md)
     video_align_lattice_nodes: float = 12.0  # correction lattice: nodes the canvas diagonal / this apart
     video_align_seam_px: float = 32.0  # points within this of the seam (canvas px) are the ones that show ...
     video_align_seam_weight: float = 4.0  # ... and weigh this many times as much; half the new corners are sought there

@@ -17,7 +17,7 @@ import pytest
 
 from sena_warp.config import Config
 from sena_warp.evaluation import naturalness
-from sena_warp.evaluation.video_figures import (FrameClock, VideoFigures, band_flow, forward_on_canvas, source_lattice,
+from sena_warp.evaluation.video_figures import (FrameClock, VideoFigures, aligned_lines, band_flow, forward_on_canvas, source_lattice,
                                                 stability, stability_per_point, texture)
 from sena_warp.video.loop import VideoOptions
 from sena_warp.video.stitch import stitch_videos
@@ -95,6 +95,17 @@ def test_seam_steps_read_a_known_exposure_step(udisd_pair):
     assert np.isfinite(steps[8:-8]).all()
     assert np.nanmax(np.abs(steps + 5.0)) < 0.5
     assert naturalness.seam_step(pano, grey, grey, valid, valid, seam) == pytest.approx(5.0, abs=0.3)
+
+
+def test_aligned_lines_are_those_whose_views_agree_next_to_the_seam():
+    flow = np.zeros((40, 30, 2), np.float32)
+    flow[10:20, :, 0] = 20.0  # a near door 20 px apart in the two views on these lines ...
+    flow[25:30, 20:, 0] = 20.0  # ... and on these, but farther from the seam than the step's strips reach
+    both = np.ones((40, 30), bool)
+    both[35:] = False  # no textured cell with both views there: nothing says these lines are not aligned
+    seam = np.full(40, 8.0)
+    aligned = aligned_lines(flow, np.arange(30)[None, :], seam, both)
+    assert not aligned[10:20].any() and aligned[:10].all() and aligned[20:].all()
 
 
 @pytest.fixture(scope="module")

@@ -26,7 +26,7 @@ from sena_warp.video import estimate
 from sena_warp.video.estimate import best_first_estimate, first_pairs, rejection_reason
 from sena_warp.composite import BorderBlend, SeamLayout
 from sena_warp.video.maps import (ArrayLerp, MapsBlend, PlaneMaps, canvas_scale, chroma_positions, chroma_seam,
-                                 map_change_px, output_shape, scaled_plane_maps, seam_change_px,
+                                 map_change_px, output_shape, scaled_plane_maps, seam_change_px, windowed_plane_maps, windowed_seam,
                                  seam_on_canvas_lines, seam_per_target_line, target_map)
 from sena_warp.video.moving import MovingRig
 from sena_warp.video.pairing import pair_times
@@ -590,6 +590,34 @@ def test_scaled_maps_sample_where_the_canvas_does_and_carry_the_seam_along():
     # What works on the canvas gets the seam back per canvas line.
     np.testing.assert_allclose(seam_on_canvas_lines(half.seam_luma.positions, 40, canvas_scale((40, 60), (20, 30)),
                                                     True), 30.0)
+
+
+def test_windowed_maps_sample_where_the_window_shows_the_canvas_and_carry_the_seam_along():
+    maps = synthetic_maps(0.0, 300, shape=(40, 60), change=lambda m: m.__setitem__((slice(None), slice(0, 6)), np.nan))
+    border = BorderBlend((9.5, 30.5), np.arange(120, dtype=np.float32).reshape(2, 60, 1), np.zeros((2, 60, 1), np.float32))
+    maps = replace(maps, border_luma=border)
+    corner = np.array([2.25, -3.5])
+    window = windowed_plane_maps(maps, corner, (40, 60), np.array([10.0, 0.0]))
+    # Output (x, y) shows canvas (x + 2.25, y - 3.5): the maps there (they are linear, so exactly) ...
+    np.testing.assert_allclose(window.map_src_luma[7, 11], maps.map_src_luma[7, 11] + [2.25, -3.5], atol=1e-4)
+    np.testing.assert_allclose(window.map_tgt_luma[7, 11], maps.map_tgt_luma[7, 11] + [2.25, -3.5], atol=1e-4)
+    np.testing.assert_allclose(window.map_src_chroma[3, 5], maps.map_src_chroma[3, 5] + [1.125, -1.75], atol=1e-4)
+    np.testing.assert_allclose(window.map_tgt_chroma[3, 5], maps.map_tgt_chroma[3, 5] + [1.125, -1.75], atol=1e-4)
+    # ... no source where it lies off the canvas (rows 0-3, columns 57 on) or where a tap the canvas does
+    # not sample counts (canvas columns 0-5: output columns 0-3, whose taps are canvas columns 2-6)
+    assert np.isnan(window.map_src_luma[:4]).all() and np.isnan(window.map_src_luma[:, 57:]).all()
+    assert np.isnan(window.map_src_luma[4:, :4]).all() and np.isfinite(window.map_src_luma[4:, 4:57]).all()
+    # The seam at canvas x 30 is at output x 27.75 on every row, the border's rows 3.5 lower, its offsets
+    # read 2.25 along; whole pixels copy the maps as they are.
+    np.testing.assert_allclose(window.seam_luma.positions, 27.75)
+    assert window.border_luma.lines == (13.0, 34.0)
+    np.testing.assert_allclose(window.border_luma.src[0, :3, 0], [2.25, 3.25, 4.25])
+    whole = windowed_plane_maps(maps, np.array([3.0, 2.0]), (40, 60), np.array([10.0, 0.0]))
+    np.testing.assert_array_equal(whole.map_src_luma[:38, :57], maps.map_src_luma[2:, 3:])
+    assert np.isnan(whole.map_src_luma[38:]).all()
+    np.testing.assert_array_equal(whole.map_tgt_luma[:38, :57], maps.map_tgt_luma[2:, 3:])
+    # A frame's seam and its offsets per canvas line, read for the window's lines.
+    np.testing.assert_allclose(windowed_seam(np.arange(40, dtype=np.float32), corner, True, 40)[5:8], [-0.75, 0.25, 1.25])
 
 
 def test_a_narrower_output_is_the_stitch_made_smaller_by_its_maps(clips, tmp_path):

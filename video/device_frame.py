@@ -10,9 +10,11 @@ the seam band's difference and, on a static plan, the object band's (the whole o
 cells) come down together in one small block (:meth:`DeviceFrame.band`); the frame's seam and
 seam-blend offsets go up in one small block, with where the next frame's seam band lies, and both
 passes are composited, then the output planes come down in one block for the encoder
-(:meth:`DeviceFrame.composite`). A moving rig's output is a window on the composited canvas
-(``steady.py``): the output planes are cut out of the canvas's on the device (``kernels/shift.py``) and
-those come down instead. Nothing in a frame waits for the device but those two downloads.
+(:meth:`DeviceFrame.composite`). A moving rig's output is a window on the canvas (``steady.py``),
+composited by a plan of the window's own maps (``maps.windowed_plane_maps``: each output pixel samples
+the inputs once); the seam's band is read on that plan at the canvas's cells, to the nearest pixel.
+Nothing in a frame waits for the device but those two downloads. An observer may ask for the canvas
+itself too (:meth:`DeviceFrame.canvas`: the pair composited again by the canvas's plan).
 """
 
 from __future__ import annotations
@@ -25,12 +27,11 @@ import warp as wp
 from ..composite import (CompositePlan, FrameArrays, FrameState, band_difference, composite, composite_plan,
                          fixed_point, kernel_gains, with_runs)
 from ..config import Config
-from sena_warp.kernels import runtime, transfer
+from sena_warp.kernels import transfer
 from sena_warp.kernels.composite import BandCells, Gains, SeamState
-from sena_warp.kernels.shift import shifted_plane_kernel
 from .frame_objects import ObjectGrid
 from .frame_seam import BandFrame, BandGrid, BandPlace
-from .maps import BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps
+from .maps import BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, windowed_plane_maps
 
 LUMA_FILL = (BLACK_Y,)  # output Y where no input is sampled
 CHROMA_FILL = (BLACK_UV, BLACK_UV)  # output U, V likewise
@@ -67,23 +68,34 @@ def frame_plan(maps: PlaneMaps, shapes: tuple[tuple[int, int], tuple[int, int]],
 
 
 class Plans:
-    """The plan of each frame's maps, made when the maps change (a new :class:`PlaneMaps` object) and,
-    on the CPU, given its runs once it has served a frame (``composite.with_runs``; CUDA's per-pixel
-    kernel takes none)."""
+    """The plan of each frame's maps, or of the window on them that the frame shows (``maps.windowed_plane_maps``
+    for an output of (H, W) ``output_shape`` on a canvas whose target offset is ``offset_tgt``), made when
+    the maps or the window change (a new :class:`PlaneMaps` object, another window) and, on the CPU, given
+    its runs once it has served a frame (``composite.with_runs``; CUDA's per-pixel kernel takes none)."""
 
-    def __init__(self, cfg: Config):
+    def __init__(self, output_shape: tuple[int, int], offset_tgt: np.ndarray, cfg: Config):
         self._cfg = cfg
+        self._output_shape = tuple(output_shape)
+        self._offset_tgt = np.asarray(offset_tgt, np.float64)
         self._plan: FramePlan | None = None
+        self._made_of: tuple[PlaneMaps, tuple[float, float] | None] | None = None  # the maps and window of ``_plan``
         self._served = False  # whether ``_plan`` has served a frame since it was made
 
-    def plan(self, maps: PlaneMaps, shapes: tuple[tuple[int, int], tuple[int, int]]) -> FramePlan:
-        """The plan of a frame composited with ``maps`` on planes of Y ``shapes`` (call once per frame)."""
+    def plan(self, maps: PlaneMaps, shapes: tuple[tuple[int, int], tuple[int, int]],
+             window: np.ndarray | None = None) -> FramePlan:
+        """The plan of a frame composited with ``maps`` on planes of Y ``shapes``, or of the output window
+        at ``window`` (x, y) on their canvas (call once per frame)."""
         plan = self._plan
-        if plan is None or plan.maps is not maps or plan.shapes != shapes:
-            self._plan, self._served = frame_plan(maps, shapes, self._cfg, plan), False
+        corner = None if window is None else tuple(float(v) for v in window)
+        made = self._made_of
+        if plan is None or made[0] is not maps or made[1] != corner or plan.shapes != shapes:
+            shown = maps if window is None else windowed_plane_maps(maps, np.asarray(corner), self._output_shape,
+                                                                    self._offset_tgt)
+            self._plan, self._made_of, self._served = frame_plan(shown, shapes, self._cfg, plan), (maps, corner), False
         elif not self._served:
             if self._cfg.device == "cpu":
-                self._plan = FramePlan(maps, shapes, with_runs(plan.luma, self._cfg), with_runs(plan.chroma, self._cfg))
+                self._plan = FramePlan(plan.maps, shapes, with_runs(plan.luma, self._cfg),
+                                       with_runs(plan.chroma, self._cfg))
             self._served = True
         return self._plan
 
@@ -114,14 +126,17 @@ class BandBlock:
         for name, (lines, cell, shape, x0) in bands.items():
             cells = BandCells()
             cells.lines, cells.cell, cells.x0 = transfer.to_device(lines, int, device, "plan"), cell, x0
+            cells.origin = wp.vec2i(0, 0)
             frame = BandFrame.of(*(self._block.host[f"{name}_{field}"] for field in BAND_FIELDS))
             self._bands[name] = BandCellsOn(shape, cells, frame)
 
-    def difference(self, frame: FrameArrays, plan: CompositePlan, gains_luma: Gains) -> dict[str, BandFrame]:
-        """``composite.band_difference`` of the pair loaded in ``frame`` on each band's cells, on the host
-        (one small download)."""
+    def difference(self, frame: FrameArrays, plan: CompositePlan, gains_luma: Gains, origin: tuple[int, int]
+                   ) -> dict[str, BandFrame]:
+        """``composite.band_difference`` of the pair loaded in ``frame`` on each band's cells, read on a
+        ``plan`` whose pixel (0, 0) shows canvas pixel ``origin`` (x, y), on the host (one small download)."""
         device = self._block.device
         for name, band in self._bands.items():
+            band.cells.origin = wp.vec2i(*origin)
             band_difference(frame, plan, band.cells, gains_luma, band.shape[1],
                             tuple(device[f"{name}_{field}"].reshape(band.shape) for field in BAND_FIELDS))
         self._block.download()
@@ -130,37 +145,30 @@ class BandBlock:
 
 class DeviceFrame:
     """The device buffers of frames whose Y planes have (rows, cols) ``shapes`` (source, target),
-    composited by plans of the fixed canvas (``canvas_shape`` (H, W), even) with the per-frame seam's
-    band ``grid``, shown as (H, W) ``output_shape`` windows on it (None: the output is the canvas); on
-    ``cfg.device``.
+    composited by plans of (H, W) ``output_shape`` (even) with the per-frame seam's band ``grid`` (its
+    cells on the fixed canvas of ``canvas_shape`` (H, W)); on ``cfg.device``.
 
     Per frame: :meth:`load`, :meth:`band`, :meth:`composite` (:meth:`set_seams`, :meth:`composite_pass` for
-    each pass, the download), in that order."""
+    each pass, the download), in that order; :meth:`canvas` after them, where the canvas is wanted too."""
 
     def __init__(self, shapes: tuple[tuple[int, int], tuple[int, int]], canvas_shape: tuple[int, int],
-                 output_shape: tuple[int, int] | None, grid: BandGrid, cfg: Config):
+                 output_shape: tuple[int, int], grid: BandGrid, cfg: Config):
         self._cfg = cfg
         self.shapes = tuple(tuple(shape[:2]) for shape in shapes)
+        self.canvas_shape, self.output_shape = tuple(canvas_shape), tuple(output_shape)
         device = cfg.device
         (rows_s, cols_s), (rows_t, cols_t) = self.shapes
         (crows_s, ccols_s), (crows_t, ccols_t) = (chroma_shape(shape) for shape in self.shapes)
-        height, width = canvas_shape
         self._planes = transfer.Staged({
             "y_src": ((rows_s, cols_s), np.uint8), "y_tgt": ((rows_t, cols_t), np.uint8),
             "uv_src": ((crows_s, ccols_s, 2), np.uint8), "uv_tgt": ((crows_t, ccols_t, 2), np.uint8)}, device, "planes")
-        self._out = transfer.Staged({"y": ((height, width), np.uint8),
-                                     "uv": ((height // 2, width // 2, 2), np.uint8)}, device, "output")
-        self._shown = None if output_shape is None else transfer.Staged(
-            {"y": (tuple(output_shape), np.uint8), "uv": ((output_shape[0] // 2, output_shape[1] // 2, 2), np.uint8)},
-            device, "output")
+        self._out: dict[tuple[int, int], transfer.Staged] = {}  # the composited planes' block of each (H, W)
         self._grid = grid
         self._bands: tuple[ObjectGrid | None, BandBlock] | None = None  # made with the object grid it holds
-        self._seam: transfer.Staged | None = None  # made with the first plan: its lines
+        self._seams: dict[tuple[int, int], transfer.Staged] = {}  # the seams' block of each plan's (luma, chroma) lines
         self._band_x0: np.ndarray | None = None  # the seam band's cells (``BandPlace.x0``) on the device
-        planes, out = self._planes.device, self._out.device
-        self._passes = {"luma": (planes["y_src"], planes["y_tgt"], out["y"]),
-                        "chroma": (planes["uv_src"], planes["uv_tgt"], out["uv"])}
-        self._arrays: dict[str, FrameArrays] = {}
+        self._seams_set: transfer.Staged | None = None  # the block the last seams went up in
+        self._arrays: dict[tuple[str, tuple[int, int]], FrameArrays] = {}
 
     def load(self, planes_src: tuple[np.ndarray, ...], planes_tgt: tuple[np.ndarray, ...]) -> None:
         """One frame pair's (y, u, v) planes of the source and of the target onto the device (one copy);
@@ -173,11 +181,23 @@ class DeviceFrame:
             uv[:, :, 1] = v
         self._planes.upload()
 
+    def _out_block(self, shape: tuple[int, int]) -> transfer.Staged:
+        """The block the planes composited on an (H, W) ``shape`` come down in (made once per shape)."""
+        if shape not in self._out:
+            self._out[shape] = transfer.Staged({"y": (shape, np.uint8), "uv": ((shape[0] // 2, shape[1] // 2, 2), np.uint8)},
+                                               self._cfg.device, "output")
+        return self._out[shape]
+
     def frame_arrays(self, name: str, plan: CompositePlan) -> FrameArrays:
-        """The pass's frame arrays (made once: the pair and output in this frame's blocks)."""
-        if name not in self._arrays:
-            self._arrays[name] = FrameArrays.on(*self._passes[name], plan)
-        return self._arrays[name]
+        """The pass's frame arrays on the plan's grid (made once a grid: the pair and output in this
+        frame's blocks)."""
+        key = (name, tuple(plan.canvas_shape))
+        if key not in self._arrays:
+            rows, cols = key[1]
+            side = "y" if name == "luma" else "uv"
+            planes, out = self._planes.device, self._out_block((rows, cols) if side == "y" else (2 * rows, 2 * cols)).device
+            self._arrays[key] = FrameArrays.on(planes[f"{side}_src"], planes[f"{side}_tgt"], out[side], plan)
+        return self._arrays[key]
 
     def gains(self, plan: FramePlan, luma: tuple, chroma: tuple) -> tuple[Gains, Gains]:
         """The frame's gains of each pass ((gain_src, bias_src, gain_tgt, bias_tgt) grey levels) as the
@@ -185,14 +205,15 @@ class DeviceFrame:
         return (kernel_gains(luma, 1, plan.luma.tone, self.frame_arrays("luma", plan.luma).table),
                 kernel_gains(chroma, 2, plan.chroma.tone, self.frame_arrays("chroma", plan.chroma).table))
 
-    def band(self, plan: FramePlan, place: BandPlace, objects: ObjectGrid | None, gains_luma: Gains
-             ) -> tuple[BandFrame, BandFrame | None]:
+    def band(self, plan: FramePlan, place: BandPlace, objects: ObjectGrid | None, gains_luma: Gains,
+             origin: tuple[int, int] = (0, 0)) -> tuple[BandFrame, BandFrame | None]:
         """The seam band's difference, sum and change of the loaded pair on the band's cells at ``place``
         (``composite.band_difference`` with the Y pass's gains) and, on a static plan, the object band's
         on ``objects`` (``frame_objects.ObjectGrid``, the whole overlap on coarse cells), on the host in
-        one small download. The seam band's cells went up with the last frame's seam (:meth:`composite`),
-        or go up now where the band moved otherwise (a new map set's). The arrays are this frame's: the
-        next call overwrites them."""
+        one small download; read on ``plan``, whose pixel (0, 0) shows canvas pixel ``origin`` (x, y).
+        The seam band's cells went up with the last frame's seam (:meth:`composite`), or go up now where
+        the band moved otherwise (a new map set's). The arrays are this frame's: the next call
+        overwrites them."""
         block = self._seam_block(plan)
         if place.x0 is not self._band_x0:
             np.copyto(block.host["band_x0"], place.x0)
@@ -205,52 +226,43 @@ class DeviceFrame:
                 bands["objects"] = (objects.lines, objects.cell, objects.shape,
                                     transfer.to_device(objects.x0, int, self._cfg.device, "plan"))
             self._bands = objects, BandBlock(bands, self._cfg.device)
-        frames = self._bands[1].difference(self.frame_arrays("luma", plan.luma), plan.luma, gains_luma)
+        frames = self._bands[1].difference(self.frame_arrays("luma", plan.luma), plan.luma, gains_luma, origin)
         return frames["seam"], frames.get("objects")
 
     def _seam_block(self, plan: FramePlan) -> transfer.Staged:
         """The block the frame's seam and offsets, and the next frame's seam band's cells, go up in (made
-        once: the canvas's lines are fixed)."""
-        if self._seam is None:
-            luma, chroma = plan.luma.lines, plan.chroma.lines
-            self._seam = transfer.Staged({
+        once per plan grid's lines; the band's cells are the first block's)."""
+        key = (plan.luma.lines, plan.chroma.lines)
+        if key not in self._seams:
+            luma, chroma = key
+            block = transfer.Staged({
                 "seam_luma": ((luma,), np.float32), "offsets_luma": ((2, luma), np.int32),
                 "seam_chroma": ((chroma,), np.float32), "offsets_chroma": ((2, chroma * 2), np.int32),
                 "band_x0": ((len(self._grid.lines),), np.int32)}, self._cfg.device, "seam")
-            self._seam.host["offsets_chroma"].fill(0)  # the U/V pass has no seam offsets
-        return self._seam
+            block.host["offsets_chroma"].fill(0)  # the U/V pass has no seam offsets
+            self._seams[key] = block
+        return self._seams[key]
 
     def composite(self, plan: FramePlan, luma: FrameState, chroma: FrameState, gains: tuple[Gains, Gains],
-                  next_band: BandPlace, window: np.ndarray | None = None, keep_canvas: bool = False
-                  ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+                  next_band: BandPlace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The loaded pair composited by ``plan`` with each pass's state (``luma`` with the seam blend's
-        offsets, ``chroma`` without) and ``gains`` (:meth:`gains`): (output, canvas) (y, u, v) planes, new
+        offsets, ``chroma`` without) and ``gains`` (:meth:`gains`): the output (y, u, v) planes, new
         arrays (one upload of the seams, with the cells of the next frame's seam band at ``next_band``; one
-        download of the planes). The output is the canvas, or with ``window`` (x, y) the output-shaped
-        window there (``kernels/shift.py``; the canvas then comes down too only with ``keep_canvas``, else
-        the canvas returned is the output)."""
+        download of the planes)."""
         self.set_seams(plan, luma, chroma, next_band.x0)
         self.composite_pass("luma", plan.luma, gains[0])
         self.composite_pass("chroma", plan.chroma, gains[1])
-        if window is None:
-            canvas = self._planes_of(self._out)
-            return canvas, canvas
-        self._shift(window)
-        shown = self._planes_of(self._shown)
-        return shown, (self._planes_of(self._out) if keep_canvas else shown)
+        return self._planes_of(self._out_block(tuple(plan.luma.canvas_shape)))
 
-    def _shift(self, window: np.ndarray) -> None:
-        """The output planes, the canvas's at ``window`` (x, y) luma px (chroma: half that), on the device."""
-        out, shown = self._out.device, self._shown.device
-        x, y = (float(v) for v in window)
-        for name, origin, fill in (("y", wp.vec2(x, y), wp.vec2i(LUMA_FILL[0], 0)),
-                                   ("uv", wp.vec2(0.5 * x, 0.5 * y), wp.vec2i(*CHROMA_FILL))):
-            channels = 1 if name == "y" else 2
-            rows, cols = self._shown.host[name].shape[:2]
-            canvas = out[name].reshape((*self._out.host[name].shape[:2], channels))
-            runtime.launch_row_loops(shifted_plane_kernel, rows, cols,
-                                     [canvas, origin, fill, shown[name].reshape((rows, cols, channels))],
-                                     self._cfg.device, self._cfg.cpu_threads)
+    def canvas(self, plan: FramePlan, luma: FrameState, chroma: FrameState, gains: tuple[Gains, Gains]
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """After :meth:`composite`: the loaded pair composited again by ``plan`` (the canvas's, where the
+        output is a window on it) with its states and the frame's ``gains`` (:meth:`gains`: the same
+        values whichever plan's tables hold them), its (y, u, v) planes, new arrays (for an observer)."""
+        self.set_seams(plan, luma, chroma, self._band_x0)
+        self.composite_pass("luma", plan.luma, gains[0])
+        self.composite_pass("chroma", plan.chroma, gains[1])
+        return self._planes_of(self._out_block(tuple(plan.luma.canvas_shape)))
 
     @staticmethod
     def _planes_of(block: transfer.Staged) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -270,11 +282,12 @@ class DeviceFrame:
         np.copyto(host["band_x0"], band_x0)
         self._band_x0 = band_x0
         block.upload()
+        self._seams_set = block
 
     def composite_pass(self, name: str, plan: CompositePlan, gains: Gains, per_pixel: bool | None = None) -> None:
         """One pass ("luma" or "chroma") of the loaded pair by its ``plan`` with the seams set last
-        (``composite.composite``, queued on the device)."""
-        block = self._seam
+        (:meth:`set_seams`; ``composite.composite``, queued on the device)."""
+        block = self._seams_set
         seam = SeamState()
         seam.seam = block.device[f"seam_{name}"]
         offsets = block.device[f"offsets_{name}"]

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import cv2
 import numpy as np
 import warp as wp
 
@@ -309,6 +310,67 @@ def scaled_plane_maps(maps: PlaneMaps, shape_out: tuple[int, int]) -> PlaneMaps:
                    map_src_chroma=chroma_positions(map_src), map_tgt_chroma=chroma_positions(map_tgt),
                    alpha_chroma=block_mean(alpha).astype(np.float32), seam_luma=seam, seam_chroma=chroma_seam(seam),
                    border_luma=border)
+
+
+def translated(field: np.ndarray, corner: np.ndarray, shape: tuple[int, int], fill: float) -> np.ndarray:
+    """(H, W[, C]) float32 of ``shape``: ``field`` (h, w[, C]) float32 at (x, y) + ``corner`` (x, y),
+    sub-pixel, bilinearly (a tap of weight 0 does not count; a NaN tap that counts makes NaN, so a
+    map's "nothing to sample" stays so); ``fill`` where a counted tap lies off ``field``."""
+    whole = np.floor(np.asarray(corner, np.float64))
+    fx, fy = (float(v) for v in np.asarray(corner, np.float64) - whole)
+    rows, cols = shape
+    taps = shift_onto(field, whole, (rows + 1, cols + 1), fill)
+    across = taps[:, :cols] if fx == 0.0 else cv2.addWeighted(taps[:, :cols], 1.0 - fx, taps[:, 1:], fx, 0.0)
+    out = across[:rows] if fy == 0.0 else cv2.addWeighted(across[:rows], 1.0 - fy, across[1:], fy, 0.0)
+    return np.ascontiguousarray(out, np.float32)
+
+
+def windowed_lines(per_line: np.ndarray, corner: np.ndarray, lines_are_rows: bool, count: int) -> np.ndarray:
+    """Per-line values (L[, C]) of the canvas, for ``count`` lines of a window whose pixel (0, 0) sits at
+    canvas ``corner`` (x, y): window line l is canvas line l + the corner's along the lines (linear
+    between lines, clamped at the ends), float64."""
+    along = corner[1] if lines_are_rows else corner[0]
+    return at_positions(np.asarray(per_line, np.float64), np.arange(count) + float(along), axis=0)
+
+
+def windowed_seam(positions: np.ndarray, corner: np.ndarray, lines_are_rows: bool, count: int) -> np.ndarray:
+    """A canvas seam (L,) (positions along its lines) as the seam of the window at ``corner`` (x, y) with
+    ``count`` lines (:func:`windowed_lines`, less the corner across the lines), float32."""
+    across = corner[0] if lines_are_rows else corner[1]
+    return (windowed_lines(positions, corner, lines_are_rows, count) - float(across)).astype(np.float32)
+
+
+def windowed_plane_maps(maps: PlaneMaps, corner: np.ndarray, shape_out: tuple[int, int],
+                        offset_tgt: np.ndarray) -> PlaneMaps:
+    """``maps`` (on the canvas, at its stitched size: the target map is ``u - offset_tgt``) for an output
+    of ``shape_out`` (even H, W) whose pixel (x, y) shows the canvas at (x, y) + ``corner`` (x, y luma
+    px, sub-pixel; may lie off the canvas, where nothing is sampled): every output pixel samples the
+    inputs once, where the canvas position it shows does (the source maps are smooth: bilinear between
+    canvas pixels; chroma pixels at half the corner; the target's exact, u - offset_tgt + corner: the
+    canvas holds the whole target, or a crop the window never leaves); the seam, the border blend along. A moving rig's steady canvas (``steady.py``) is composited so. ``overlap_luma`` is left out
+    (None): these maps are composited, the per-frame seam works on the canvas's."""
+    corner = np.asarray(corner, np.float64)
+    origin = np.asarray(offset_tgt, np.float64) - corner  # where target pixel (0, 0) sits on the window
+    half = 0.5 * corner
+    chroma_out = (shape_out[0] // 2, shape_out[1] // 2)
+    rows = maps.seam_luma.lines_are_rows
+    lines = shape_out[0] if rows else shape_out[1]
+    seam = replace(maps.seam_luma, positions=windowed_seam(maps.seam_luma.positions, corner, rows, lines))
+    border = maps.border_luma
+    if border is not None:
+        along, across = (corner[1], corner[0]) if rows else (corner[0], corner[1])
+        spots = np.arange(shape_out[1] if rows else shape_out[0]) + float(across)
+        border = BorderBlend(tuple(float(line - along) for line in border.lines),
+                             at_positions(border.src, spots, axis=1).astype(np.float32),
+                             at_positions(border.tgt, spots, axis=1).astype(np.float32))
+    return replace(maps, map_src_luma=translated(maps.map_src_luma, corner, shape_out, np.nan),
+                   map_tgt_luma=target_map(shape_out, origin),
+                   alpha_luma=translated(maps.alpha_luma, corner, shape_out, 0.0),
+                   map_src_chroma=translated(maps.map_src_chroma, half, chroma_out, np.nan),
+                   map_tgt_chroma=target_map(chroma_out, 0.5 * origin),
+                   alpha_chroma=translated(maps.alpha_chroma, half, chroma_out, 0.0),
+                   seam_luma=seam, seam_chroma=chroma_seam(seam),
+                   border_luma=border, overlap_luma=None)
 
 
 def seam_on_canvas_lines(positions_out: np.ndarray, lines: int, scale: np.ndarray, lines_are_rows: bool) -> np.ndarray:

@@ -11,10 +11,11 @@ follows the target's *camera path* through a causal low-pass:
    followed without lag, and never more than ``video_steady_max_px`` from the path (the lag bound). It
    starts moving as the rig's first step does (a rig panning from the first frame is not caught up
    from rest).
-3. *Window*: the output shows the canvas shifted by (steady path - path), sub-pixel (Catmull-Rom's cubic
-   on the device, ``kernels/shift.py``: whole pixels would leave half a pixel of shake, as much as a
-   hand-held rig's frame-to-frame jitter); where the shifted canvas does not reach, the output is black
-   and that band moves as smoothly as the window does.
+3. *Window*: the output shows the canvas shifted by (steady path - path), sub-pixel (whole pixels would
+   leave half a pixel of shake, as much as a hand-held rig's frame-to-frame jitter). It is composited
+   through the window's own maps (``maps.windowed_plane_maps``: the canvas's maps read at the window,
+   so each output pixel samples the inputs once, and a frame costs no second pass); where the shifted
+   canvas does not reach, the output is black and that band moves as smoothly as the window does.
 
 With ``--crop`` and ``--rig moving`` the output is the first estimate's rectangle less
 ``video_steady_max_px`` on every side (:func:`steady_crop`): the window never leaves the cropped canvas,

@@ -50,13 +50,14 @@ from ..stitch import StitchMaps
 from sena_warp.kernels import transfer
 from sena_warp.kernels.runtime import prewarm, resolve_config
 from .debug import dump_first_estimate
-from .device_frame import DeviceFrame, FramePlan, Plans
+from .device_frame import DeviceFrame, FramePlan, Plans, frame_plan
 from .estimate import Attempt, best_first_estimate, paired_frames, spaced_pairs, spaced_span
 from .exposure import ExposureTracker
 from .frame_seam import BandFrame, FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_still, run_video
 from .maps import (PlaneMaps, chroma_lines, map_change_px, maps_on_canvas, output_shape, sampled_mask,
-                   seam_change_px, seam_on_canvas_lines, seam_per_target_line, target_offset)
+                   seam_change_px, seam_on_canvas_lines, seam_per_target_line, target_offset, windowed_lines,
+                   windowed_seam)
 from .reader import YuvFrame, probe_video
 from .align import Seam
 from .rig_motion import RigMotion
@@ -124,13 +125,15 @@ class CompositedFrame:
     ``composite_yuv`` was called without ``update``); ``source``: which input is the source, "left"
     or "right" (the other is the target). ``planes_src`` / ``planes_tgt``: the (y, u, v)
     uint8 planes of the source / target input as decoded (``plane[row, col]``); ``planes_out``: the
-    composited (y, u, v) on the canvas; ``window``: (x, y, width, height) the output frame on the canvas
-    (x, y sub-pixel: a moving rig's steady canvas, ``steady.py``; it may reach off the canvas, where the
-    output is black). ``maps``: the :class:`~sena_warp.video.maps.PlaneMaps` composited
-    with (the same object for as long as the maps do not change; input-frame (x, y) sample positions
-    per canvas pixel). ``seam_home``: (L,) float32 the estimate's seam, the centre of the band in
-    which the frame's seam may move, at most ``seam_reach_px`` from it; ``seam``: (L,) float32 the
-    frame's seam as composited; a line is
+    output (y, u, v) as shown; ``window``: (x, y, width, height) the output frame on the canvas (x, y
+    sub-pixel: a moving rig's steady canvas, ``steady.py``; it may reach off the canvas, where the
+    output is black); ``canvas()``: the (y, u, v) composited on the canvas (``planes_out`` where the
+    output is the canvas, else the pair composited once more by the canvas's plan: call it only where
+    needed). ``maps``: the canvas's :class:`~sena_warp.video.maps.PlaneMaps` (the same object for as
+    long as the maps do not change; input-frame (x, y) sample positions per canvas pixel); its
+    ``seam_home``: (L,) float32 the estimate's seam, the centre of the band in which the frame's seam
+    may move, at most ``seam_reach_px`` from it; ``seam``: (L,) float32 the frame's seam as composited
+    on the canvas; a line is
     a canvas row when ``lines_are_rows`` (positions are x; the source lies at smaller x), else a
     column (positions are y). ``gains_luma``: (gain_src, bias_src, gain_tgt, bias_tgt), each (1,)
     float64, the Y pass's affine gains (``out = gain * Y + bias`` up to the knee), ``knee_luma`` their
@@ -148,18 +151,27 @@ class CompositedFrame:
     planes_out: tuple[np.ndarray, np.ndarray, np.ndarray]
     window: tuple[float, float, int, int]
     maps: PlaneMaps
-    seam_home: np.ndarray
-    seam_reach_px: float
     seam: np.ndarray
     gains_luma: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
     knee_luma: tuple[float, float] | None
     offsets_luma: tuple[np.ndarray, np.ndarray]
     weights: Callable[[], tuple[np.ndarray, np.ndarray]]
+    canvas: Callable[[], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
     @property
     def lines_are_rows(self) -> bool:
         """Whether a seam line is a canvas row (else a column)."""
         return self.maps.seam_luma.lines_are_rows
+
+    @property
+    def seam_home(self) -> np.ndarray:
+        """(L,) float32 the estimate's seam: the centre of the band the frame's seam may move in."""
+        return self.maps.seam_luma.positions
+
+    @property
+    def seam_reach_px(self) -> float:
+        """How far from ``seam_home`` the frame's seam may go."""
+        return float(self.maps.seam_luma.band_px)
 
 
 FirstEstimateHook = Callable[[StitchMaps, YuvFrame, YuvFrame], None]
@@ -253,7 +265,7 @@ class SenaFrameCompositor:
         self._timeline = MapsTimeline(maps, mode, first_s, self._canvas, self._reestimates(maps, fps, frame_shapes),
                                       RigMotion(cfg) if cfg.video_rig == "auto" else None,
                                       watch_frames(fps, pair_mib(frame_shapes), cfg), cfg)
-        self._plans = Plans(cfg)
+        self._plans = Plans((shown[3], shown[2]), offset_tgt, cfg)  # of the canvas's maps, or of a window on them
         cell = max(1, round(cell_px(frame_shapes, cfg) * float(self._canvas.scale.min())))
         self._seam = FrameSeam(maps.seam_luma.positions, self._canvas.band_px, cell, maps.overlap_luma,
                                mode == "static", fps, cfg)
@@ -398,8 +410,9 @@ class SenaFrameCompositor:
         planes_src, planes_tgt = self.source_target((y_l, u_l, v_l), (y_r, u_r, v_r))
         shapes = (planes_src[0].shape, planes_tgt[0].shape)
         maps = self._timeline.maps
+        window = self._steady.window_for(self._timeline.mode)
         with log.clock("maps_upload"):
-            plan = self._plans.plan(maps, shapes)
+            plan = self._plans.plan(maps, shapes, window)
             self._seam.reset(maps.seam_luma.positions, maps.overlap_luma)
         with log.clock("exposure"):
             luma_gains, chroma_gains = self._gains(maps, planes_src, planes_tgt)
@@ -408,33 +421,49 @@ class SenaFrameCompositor:
         gains = device.gains(plan, luma_gains, chroma_gains)
         with log.clock("frame_seam"):
             objects = self._seam.objects
+            origin = (0, 0) if window is None else tuple(int(v) for v in np.rint(window))
             band, object_band = device.band(plan, self._seam.place, objects.grid if objects is not None else None,
-                                            gains[0])
-            luma, chroma = self._frame_states(band, object_band, plan, luma_gains, chroma_gains)
-        window = self._steady.window_for(self._timeline.mode)
-        out, canvas = device.composite(plan, luma, chroma, gains, self._seam.place, window,
-                                       keep_canvas=self.observer is not None)
-        self._last = (plan, luma, chroma)
+                                            gains[0], origin)
+            luma, chroma = self._frame_states(band, object_band, maps, luma_gains, chroma_gains)
+            shown_luma, shown_chroma = (luma, chroma) if window is None else windowed_states(luma, chroma, window, plan)
+        out = device.composite(plan, shown_luma, shown_chroma, gains, self._seam.place)
+        self._last = (plan, shown_luma, shown_chroma)
         if self.observer is not None:
             with log.clock("observer"):
-                self.observer(self._composited(planes_src, planes_tgt, canvas, gains[0]))
+                canvas = self._canvas_of(out, window, maps, shapes, (luma, chroma), gains)
+                self.observer(self._composited(planes_src, planes_tgt, out, canvas, maps, luma, gains[0]))
         log.transfers.append(transfer.tally() - counted)
         log.frames += 1
         log.time_s = None
         return out
 
-    def _frame_states(self, band: BandFrame, objects: BandFrame | None, plan: FramePlan, luma_gains: tuple,
+    def _frame_states(self, band: BandFrame, objects: BandFrame | None, maps: PlaneMaps, luma_gains: tuple,
                       chroma_gains: tuple) -> tuple[FrameState, FrameState]:
-        """Each pass's state of the frame whose seam band is ``band`` (and object band ``objects``, on a
-        static plan): its seam (``frame_seam``), kept in the band, with the seam blend's offsets on the
-        Y pass, and its gains."""
+        """Each pass's state on the canvas of ``maps`` of the frame whose seam band is ``band`` (and
+        object band ``objects``, on a static plan): its seam (``frame_seam``), kept in the band, with the
+        seam blend's offsets on the Y pass, and its gains."""
         last = self._seam.positions if self._seam.shown is None else self._seam.shown  # a new array either way
-        copies = self._timeline.copies(plan.maps.seam_luma.lines_are_rows)
+        copies = self._timeline.copies(maps.seam_luma.lines_are_rows)
         positions, offsets_src, offsets_tgt = self._seam.next(band, objects, copies)
         self._log.seam_motion_px.append(float(np.abs(positions - last).max()))
         positions = positions.astype(np.float32)
-        return (FrameState(clipped_seam(positions, plan.luma.layout), luma_gains, (offsets_src, offsets_tgt)),
-                FrameState(clipped_seam(chroma_lines(positions), plan.chroma.layout), chroma_gains))
+        return (FrameState(clipped_seam(positions, maps.seam_luma), luma_gains, (offsets_src, offsets_tgt)),
+                FrameState(clipped_seam(chroma_lines(positions), maps.seam_chroma), chroma_gains))
+
+    def _canvas_of(self, out: tuple, window: np.ndarray | None, maps: PlaneMaps, shapes: tuple,
+                   states: tuple[FrameState, FrameState], gains: tuple) -> Callable[[], tuple]:
+        """The frame's canvas planes for an observer, composited on its first call: ``out`` where the output
+        is the canvas, else the loaded pair by a plan of the canvas's maps (made for it: an observer's cost)
+        with the canvas's ``states``."""
+        if window is None:
+            return lambda: out
+        made: list[tuple] = []
+
+        def canvas() -> tuple:
+            if not made:
+                made.append(self._device.canvas(frame_plan(maps, shapes, self._cfg), *states, gains))
+            return made[0]
+        return canvas
 
     def _gains(self, maps: PlaneMaps, planes_src: tuple, planes_tgt: tuple) -> tuple[tuple, tuple]:
         """The frame's (luma, chroma) gains, (gain_src, bias_src, gain_tgt, bias_tgt) each (``exposure.py``)."""
@@ -450,24 +479,23 @@ class SenaFrameCompositor:
         """The device frame of planes of these Y shapes (made on the first frame)."""
         if self._device is None or self._device.shapes != shapes:
             steady = self._steady
-            self._device = DeviceFrame(shapes, self._canvas.shape, steady.output_shape if steady.windowed else None,
-                                       self._seam.grid, self._cfg)
+            self._device = DeviceFrame(shapes, self._canvas.shape, steady.output_shape, self._seam.grid, self._cfg)
         return self._device
 
-    def _composited(self, planes_src: tuple, planes_tgt: tuple, planes_out: tuple, gains_luma) -> CompositedFrame:
-        """The frame just composited, for the observer."""
-        plan, luma, _ = self._last
-        maps = plan.maps
+    def _composited(self, planes_src: tuple, planes_tgt: tuple, planes_out: tuple, canvas: Callable[[], tuple],
+                    maps: PlaneMaps, luma: FrameState, gains_luma) -> CompositedFrame:
+        """The frame just composited, for the observer: its ``maps`` and Y state ``luma`` on the canvas."""
+        plan = self._last[0]
         offsets = tuple(fixed_point(v).reshape(-1, 1) / LEVEL for v in luma.offsets)
         return CompositedFrame(
             index=self._log.frames, time_s=self._log.time_s,
             source="left" if self._canvas.rig.source == "a" else "right",
             planes_src=planes_src, planes_tgt=planes_tgt, planes_out=planes_out,
             window=(*(float(v) for v in self._steady.window()), *self.output_size), maps=maps,
-            seam_home=maps.seam_luma.positions, seam_reach_px=float(maps.seam_luma.band_px), seam=luma.seam.copy(),
+            seam=luma.seam.copy(),
             gains_luma=applied_gains(gains_luma, 1),
             knee_luma=plan.luma.knee, offsets_luma=offsets,
-            weights=lambda: seam_weights(luma.seam, plan.luma.layout, plan.luma.canvas_shape, self._cfg))
+            weights=lambda: seam_weights(luma.seam, maps.seam_luma, maps.shape, self._cfg), canvas=canvas)
 
     def close(self) -> None:
         """Stop the re-estimation worker (a pending estimate is dropped)."""
@@ -515,6 +543,19 @@ class SenaFrameCompositor:
             "transfers": log.transfer_figures(),
             "timing_s": {name: round(seconds, 4) for name, seconds in seconds.items()},
         }
+
+
+def windowed_states(luma: FrameState, chroma: FrameState, window: np.ndarray, plan: FramePlan
+                    ) -> tuple[FrameState, FrameState]:
+    """A frame's (luma, chroma) states on the canvas as the states of the output window at ``window`` (x,
+    y) whose ``plan`` composites it (``maps.windowed_plane_maps``): the seam and its offsets resampled
+    onto the window's lines (``maps.windowed_lines``), the seam kept in the window plan's band."""
+    layout = plan.luma.layout
+    rows, lines = layout.lines_are_rows, plan.luma.lines
+    positions = windowed_seam(luma.seam, window, rows, lines)
+    offsets = tuple(windowed_lines(v, window, rows, lines) for v in luma.offsets)
+    return (FrameState(clipped_seam(positions, layout), luma.gains, offsets),
+            FrameState(clipped_seam(chroma_lines(positions), plan.chroma.layout), chroma.gains))
 
 
 def fixed_canvas(first: StitchMaps, shapes_src_tgt: tuple[tuple[int, int], tuple[int, int]], crop: bool

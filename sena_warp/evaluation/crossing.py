@@ -415,7 +415,7 @@ class CrossingFigures:
         shown = shown_figure((maps.map_src_luma, maps.map_tgt_luma), self._valid, alpha, affines, self.clip.mask)
         self.per_frame.append({"frame": frame.index, **shown.as_dict()})
         if frame.index in self.keep_frames:
-            self.frames[frame.index] = (tuple(p.copy() for p in frame.planes_out), frame.seam.copy(),
+            self.frames[frame.index] = (tuple(p.copy() for p in frame.canvas()), frame.seam.copy(),
                                         frame.lines_are_rows)
 
     def figures(self) -> dict:

@@ -13,9 +13,14 @@ rig), in a band of :data:`BAND_MARGIN_PX` beyond the per-frame seam's reach arou
 * *Exposure step* (grey levels per frame): ``naturalness.seam_step`` on the band: the output luma
   just before the seam minus just after, less the two views' own change across those pixels (the
   views as they enter the output: warped, with the frame's gains; the seam blend's offsets are part
-  of the output, not of the views); its *frame-to-frame change*: the mean over lines of |change of
-  the row-averaged signed step| (``naturalness.seam_steps``). "Settled": from :data:`SETTLED_S` on.
-  The settled step is also given per run of seam lines (where along the seam it is).
+  of the output, not of the views), on the lines where the views are aligned at the seam (the median
+  flow of the misalignment below at its textured cells within ``naturalness.STEP_FAR_PX`` of the seam
+  at most :data:`STEP_ALIGNED_PX`, as last measured): where they are not, the two strips show each view
+  something else (a near door in one, the room behind it in the other), the step is the scene's and
+  the misalignment figure counts it; ``all_lines_mean`` the same over every line. Its
+  *frame-to-frame change*: the mean over lines of |change of the row-averaged signed step|
+  (``naturalness.seam_steps``). "Settled": from :data:`SETTLED_S` on. The settled step is also given
+  per run of seam lines (where along the seam it is).
 * *Misalignment at the seam* (px): DIS optical flow (OpenCV, medium preset) from the target's band
   to the source's (the band's cells within :data:`FLOW_MARGIN_PX` of the frame's seam), both with
   their gains, every :data:`FLOW_EVERY` frames; its magnitude (and its
@@ -76,6 +81,8 @@ STILL_LINES = 1.0  # lines within this x the band width of a changed line are no
 SETTLED_S = 1.0  # "once settled": frames from this time on (cameras settle in their first half second)
 STEP_LINE_GROUPS = 16  # the settled exposure step is also given per this many runs of seam lines
 FLOW_EVERY = 2  # the optical flow runs on every this-th frame
+STEP_ALIGNED_PX = naturalness.STEP_NEAR_PX  # a line's views are aligned at the seam when their flow there is this
+# at most: the step's strips start this far from the seam, so farther apart they show each view other content
 FLOW_MARGIN_PX = 32  # ... on the band's cells within this of the frame's seam (not the whole band: DIS's
 # result at a cell depends on how far the image reaches, and the band's width is a setting)
 TEXTURE_GREY_PER_PX = 3.0  # misalignment is read where the target is this textured (sqrt of min eigenvalue)
@@ -200,6 +207,20 @@ def band_flow(src: np.ndarray, tgt: np.ndarray, valid_src: np.ndarray, valid_tgt
     return dis.calc(tgt8, src8, None)
 
 
+def aligned_lines(flow: np.ndarray, cells: np.ndarray, seam: np.ndarray, both: np.ndarray) -> np.ndarray:
+    """(L,) bool: the lines whose views are aligned at the seam (``seam`` (L,) positions): the median
+    magnitude of the ``flow`` (L, W, 2) over the cells at ``cells`` (1, W) within
+    ``naturalness.STEP_FAR_PX`` of the seam where ``both`` (L, W) holds (both views, textured: the flow
+    of a flat sky is DIS's guess), at most :data:`STEP_ALIGNED_PX`; True on a line without such a cell
+    (nothing says otherwise: a step on a flat line is the exposure's)."""
+    strips = (np.abs(cells - np.asarray(seam, np.float64)[:, None]) <= naturalness.STEP_FAR_PX) & both
+    magnitude = np.where(strips, np.hypot(flow[..., 0], flow[..., 1]), np.nan)
+    any_cell = strips.any(axis=1)
+    median = np.zeros(len(strips))
+    median[any_cell] = np.nanmedian(magnitude[any_cell], axis=1)
+    return median <= STEP_ALIGNED_PX
+
+
 def covered_canvas(frame: CompositedFrame) -> np.ndarray:
     """(Hc, Wc) bool: the canvas pixels a view samples with the frame's maps."""
     maps = frame.maps
@@ -264,18 +285,21 @@ class VideoFigures:
         self.shown_path: list[np.ndarray] = []  # the output picture's path (output shake), output px
         self.per_frame: dict[str, list] = {name: [] for name in (
             "time_s", "maps_changed", "seam_motion_px", "seam_motion_still_px", "still_lines_pct",
-            "exposure_step", "exposure_step_change", "misalignment_px", "uncovered_pct")}
+            "exposure_step", "exposure_step_all", "exposure_step_change", "misalignment_px", "uncovered_pct")}
         self.paths: list[np.ndarray] = []
         self._flow_cells: list[np.ndarray] = []
         self._flow_cross: list[np.ndarray] = []
         self._steps: list[np.ndarray] = []  # every frame's signed step per seam line (NaN where undefined)
+        self._aligned: np.ndarray | None = None  # (L,) bool: lines whose views were aligned at the seam when last measured
+        self._step_lines = (0, 0)  # (frame, line) with a defined step: all of them, those where the views were aligned
 
     def __call__(self, frame: CompositedFrame) -> None:
         changed = frame.maps is not self._maps
         if changed:
             self._new_maps(frame)
         band = self._band
-        y_src, y_tgt, y_out = frame.planes_src[0], frame.planes_tgt[0], frame.planes_out[0]
+        canvas = frame.canvas()
+        y_src, y_tgt, y_out = frame.planes_src[0], frame.planes_tgt[0], canvas[0]
         src, tgt = band.views(y_src, y_tgt)
         out = band.output(y_out)
         gain_src, bias_src, gain_tgt, bias_tgt = (float(v[0]) for v in frame.gains_luma)
@@ -302,11 +326,16 @@ class VideoFigures:
         record["seam_motion_still_px"].append(still_motion)
         record["still_lines_pct"].append(still_pct)
         known = np.isfinite(steps)
-        record["exposure_step"].append(float(np.mean(np.abs(steps[known]))) if known.any() else None)
-        self._steps.append(steps.astype(np.float32))
-        record["exposure_step_change"].append(change)
+        record["exposure_step_all"].append(float(np.mean(np.abs(steps[known]))) if known.any() else None)
         record["misalignment_px"].append(
             self._misalignment(src_g, tgt_g, band, seam_band) if frame.index % self.flow_every == 0 else None)
+        defined = int(known.sum())
+        if self._aligned is not None and len(self._aligned) == len(steps):
+            known &= self._aligned
+        self._step_lines = (self._step_lines[0] + defined, self._step_lines[1] + int(known.sum()))
+        record["exposure_step"].append(float(np.mean(np.abs(steps[known]))) if known.any() else None)
+        self._steps.append(np.where(known, steps, np.nan).astype(np.float32))
+        record["exposure_step_change"].append(change)
         record["uncovered_pct"].append(uncovered_pct(self._covered, frame.window))
         self._follow_output(y_out, frame.window)
         self.paths.append(self._path)
@@ -314,7 +343,7 @@ class VideoFigures:
             self.strips.append((frame.index, np.clip(np.rint(out), 0, 255).astype(np.uint8), seam_band.copy(),
                                 band.x0.copy()))
         if frame.index in self.keep_frames:
-            self.frames[frame.index] = (tuple(p.copy() for p in frame.planes_out), np.asarray(frame.seam).copy())
+            self.frames[frame.index] = (tuple(p.copy() for p in canvas), np.asarray(frame.seam).copy())
         self._last = {"seam": np.asarray(frame.seam, np.float64).copy(), "src": src, "tgt": tgt, "steps": steps}
 
     def _new_maps(self, frame: CompositedFrame) -> None:
@@ -354,20 +383,28 @@ class VideoFigures:
         return ~lines_near(moved, int(math.ceil(STILL_LINES * src.shape[1])))
 
     def _misalignment(self, src_g, tgt_g, band: SeamBand, seam_band: np.ndarray) -> float | None:
-        """The frame's median flow magnitude at the seam's textured cells; their values are pooled."""
+        """The frame's median flow magnitude at the seam's textured cells; their values are pooled. Also
+        which lines' views are aligned at the seam (``_aligned``, :func:`aligned_lines`)."""
         lo = max(0, int(np.floor(seam_band.min())) - FLOW_MARGIN_PX)
         hi = min(src_g.shape[1], int(np.ceil(seam_band.max())) + FLOW_MARGIN_PX + 1)
         src_g, tgt_g, valid_src, valid_tgt = (a[:, lo:hi] for a in (src_g, tgt_g, band.valid_src, band.valid_tgt))
         flow = band_flow(src_g, tgt_g, valid_src, valid_tgt)
         cells = np.arange(lo, hi)[None, :]
         near = np.abs(cells - seam_band[:, None]) <= 0.5 * self.cfg.transition_px
-        chosen = near & valid_src & valid_tgt & (texture(tgt_g) >= TEXTURE_GREY_PER_PX)
+        textured = valid_src & valid_tgt & (texture(tgt_g) >= TEXTURE_GREY_PER_PX)
+        self._aligned = aligned_lines(flow, cells, seam_band, textured)
+        chosen = near & textured
         if not chosen.any():
             return None
         magnitude = np.hypot(flow[..., 0], flow[..., 1])[chosen]
         self._flow_cells.append(magnitude)
         self._flow_cross.append(np.abs(flow[..., 0][chosen]))
         return float(np.median(magnitude))
+
+    def _aligned_pct(self) -> float | None:
+        """% of the (frame, line) whose step is defined where the views were aligned at the seam."""
+        defined, aligned = self._step_lines
+        return round(100.0 * aligned / defined, 2) if defined else None
 
     def _steps_by_lines(self, settled: list[bool]) -> list[dict]:
         """Where along the seam the settled exposure step is: the mean |step| over the settled frames in
@@ -424,6 +461,8 @@ class VideoFigures:
             },
             "exposure_step_grey": {
                 "mean": _stats(record["exposure_step"]), "p99": _stats(record["exposure_step"], 99),
+                "all_lines_mean": _stats(record["exposure_step_all"]),
+                "aligned_lines_pct": self._aligned_pct(),
                 "settled_mean": _stats(only("exposure_step", settled)),
                 "settled_p99": _stats(only("exposure_step", settled), 99),
                 "settled_by_lines": self._steps_by_lines(settled),
