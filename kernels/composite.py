@@ -173,6 +173,35 @@ def line_and_position(x: int, y: int, lines_are_rows: int) -> wp.vec2i:
     return wp.vec2i(x, y)
 
 
+@wp.func(inline=True)  # per pixel: inlined, its array arguments are not copied per call
+def plan_pixel(q: int, lp: wp.vec2i, p_src: wp.vec2, p_tgt: wp.vec2, seam: wp.array(dtype=float), layout: Layout,
+               shape_src: wp.vec3i, shape_tgt: wp.vec3i, plan: wp.array(dtype=wp.int64),
+               plan_tgt: wp.array(dtype=wp.int64)) -> int:
+    """plan[q] (and plan_tgt[q] for a band pixel) of a canvas pixel at (line, position) ``lp`` that samples the
+    source at ``p_src`` and the target at ``p_tgt`` (NaN: nowhere); returns its coverage, 255 or 0.
+
+    Where both sides are valid, pixels within ``layout.band_px`` of the seam are band pixels (the frame
+    decides the side); the others show the source below the seam and the target above it."""
+    ok_src = inside(p_src, shape_src)
+    ok_tgt = inside(p_tgt, shape_tgt)
+    d = float(lp[1]) - seam[lp[0]]
+    word = wp.int64(KIND_FILL)
+    if ok_src and ok_tgt:
+        if wp.abs(d) <= layout.band_px:
+            word = plan_word(KIND_BAND, p_src, shape_src)
+            plan_tgt[q] = plan_word(KIND_TARGET, p_tgt, shape_tgt)
+        elif d < 0.0:
+            word = plan_word(KIND_SOURCE, p_src, shape_src)
+        else:
+            word = plan_word(KIND_TARGET, p_tgt, shape_tgt)
+    elif ok_src:
+        word = plan_word(KIND_SOURCE, p_src, shape_src)
+    elif ok_tgt:
+        word = plan_word(KIND_TARGET, p_tgt, shape_tgt)
+    plan[q] = word
+    return wp.where(ok_src or ok_tgt, 255, 0)
+
+
 @wp.kernel
 def composite_plan_kernel(
     row0: int,
@@ -188,38 +217,94 @@ def composite_plan_kernel(
     plan_tgt: wp.array(dtype=wp.int64),
     coverage: wp.array2d(dtype=wp.uint8),
 ):
-    """Per canvas pixel q = y * Wc + x: plan[q], plan_tgt[q] for band pixels, coverage 255 / 0.
-
-    Where both sides are valid, pixels within ``layout.band_px`` of the seam are band pixels (the frame
-    decides the side); the others show the source below the seam and the target above it. Thread
-    (i, j) does row ``row0 + i``, columns j, j + col_step, ... (``runtime.launch_row_loops``): a
-    blended-in map makes a plan every frame.
+    """Per canvas pixel q = y * Wc + x: plan[q], plan_tgt[q] for band pixels, coverage 255 / 0
+    (``plan_pixel``). Thread (i, j) does row ``row0 + i``, columns j, j + col_step, ...
+    (``runtime.launch_row_loops``): a blended-in map makes a plan every frame.
     """
     i, j = wp.tid()
     y = row0 + i
     for x in range(j, width, col_step):
         q = y * width + x
-        p_src = map_src[y, x]
-        p_tgt = map_tgt[y, x]
-        ok_src = inside(p_src, shape_src)
-        ok_tgt = inside(p_tgt, shape_tgt)
-        lp = line_and_position(x, y, layout.lines_are_rows)
-        d = float(lp[1]) - seam[lp[0]]
-        word = wp.int64(KIND_FILL)
-        if ok_src and ok_tgt:
-            if wp.abs(d) <= layout.band_px:
-                word = plan_word(KIND_BAND, p_src, shape_src)
-                plan_tgt[q] = plan_word(KIND_TARGET, p_tgt, shape_tgt)
-            elif d < 0.0:
-                word = plan_word(KIND_SOURCE, p_src, shape_src)
-            else:
-                word = plan_word(KIND_TARGET, p_tgt, shape_tgt)
-        elif ok_src:
-            word = plan_word(KIND_SOURCE, p_src, shape_src)
-        elif ok_tgt:
-            word = plan_word(KIND_TARGET, p_tgt, shape_tgt)
-        plan[q] = word
-        coverage[y, x] = wp.where(ok_src or ok_tgt, wp.uint8(255), wp.uint8(0))
+        covered = plan_pixel(q, line_and_position(x, y, layout.lines_are_rows), map_src[y, x], map_tgt[y, x], seam,
+                             layout, shape_src, shape_tgt, plan, plan_tgt)
+        coverage[y, x] = wp.uint8(covered)
+
+
+@wp.struct
+class Window:
+    """An output window on a canvas: output pixel (x, y) shows canvas (x, y) + corner, corner = ``whole`` (x, y)
+    + ``frac`` (each in [0, 1)); the target pixel it shows is (x, y) - ``origin_tgt`` (where target pixel
+    (0, 0) sits on the window)."""
+
+    whole: wp.vec2i
+    frac: wp.vec2
+    origin_tgt: wp.vec2
+
+
+@wp.func(inline=True)
+def field_tap(field: wp.array2d(dtype=wp.vec2), x: int, y: int) -> wp.vec2:
+    """field[y, x], NaN off the field."""
+    if x < 0 or y < 0 or y >= field.shape[0] or x >= field.shape[1]:
+        return wp.vec2(wp.nan, wp.nan)
+    return field[y, x]
+
+
+@wp.func(inline=True)
+def window_sample(field: wp.array2d(dtype=wp.vec2), x: int, y: int, window: Window) -> wp.vec2:
+    """A canvas map at window pixel (x, y) (canvas (x, y) + the corner), bilinearly: a tap of weight 0 does
+    not count, a counted tap off the canvas or NaN makes NaN (``video.maps.translated``'s rule)."""
+    cx = x + window.whole[0]
+    cy = y + window.whole[1]
+    fx = window.frac[0]
+    fy = window.frac[1]
+    if cx >= 0 and cy >= 0 and cx + 1 < field.shape[1] and cy + 1 < field.shape[0]:  # every tap on the canvas
+        top = (1.0 - fx) * field[cy, cx] + fx * field[cy, cx + 1]
+        bottom = (1.0 - fx) * field[cy + 1, cx] + fx * field[cy + 1, cx + 1]
+        if fx <= 0.0:
+            top = field[cy, cx]
+            bottom = field[cy + 1, cx]
+        if fy <= 0.0:
+            return top
+        return (1.0 - fy) * top + fy * bottom
+    top = field_tap(field, cx, cy)
+    if fx > 0.0:
+        top = (1.0 - fx) * top + fx * field_tap(field, cx + 1, cy)
+    if fy <= 0.0:
+        return top
+    bottom = field_tap(field, cx, cy + 1)
+    if fx > 0.0:
+        bottom = (1.0 - fx) * bottom + fx * field_tap(field, cx + 1, cy + 1)
+    return (1.0 - fy) * top + fy * bottom
+
+
+@wp.kernel
+def window_plan_kernel(
+    row0: int,
+    col_step: int,
+    width: int,
+    map_src: wp.array2d(dtype=wp.vec2),
+    window: Window,
+    seam: wp.array(dtype=float),
+    layout: Layout,
+    shape_src: wp.vec3i,
+    shape_tgt: wp.vec3i,
+    plan: wp.array(dtype=wp.int64),
+    plan_tgt: wp.array(dtype=wp.int64),
+    coverage: wp.array2d(dtype=wp.uint8),
+):
+    """``composite_plan_kernel`` for the output window ``window`` on a canvas whose source map is ``map_src``:
+    per window pixel q = y * W + x, the source where the canvas position it shows samples it
+    (``window_sample``), the target at (x, y) - ``window.origin_tgt``; ``seam`` and ``layout`` the window's.
+    Each pixel samples the inputs once, and no map of the window is made (a moving rig's steady window, a
+    new one every frame)."""
+    i, j = wp.tid()
+    y = row0 + i
+    for x in range(j, width, col_step):
+        q = y * width + x
+        p_tgt = wp.vec2(float(x), float(y)) - window.origin_tgt
+        covered = plan_pixel(q, line_and_position(x, y, layout.lines_are_rows), window_sample(map_src, x, y, window),
+                             p_tgt, seam, layout, shape_src, shape_tgt, plan, plan_tgt)
+        coverage[y, x] = wp.uint8(covered)
 
 
 @wp.func

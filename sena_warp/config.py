@@ -195,6 +195,9 @@ class Config:
     video_drift_px: float = 2.0  # static rig: a view's move (input px) beyond this from what the maps follow moves them
     video_drift_speed_px: float = 0.5  # static rig: a drift move is blended in at this many px a frame (faster jolts)
     video_blend_frames: int = 10  # frames over which new maps are blended in linearly (at least): a drift's, a moving rig's new key
+    video_moving_edge_share: float = 0.75  # moving rig: an overlap this share of the target across the seam or more
+    # (a stereo rig) puts the seam's home at the overlap's target-side edge; above 1: the estimate's seam (the paper's)
+    video_seam_edge_px: float = 3.0  # ... this far inside the overlap
     video_seam_speed_px: float = 2.0  # the seam moves at most this (or one cell) per frame (a blend lasts long enough), but for jumps
     video_estimate_lookahead_s: float = 1.5  # moving rig, worker: a re-estimate starts on the frame this far ahead of
     # the one composited (those decoded frames are held), so it is ready when the loop reaches its frame; 0: none
@@ -270,6 +273,8 @@ class Config:
     max_input_megapixels: float = 100.0  # refuse a larger input, from its header before decoding (memory; README)
     # --- runtime, fine tuning -----------------------------------------------------------------
     video_queue_frames: int = 8  # decoded frames buffered per input between decoder thread and loop
+    video_opencv_threads: int = 1  # OpenCV's threads while a video's frames are stitched (its calls there are small:
+    # waking and spinning a pool cost more CPU than they save); 0 = OpenCV's own choice
     video_estimate_workers: int = 1  # moving rig: re-estimates run on this many threads off the frame loop (0: on it)
     video_estimate_lookahead_mib: int = 512  # the most a re-estimate's look-ahead holds of decoded frames (1080p: 45
     # pairs, 4K: 21); also the most the first estimate's pairs may hold for the loop (more: it decodes its own)
@@ -383,7 +388,8 @@ RANGES: dict[str, Range] = {
     "video_screen_max_side": Range(32, 4096), "video_estimate_max_side": Range(64, 8192),
     "video_min_inlier_ratio": Range(0, 1), "video_max_median_change_px": Range(0, 10000),
     "video_drift_check_s": Range(0, 3600), "video_drift_px": _above(0, 10000), "video_drift_speed_px": _above(0, 10000),
-    "video_blend_frames": Range(0, 10000), "video_seam_speed_px": _above(0, 10000), "video_rig_moving_share": _above(0, 1),
+    "video_blend_frames": Range(0, 10000), "video_seam_speed_px": _above(0, 10000), "video_moving_edge_share": Range(0, 2),
+    "video_seam_edge_px": Range(0, 10000), "video_rig_moving_share": _above(0, 1),
     "video_rig_switch_share": _above(0, 1), "video_rig_still_share": _above(0, 1), "video_rig_still_s": _above(0, 3600),
     "video_align_short_px": Range(32, 4096), "video_align_points": Range(1, 10000), "video_align_min_share": Range(0, 1),
     "video_align_min_points": Range(3, 10000), "video_align_window_px": Range(3, 99),
@@ -411,7 +417,7 @@ RANGES: dict[str, Range] = {
     "video_crf": Range(0, 51), "video_bitrate_kbps": Range(0, 1_000_000), "video_maxrate_kbps": Range(0, 1_000_000),
     # runtime: more threads than cores only costs memory (a thread's stack; onnxruntime stalls under a memory limit)
     "cpu_threads": Range(0, 256), "max_input_megapixels": _above(0, 10000), "video_queue_frames": Range(1, 64),
-    "video_estimate_workers": Range(0, 16), "video_estimate_lookahead_mib": Range(1, 65536),
+    "video_estimate_workers": Range(0, 16), "video_opencv_threads": Range(0, 256), "video_estimate_lookahead_mib": Range(1, 65536),
 }
 
 # Fields that bound each other: (field, relation, other field, why), checked after each field's own range.

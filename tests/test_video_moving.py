@@ -22,7 +22,7 @@ from sena_warp.evaluation.rig_decisions import RECORDINGS, decisions
 from sena_warp.video.estimate import estimate_pair
 from sena_warp.video.loop import VideoOptions
 from sena_warp.video.maps import plane_maps, sampled_mask, target_offset
-from sena_warp.video.moving import MovingRig
+from sena_warp.video.moving import MovingRig, edge_home, with_home
 from sena_warp.video.stitch import fixed_canvas, stitch_videos
 from helpers import decoded_frames
 
@@ -60,14 +60,30 @@ def test_a_new_key_takes_over_without_a_jump(clips):
     step = np.abs(after.map_src_luma - before.map_src_luma)[shown]
     usual = np.abs(before.map_src_luma - earlier.map_src_luma)[shown]
     assert np.percentile(step, 99) < 1.5 * np.percentile(usual, 99) < 0.5 * np.percentile(keys_apart, 99)
-    # Its seam's home moves towards the new key's, at most video_seam_speed_px a frame.
+    # Its seam's home moves towards the new key's, at most video_seam_speed_px a frame (the rooftop's overlap
+    # spans 83 % of the target: the home is at the overlap's edge, with_home) ...
+    home = with_home(new, rig.shapes, CFG).seam_luma.positions
+    assert not np.allclose(home, new.seam_luma.positions)
     assert np.abs(after.seam_luma.positions - before.seam_luma.positions).max() <= CFG.video_seam_speed_px + 1e-3
     # ... and reaches it once it could have at that speed (and after video_blend_frames at least).
     frames = max(CFG.video_blend_frames,
-                 int(np.ceil(np.abs(before.seam_luma.positions - new.seam_luma.positions).max() / CFG.video_seam_speed_px)))
+                 int(np.ceil(np.abs(before.seam_luma.positions - home).max() / CFG.video_seam_speed_px)))
     for i in range(frames):
         settled = rig.frame_maps(*pick(min(32 + i, 59)), gains)
-    assert np.allclose(settled.seam_luma.positions, new.seam_luma.positions)
+    assert np.allclose(settled.seam_luma.positions, home)
+
+
+def test_a_stereo_rigs_seam_home_runs_inside_the_overlaps_target_side_edge():
+    overlap = np.array([[0, -1]] + [[300, 330]] * 3 + [[32, 600]] * 40 + [[40, 600]] * 20, np.int32)
+    home = edge_home(overlap, np.full(len(overlap), 100.0, np.float32), 3.0, 2.0)
+    # 3 px inside the edge where the overlap is whole; lines cut short by a slanted border (300-330, under
+    # half the median width) and lines without any go on from the others ...
+    np.testing.assert_allclose(home[:41], 35.0)
+    # ... and where the edge steps by 8 px the home rises 2 px a line ahead of it, never nearer the edge.
+    np.testing.assert_allclose(home[40:46], [35.0, 37.0, 39.0, 41.0, 43.0, 43.0])
+    assert (home[44:] >= 43.0).all() and np.abs(np.diff(home)).max() <= 2.0
+    # A line whose overlap is narrower than the margin keeps inside it.
+    assert edge_home(np.array([[10, 11]] * 4, np.int32), np.zeros(4, np.float32), 3.0, 2.0).max() == 11.0
 
 
 def test_auto_composites_a_fixed_rig_exactly_as_static(clips, tmp_path, capfd):

@@ -11,27 +11,28 @@ cells) come down together in one small block (:meth:`DeviceFrame.band`); the fra
 seam-blend offsets go up in one small block, with where the next frame's seam band lies, and both
 passes are composited, then the output planes come down in one block for the encoder
 (:meth:`DeviceFrame.composite`). A moving rig's output is a window on the canvas (``steady.py``),
-composited by a plan of the window's own maps (``maps.windowed_plane_maps``: each output pixel samples
-the inputs once); the seam's band is read on that plan at the canvas's cells, to the nearest pixel.
+composited by the plan of the window's own maps, made in one kernel without them (``frame_plan`` with an
+:class:`OutputWindow`, ``composite.window_plan``: each output pixel samples the inputs once, and a new window
+every frame costs one pass over it); the seam's band is read on that plan at the canvas's cells, to the nearest pixel.
 Nothing in a frame waits for the device but those two downloads. An observer may ask for the canvas
 itself too (:meth:`DeviceFrame.canvas`: the pair composited again by the canvas's plan).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import warp as wp
 
 from ..composite import (CompositePlan, FrameArrays, FrameState, band_difference, composite, composite_plan,
-                         fixed_point, kernel_gains, with_runs)
+                         fixed_point, kernel_gains, window_plan, with_runs)
 from ..config import Config
 from sena_warp.kernels import transfer
 from sena_warp.kernels.composite import BandCells, Gains, SeamState
 from .frame_objects import ObjectGrid
 from .frame_seam import BandFrame, BandGrid, BandPlace
-from .maps import BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, windowed_plane_maps
+from .maps import BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, windowed_layouts, windowed_plane_maps
 
 LUMA_FILL = (BLACK_Y,)  # output Y where no input is sampled
 CHROMA_FILL = (BLACK_UV, BLACK_UV)  # output U, V likewise
@@ -43,32 +44,67 @@ def chroma_shape(shape_y: tuple[int, ...]) -> tuple[int, int]:
 
 
 @dataclass(frozen=True)
+class OutputWindow:
+    """An output of (H, W) ``shape`` (even) whose pixel (x, y) shows the canvas at (x, y) + ``corner`` (x, y, sub-pixel),
+    on a canvas whose target offset is ``offset_tgt`` (x, y): a moving rig's steady window (``steady.py``)."""
+
+    corner: np.ndarray
+    shape: tuple[int, int]
+    offset_tgt: np.ndarray
+
+
+@dataclass(frozen=True)
 class FramePlan:
     """One map set made ready for planes of Y shapes ``shapes`` ((rows, cols) of the source, of the
-    target): ``luma`` the Y pass's plan, ``chroma`` the U/V pass's, both of ``maps``."""
+    target): ``luma`` the Y pass's plan, ``chroma`` the U/V pass's, both of ``maps``, or with ``window``
+    of that window on them (:meth:`shown_maps`)."""
 
     maps: PlaneMaps
     shapes: tuple[tuple[int, int], tuple[int, int]]
     luma: CompositePlan
     chroma: CompositePlan
+    window: OutputWindow | None = None
+
+    def shown_maps(self) -> PlaneMaps:
+        """The maps the plans composite: ``maps``, or the window's own (``maps.windowed_plane_maps``)."""
+        if self.window is None:
+            return self.maps
+        return windowed_plane_maps(self.maps, self.window.corner, self.window.shape, self.window.offset_tgt)
 
 
 def frame_plan(maps: PlaneMaps, shapes: tuple[tuple[int, int], tuple[int, int]], cfg: Config,
-               previous: FramePlan | None = None) -> FramePlan:
-    """The plans of ``maps`` for planes of Y shapes ``shapes``; the border blend on the device is kept
-    from ``previous`` while it is the same (a blend's steps share their goal's)."""
+               previous: FramePlan | None = None, window: OutputWindow | None = None) -> FramePlan:
+    """The plans of ``maps`` for planes of Y shapes ``shapes``, or of the output ``window`` on them (each
+    output pixel samples the inputs once, where the canvas position it shows does: ``composite.window_plan``,
+    no map of the window made); the border blend on the device is kept from ``previous`` while it is the
+    same (a blend's steps share their goal's), and a window's plan is made in the buffers of ``previous``
+    where that was a window's too (the plan it replaces: no frame composites it any more)."""
     shape_src, shape_tgt = (tuple(shape[:2]) for shape in shapes)
-    luma = composite_plan(maps.map_src_luma, maps.map_tgt_luma, maps.seam_luma, ((*shape_src, 1), (*shape_tgt, 1)),
-                          cfg, border=maps.border_luma, fill=LUMA_FILL, white=WHITE_Y,
+    luma_shapes = ((*shape_src, 1), (*shape_tgt, 1))
+    chroma_shapes = ((*chroma_shape(shape_src), 2), (*chroma_shape(shape_tgt), 2))
+    if window is not None:
+        seam_luma, seam_chroma, border = windowed_layouts(maps, window.corner, window.shape)
+        corner = np.asarray(window.corner, np.float64)
+        origin = np.asarray(window.offset_tgt, np.float64) - corner  # where target pixel (0, 0) sits on the window
+        rows, cols = window.shape
+        # The last window's plan serves no later frame: this one fills its buffers.
+        last = previous if previous is not None and previous.window is not None else None
+        luma = window_plan(maps.map_src_luma, corner, origin, (rows, cols), seam_luma, luma_shapes, cfg, border=border,
+                           fill=LUMA_FILL, white=WHITE_Y, into=last.luma if last is not None else None)
+        chroma = window_plan(maps.map_src_chroma, 0.5 * corner, 0.5 * origin, (rows // 2, cols // 2), seam_chroma,
+                             chroma_shapes, cfg, fill=CHROMA_FILL, white=None, offsets=False,
+                             into=last.chroma if last is not None else None)
+        return FramePlan(maps, (shape_src, shape_tgt), luma, chroma, window)
+    luma = composite_plan(maps.map_src_luma, maps.map_tgt_luma, maps.seam_luma, luma_shapes, cfg,
+                          border=maps.border_luma, fill=LUMA_FILL, white=WHITE_Y,
                           reuse=previous.luma if previous is not None else None)
-    chroma = composite_plan(maps.map_src_chroma, maps.map_tgt_chroma, maps.seam_chroma,
-                            ((*chroma_shape(shape_src), 2), (*chroma_shape(shape_tgt), 2)), cfg, fill=CHROMA_FILL,
-                            white=None, offsets=False)
+    chroma = composite_plan(maps.map_src_chroma, maps.map_tgt_chroma, maps.seam_chroma, chroma_shapes, cfg,
+                            fill=CHROMA_FILL, white=None, offsets=False)
     return FramePlan(maps, (shape_src, shape_tgt), luma, chroma)
 
 
 class Plans:
-    """The plan of each frame's maps, or of the window on them that the frame shows (``maps.windowed_plane_maps``
+    """The plan of each frame's maps, or of the window on them that the frame shows (:class:`OutputWindow`
     for an output of (H, W) ``output_shape`` on a canvas whose target offset is ``offset_tgt``), made when
     the maps or the window change (a new :class:`PlaneMaps` object, another window) and, on the CPU, given
     its runs once it has served a frame (``composite.with_runs``; CUDA's per-pixel kernel takes none)."""
@@ -89,13 +125,12 @@ class Plans:
         corner = None if window is None else tuple(float(v) for v in window)
         made = self._made_of
         if plan is None or made[0] is not maps or made[1] != corner or plan.shapes != shapes:
-            shown = maps if window is None else windowed_plane_maps(maps, np.asarray(corner), self._output_shape,
-                                                                    self._offset_tgt)
-            self._plan, self._made_of, self._served = frame_plan(shown, shapes, self._cfg, plan), (maps, corner), False
+            shown = None if corner is None else OutputWindow(np.asarray(corner), self._output_shape, self._offset_tgt)
+            self._plan = frame_plan(maps, shapes, self._cfg, plan, shown)
+            self._made_of, self._served = (maps, corner), False
         elif not self._served:
             if self._cfg.device == "cpu":
-                self._plan = FramePlan(plan.maps, shapes, with_runs(plan.luma, self._cfg),
-                                       with_runs(plan.chroma, self._cfg))
+                self._plan = replace(plan, luma=with_runs(plan.luma, self._cfg), chroma=with_runs(plan.chroma, self._cfg))
             self._served = True
         return self._plan
 

@@ -469,17 +469,18 @@ def separation_band_cost(lines: np.ndarray, x0: np.ndarray, cell: int, width: in
     solved[lines] = np.arange(len(lines))
     mid, lo, hi = separation_spans(np.asarray(copies_src, np.float64)[:, ::-1],
                                    np.asarray(copies_tgt, np.float64)[:, ::-1], cfg)
-    row = np.rint(mid).astype(np.int64)
+    rows = cfg.seam_separation_rows
+    line = (np.rint(mid).astype(np.int64)[None, :] + np.arange(-rows, rows + 1)[:, None]).ravel()  # every pair's lines
+    lo, hi = np.tile(lo, 2 * rows + 1), np.tile(hi, 2 * rows + 1)
+    k = np.where((line >= 0) & (line < len(solved)), solved[np.clip(line, 0, len(solved) - 1)], -1)
+    ok = k >= 0
+    k, lo, hi = k[ok], lo[ok], hi[ok]
+    first = np.clip(np.floor((lo - x0[k]) / cell), 0, width).astype(np.int64)
+    last = np.clip(np.ceil((hi - x0[k]) / cell), 0, width).astype(np.int64)
+    wide = last > first
     edges = np.zeros((len(lines), width + 1), np.float32)
-    for dy in range(-cfg.seam_separation_rows, cfg.seam_separation_rows + 1):
-        line = row + dy
-        k = np.where((line >= 0) & (line < len(solved)), solved[np.clip(line, 0, len(solved) - 1)], -1)
-        ok = k >= 0
-        first = np.clip(np.floor((lo[ok] - x0[k[ok]]) / cell), 0, width).astype(np.int64)
-        last = np.clip(np.ceil((hi[ok] - x0[k[ok]]) / cell), 0, width).astype(np.int64)
-        wide = last > first
-        np.add.at(edges, (k[ok][wide], first[wide]), cfg.seam_separation_weight)
-        np.add.at(edges, (k[ok][wide], last[wide]), -cfg.seam_separation_weight)
+    np.add.at(edges, (k[wide], first[wide]), cfg.seam_separation_weight)
+    np.add.at(edges, (k[wide], last[wide]), -cfg.seam_separation_weight)
     return np.cumsum(edges, axis=1)[:, :width]
 
 

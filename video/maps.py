@@ -340,19 +340,11 @@ def windowed_seam(positions: np.ndarray, corner: np.ndarray, lines_are_rows: boo
     return (windowed_lines(positions, corner, lines_are_rows, count) - float(across)).astype(np.float32)
 
 
-def windowed_plane_maps(maps: PlaneMaps, corner: np.ndarray, shape_out: tuple[int, int],
-                        offset_tgt: np.ndarray) -> PlaneMaps:
-    """``maps`` (on the canvas, at its stitched size: the target map is ``u - offset_tgt``) for an output
-    of ``shape_out`` (even H, W) whose pixel (x, y) shows the canvas at (x, y) + ``corner`` (x, y luma
-    px, sub-pixel; may lie off the canvas, where nothing is sampled): every output pixel samples the
-    inputs once, where the canvas position it shows does (the source maps are smooth: bilinear between
-    canvas pixels; chroma pixels at half the corner; the target's exact, u - offset_tgt + corner: the
-    canvas holds the whole target, or a crop the window never leaves); the seam, the border blend along. A moving rig's steady canvas (``steady.py``) is composited so. ``overlap_luma`` is left out
-    (None): these maps are composited, the per-frame seam works on the canvas's."""
+def windowed_layouts(maps: PlaneMaps, corner: np.ndarray, shape_out: tuple[int, int]
+                     ) -> tuple[SeamLayout, SeamLayout, BorderBlend | None]:
+    """The seam (luma, chroma) and the border blend of ``maps`` (on the canvas) for an output of ``shape_out``
+    (even H, W) whose pixel (x, y) shows the canvas at (x, y) + ``corner`` (x, y luma px, sub-pixel)."""
     corner = np.asarray(corner, np.float64)
-    origin = np.asarray(offset_tgt, np.float64) - corner  # where target pixel (0, 0) sits on the window
-    half = 0.5 * corner
-    chroma_out = (shape_out[0] // 2, shape_out[1] // 2)
     rows = maps.seam_luma.lines_are_rows
     lines = shape_out[0] if rows else shape_out[1]
     seam = replace(maps.seam_luma, positions=windowed_seam(maps.seam_luma.positions, corner, rows, lines))
@@ -363,14 +355,33 @@ def windowed_plane_maps(maps: PlaneMaps, corner: np.ndarray, shape_out: tuple[in
         border = BorderBlend(tuple(float(line - along) for line in border.lines),
                              at_positions(border.src, spots, axis=1).astype(np.float32),
                              at_positions(border.tgt, spots, axis=1).astype(np.float32))
+    return seam, chroma_seam(seam), border
+
+
+def windowed_plane_maps(maps: PlaneMaps, corner: np.ndarray, shape_out: tuple[int, int],
+                        offset_tgt: np.ndarray) -> PlaneMaps:
+    """``maps`` (on the canvas, at its stitched size: the target map is ``u - offset_tgt``) for an output
+    of ``shape_out`` (even H, W) whose pixel (x, y) shows the canvas at (x, y) + ``corner`` (x, y luma
+    px, sub-pixel; may lie off the canvas, where nothing is sampled): every output pixel samples the
+    inputs once, where the canvas position it shows does (the source maps are smooth: bilinear between
+    canvas pixels; chroma pixels at half the corner; the target's exact, u - offset_tgt + corner: the
+    canvas holds the whole target, or a crop the window never leaves); the seam, the border blend along
+    (:func:`windowed_layouts`). A moving rig's steady canvas (``steady.py``) is composited by the plan of
+    these maps, made without them (``composite.window_plan``); these are what it composites, for a
+    reference. ``overlap_luma`` is left out (None): these maps are composited, the per-frame seam works
+    on the canvas's."""
+    corner = np.asarray(corner, np.float64)
+    origin = np.asarray(offset_tgt, np.float64) - corner  # where target pixel (0, 0) sits on the window
+    half = 0.5 * corner
+    chroma_out = (shape_out[0] // 2, shape_out[1] // 2)
+    seam, seam_chroma, border = windowed_layouts(maps, corner, shape_out)
     return replace(maps, map_src_luma=translated(maps.map_src_luma, corner, shape_out, np.nan),
                    map_tgt_luma=target_map(shape_out, origin),
                    alpha_luma=translated(maps.alpha_luma, corner, shape_out, 0.0),
                    map_src_chroma=translated(maps.map_src_chroma, half, chroma_out, np.nan),
                    map_tgt_chroma=target_map(chroma_out, 0.5 * origin),
                    alpha_chroma=translated(maps.alpha_chroma, half, chroma_out, 0.0),
-                   seam_luma=seam, seam_chroma=chroma_seam(seam),
-                   border_luma=border, overlap_luma=None)
+                   seam_luma=seam, seam_chroma=seam_chroma, border_luma=border, overlap_luma=None)
 
 
 def seam_on_canvas_lines(positions_out: np.ndarray, lines: int, scale: np.ndarray, lines_are_rows: bool) -> np.ndarray:

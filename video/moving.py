@@ -25,7 +25,7 @@ import numpy as np
 
 from ..config import Config
 from .align import Alignment, FrameAlignment, Seam, copies_apart, sample_map
-from .maps import PlaneMaps
+from .maps import PlaneMaps, chroma_lines, overlap_lines
 
 KEY_GRID_PX = 16  # a new key's correction is fitted to the map of the moment on a grid this fine (canvas px)
 POOR_SHARE = 0.5  # the alignment is poor on a frame where fewer of its points than this follow the warp ...
@@ -38,7 +38,8 @@ class CoverFade:
     its fade instead of shown in one frame: pixels the new key covers first (``appear``) are shown from
     the old coverage outwards, those it no longer covers (``vanish``) keep the map of the moment (less
     the key's correction, ``held``) and are let go from the outside in, each by its distance
-    (``appear_px``, ``vanish_px``) to what stays."""
+    (``appear_px``, ``vanish_px``) to what stays. Each set is held as its flat pixel indices in the order
+    of that distance (nearest first), so that a frame's share of it is a slice."""
 
     appear: np.ndarray
     appear_px: np.ndarray
@@ -51,21 +52,83 @@ class CoverFade:
         """For source maps ``now`` and ``key`` (H, W, 2) (NaN: not covered) and the correction (H, W, 2)
         the new key starts with."""
         now_nan, key_nan = np.isnan(now[..., 0]), np.isnan(key[..., 0])
-        appear, vanish = now_nan & ~key_nan, ~now_nan & key_nan
-        appear_px = cv2.distanceTransform(now_nan.astype(np.uint8), cv2.DIST_L2, 3)
-        vanish_px = cv2.distanceTransform(key_nan.astype(np.uint8), cv2.DIST_L2, 3)
-        return CoverFade(appear, appear_px, vanish, vanish_px, (now - correction).astype(np.float32))
+
+        def by_distance(pixels: np.ndarray, outside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            distance = cv2.distanceTransform(outside.astype(np.uint8), cv2.DIST_L2, 3).ravel()
+            index = np.flatnonzero(pixels)
+            order = np.argsort(distance[index], kind="stable")
+            return index[order], distance[index[order]]
+
+        appear, appear_px = by_distance(now_nan & ~key_nan, now_nan)
+        vanish, vanish_px = by_distance(~now_nan & key_nan, key_nan)
+        held = (now - correction).astype(np.float32).reshape(-1, 2)[vanish]
+        return CoverFade(appear, appear_px, vanish, vanish_px, held)
 
     def apply(self, map_src: np.ndarray, weight: float) -> None:
         """``map_src`` (H, W, 2), the key's with ``weight`` (1 at the fade's start, 0 at its end) of the
         remainder, in place: what appears is hidden beyond ``1 - weight`` of its reach, what vanishes is
-        held within ``weight`` of its reach."""
-        if self.appear.any():
-            hidden = self.appear & (self.appear_px > (1.0 - weight) * float(self.appear_px[self.appear].max()))
-            map_src[hidden] = np.nan
-        if self.vanish.any():
-            held = self.vanish & (self.vanish_px <= weight * float(self.vanish_px[self.vanish].max()))
-            map_src[held] = self.held[held]
+        held within ``weight`` of its reach (C-ordered: changed through its flat view)."""
+        if not map_src.flags.c_contiguous:
+            raise ValueError("CoverFade.apply changes a C-ordered map in place")
+        flat = map_src.reshape(-1, 2)
+        if self.appear.size:
+            flat[self.appear[np.searchsorted(self.appear_px, (1.0 - weight) * self.appear_px[-1], "right"):]] = np.nan
+        if self.vanish.size:
+            held = np.searchsorted(self.vanish_px, weight * self.vanish_px[-1], "right")
+            flat[self.vanish[:held]] = self.held[:held]
+
+
+def home_fade(now: PlaneMaps, key: PlaneMaps, frames: int, cfg: Config
+              ) -> tuple[np.ndarray, np.ndarray, int, int] | None:
+    """The seam home's fade from ``now``'s to ``key``'s: (luma, chroma remainders, frames, frames left), over
+    ``frames`` frames at least and slowly enough that the home moves at most ``video_seam_speed_px`` a
+    frame; None where there is nothing to fade."""
+    seam_luma = (now.seam_luma.positions - key.seam_luma.positions).astype(np.float32)
+    seam_chroma = (now.seam_chroma.positions - key.seam_chroma.positions).astype(np.float32)
+    frames = max(frames, int(np.ceil(float(np.abs(np.nan_to_num(seam_luma)).max(initial=0.0)) / cfg.video_seam_speed_px)))
+    return (seam_luma, seam_chroma, frames, frames) if frames > 0 else None
+
+
+def edge_home(overlap: np.ndarray, home: np.ndarray, edge_px: float, most_px: float) -> np.ndarray:
+    """(L,) float32 a seam home ``edge_px`` inside the target's side of the ``overlap`` (L, 2) (first, last
+    position holding both views per line; the target lies above the seam), changing by at most
+    ``most_px`` from one line to the next and nowhere nearer the edge than that (raised where the
+    overlap's edge steps). Lines whose overlap is less than half the median's wide (where a view's slanted
+    top or bottom border cuts it) do not count: there the home runs on from the lines that do (off the
+    overlap the seam picks no view: each pixel shows the view that has it, the target first); ``home``
+    where no line has an overlap."""
+    width = overlap[:, 1] - overlap[:, 0] + 1
+    has = width > 0
+    if not has.any():
+        return np.asarray(home, np.float32)
+    full = width >= 0.5 * np.median(width[has])
+    lines = np.arange(len(overlap))
+    goal = np.interp(lines, lines[full], (overlap[full, 0] + np.minimum(edge_px, width[full] - 1)).astype(np.float64))
+    for k in range(1, len(goal)):  # the lowest home within the bound of its neighbours: raised, never lowered
+        goal[k] = max(goal[k], goal[k - 1] - most_px)
+    for k in range(len(goal) - 2, -1, -1):
+        goal[k] = max(goal[k], goal[k + 1] - most_px)
+    return goal.astype(np.float32)
+
+
+def with_home(key: PlaneMaps, shapes: tuple[tuple[int, int], tuple[int, int]], cfg: Config) -> PlaneMaps:
+    """``key`` with a moving rig's seam home: where its overlap spans ``video_moving_edge_share`` or more of
+    the target across the seam (a stereo rig, whose views differ most where things are near), the home
+    is ``video_seam_edge_px`` inside the overlap's target-side edge (:func:`edge_home`): the output is
+    the target, the source only beyond it, and a near object is not cut between two views whose parallax
+    differs; else the estimate's seam (the paper's)."""
+    overlap = overlap_lines(key, *shapes)
+    has = overlap[:, 1] >= overlap[:, 0]
+    rows = key.seam_luma.lines_are_rows
+    across = shapes[1][1] if rows else shapes[1][0]  # the target's extent across the seam
+    if not has.any() or np.median(overlap[has, 1] - overlap[has, 0] + 1) < cfg.video_moving_edge_share * across:
+        return key
+    home = edge_home(overlap, key.seam_luma.positions, cfg.video_seam_edge_px, cfg.seam_max_step_px)
+    # The plan keeps both views as far from the new home as from the estimate's (a static plan's whole overlap).
+    moved = float(np.nanmax(np.abs(home - key.seam_luma.positions), initial=0.0))
+    return replace(key, seam_luma=replace(key.seam_luma, positions=home, band_px=key.seam_luma.band_px + moved),
+                   seam_chroma=replace(key.seam_chroma, positions=chroma_lines(home),
+                                       band_px=key.seam_chroma.band_px + 0.5 * moved))
 
 
 class MovingRig:
@@ -80,15 +143,18 @@ class MovingRig:
     def __init__(self, key: PlaneMaps, offset_tgt: np.ndarray, shapes: tuple[tuple[int, int], tuple[int, int]],
                  cfg: Config):
         self.cfg = cfg
-        self.key = key
         self.shapes = shapes
+        self.key = with_home(key, shapes, cfg)
         self.aligner = FrameAlignment(key.map_src_luma, offset_tgt, shapes, cfg)
         self.alignment: Alignment | None = None
         self.maps = key
         self._chroma_key = key.map_src_chroma
-        # A new key's fade: (luma, chroma map remainders, luma, chroma seam home remainders, frames, frames left).
-        self._fade: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int] | None = None
-        self._cover: tuple[CoverFade, CoverFade] | None = None  # ... and its coverage's (luma, chroma)
+        # A new key's fade: (luma, chroma map remainders, frames, frames left) ...
+        self._fade: tuple[np.ndarray, np.ndarray, int, int] | None = None
+        self._cover: tuple[CoverFade, CoverFade] | None = None  # ... its coverage's (luma, chroma) ...
+        # ... and its seam home's: (luma, chroma remainders, frames, frames left); the first key's from the seam
+        # of the maps of the moment (the estimate's) to its own home.
+        self._home_fade = home_fade(key, self.key, 0, cfg)
         self._poor_frames = 0
         self.log = {"frames": 0, "keys": 0, "points_mean": 0.0, "followed_share_mean": 0.0, "seeded": 0}
 
@@ -121,17 +187,23 @@ class MovingRig:
         """(luma, chroma) key maps and seam homes of this frame: the key's, plus what is left of a new
         key's remainders."""
         key = self.key
+        home_luma, home_chroma = key.seam_luma.positions, key.seam_chroma.positions
+        if self._home_fade is not None:
+            seam_luma, seam_chroma, frames, left = self._home_fade
+            weight = np.float32(left / (frames + 1))
+            self._home_fade = None if left <= 1 else (*self._home_fade[:3], left - 1)
+            home_luma, home_chroma = home_luma + weight * seam_luma, home_chroma + weight * seam_chroma
         if self._fade is None:
-            return key.map_src_luma, self._chroma_key, key.seam_luma.positions, key.seam_chroma.positions
-        map_luma, map_chroma, seam_luma, seam_chroma, frames, left = self._fade
+            return key.map_src_luma, self._chroma_key, home_luma, home_chroma
+        map_luma, map_chroma, frames, left = self._fade
         weight = np.float32(left / (frames + 1))
-        self._fade = None if left <= 1 else (*self._fade[:5], left - 1)
+        self._fade = None if left <= 1 else (*self._fade[:3], left - 1)
         luma, chroma = cv2.scaleAdd(map_luma, weight, key.map_src_luma), cv2.scaleAdd(map_chroma, weight, self._chroma_key)
         for cover, plane in zip(self._cover, (luma, chroma)):
             cover.apply(plane, float(weight))
         if self._fade is None:
             self._cover = None
-        return luma, chroma, key.seam_luma.positions + weight * seam_luma, key.seam_chroma.positions + weight * seam_chroma
+        return luma, chroma, home_luma, home_chroma
 
     def wants_estimate(self) -> bool:
         """Whether the alignment has been poor for :data:`POOR_FRAMES` frames in a row (too few of its
@@ -142,6 +214,7 @@ class MovingRig:
         """Make ``key`` (a new estimate on the fixed canvas, its target maps the canvas's) the key, from
         the next frame on, without a jump (module docstring)."""
         now = self.maps
+        key = with_home(key, self.shapes, self.cfg)
         height, width = key.shape
         rows, cols = np.mgrid[KEY_GRID_PX // 2:height:KEY_GRID_PX, KEY_GRID_PX // 2:width:KEY_GRID_PX]
         pts = np.stack([cols.ravel(), rows.ravel()], axis=1).astype(np.float64)
@@ -156,11 +229,9 @@ class MovingRig:
         chroma = np.nan_to_num(now.map_src_chroma - key.map_src_chroma - correction_chroma)
         self._cover = (CoverFade.of(now.map_src_luma, key.map_src_luma, correction),
                        CoverFade.of(now.map_src_chroma, key.map_src_chroma, correction_chroma))
-        seam_luma = (now.seam_luma.positions - key.seam_luma.positions).astype(np.float32)
-        seam_chroma = (now.seam_chroma.positions - key.seam_chroma.positions).astype(np.float32)
-        frames = max(self.cfg.video_blend_frames,
-                     int(np.ceil(float(np.abs(seam_luma).max(initial=0.0)) / self.cfg.video_seam_speed_px)))
-        self._fade = (remainder, chroma.astype(np.float32), seam_luma, seam_chroma, frames, frames)
+        self._home_fade = home_fade(now, key, self.cfg.video_blend_frames, self.cfg)
+        frames = self.cfg.video_blend_frames if self._home_fade is None else self._home_fade[2]
+        self._fade = (remainder, chroma.astype(np.float32), frames, frames)
         self.key, self._chroma_key = key, key.map_src_chroma
         self._poor_frames = 0
         self.log["keys"] += 1

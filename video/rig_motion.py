@@ -3,7 +3,8 @@
 A fixed camera's view holds still, but for what moves in front of it (people, a person right at the
 lens) and a slow creep of its mount; a hand-held camera's whole view moves. So each view is judged by
 its stillest part: every :data:`CHECK_S` the corners of a small grey copy of the view
-(:data:`THUMB_WIDTH_PX` wide) are tracked from the last check to this one (pyramidal Lucas-Kanade,
+(:data:`THUMB_WIDTH_PX` wide) are tracked from the last check to this one (every :data:`MOVING_CHECK_S`
+once the rig moves) (pyramidal Lucas-Kanade,
 kept where the backward track returns within :data:`RETURN_PX`), and the view's still-part move is the
 mean move of its :data:`STILL_SHARE` least-moving corners (at least :data:`MIN_STILL` of them). Over the
 last :data:`WINDOW_S` those moves add up to the view's *drift*, as a share of its width per second.
@@ -33,7 +34,9 @@ import numpy as np
 
 from ..config import Config
 
-CHECK_S = 0.2  # views are compared this often (seconds of video)
+CHECK_S = 0.2  # views are compared this often (seconds of video) ...
+MOVING_CHECK_S = 0.4  # ... and this often once the rig moves: what is watched for then (both views still for
+# video_rig_still_s) takes seconds to show, and a check costs as much as a hand-held frame's alignment
 WINDOW_S = 1.0  # drifts add up the checks over this much video
 THUMB_WIDTH_PX = 320  # views are compared at this width at most
 CORNERS = 200  # corners tracked per check ...
@@ -146,7 +149,8 @@ class RigMotion:
     def observe(self, time_s: float, y_left: np.ndarray, y_right: np.ndarray) -> RigDecision | None:
         if self._first_s is None:
             self._first_s = time_s
-        if self._last_check_s is not None and time_s - self._last_check_s < CHECK_S - 1e-6:
+        every_s = MOVING_CHECK_S if self.mode == "moving" else CHECK_S
+        if self._last_check_s is not None and time_s - self._last_check_s < every_s - 1e-6:
             return None
         for view, y in zip(self.views, (y_left, y_right)):
             view.check(time_s, y, self._last_check_s)

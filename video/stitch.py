@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+import cv2
 import numpy as np
 
 from ..composite import (LEVEL, CompositePlan, FrameState, applied_gains, border_offsets, clipped_seam, fixed_point,
@@ -68,7 +69,8 @@ from .writer import even_size
 RIGS = CHOICES["video_rig"]
 STILL_SUFFIXES = (".png", ".jpg", ".jpeg")  # an output of these types is the one stitched frame at the span's start
 JITTER_PERCENTILE = 99.0  # "largest map change" = this percentile of |delta M_s| per frame (robust to edge pixels)
-JITTER_STRIDE = 4  # ... over every this-th canvas row and column (a 1080p frame's full maps took 0.1 s)
+JITTER_STRIDE = 8  # ... over every this-th canvas row and column (a 1080p frame's full maps took 0.1 s; a moving rig's
+# maps change every frame, and at 4 the figure took 0.7-2 ms of its frame)
 FRAME_PATH = ("planes", "band", "seam", "output")  # what a frame itself moves (``kernels/transfer.py``)
 PLANE_CHANNELS = (1, 2)  # the frame kernels' channel counts: the Y pass, and U and V stacked
 
@@ -354,7 +356,7 @@ class SenaFrameCompositor:
     def passes(self) -> tuple[PlanePass, PlanePass]:
         """(luma, chroma): the maps, seam, gains and offsets the last :meth:`composite_yuv` composited with."""
         plan, luma, chroma = self._last
-        maps = plan.maps
+        maps = plan.shown_maps()
         return (PlanePass.of(plan.luma, luma, maps.map_src_luma, maps.map_tgt_luma, self._cfg),
                 PlanePass.of(plan.chroma, chroma, maps.map_src_chroma, maps.map_tgt_chroma, self._cfg))
 
@@ -652,9 +654,12 @@ def _stitch_videos(left, right, output, cfg: Config, options: VideoOptions, refe
         else:  # too large to hold that many pairs for the loop: the estimate decodes its own
             built.append(SenaFrameCompositor.from_videos(left, right, options.offset_s, cfg, reference, observer,
                                                          hook))
+        if cfg.video_opencv_threads > 0:  # from the first estimate on: the frames' OpenCV calls are small
+            cv2.setNumThreads(cfg.video_opencv_threads)
         return built[0]
 
     run = run_still if Path(output).suffix.lower() in STILL_SUFFIXES else run_video
+    opencv_threads = cv2.getNumThreads()  # set back when the run ends: the process's, not the run's
     try:
         report = run(left, right, output, factory, options, plan)
         if debug is not None:
@@ -663,6 +668,7 @@ def _stitch_videos(left, right, output, cfg: Config, options: VideoOptions, refe
     finally:
         for compositor in built:
             compositor.close()
+        cv2.setNumThreads(opencv_threads)
     stitch = built[0].report()
     report["timing_s"] = {"load_kernels": round(load_kernels_s, 4), **report["timing_s"], **stitch.pop("timing_s")}
     return {"run": run_info(cfg), **report, "stitch": stitch}

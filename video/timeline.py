@@ -140,6 +140,9 @@ class Reestimates:
         self._workers = ThreadPoolExecutor(cfg.video_estimate_workers, thread_name_prefix="estimate") \
             if cfg.video_estimate_workers > 0 else None
         self.lookahead_frames = lookahead_frames if self._workers else 0
+        # Beside the frame loop a re-estimate takes one thread (XFeat's, the kernels' bands): the loop has the
+        # others, and more threads on the same cores cost more CPU than they save; its look-ahead waits for it.
+        self._estimate_cfg = cfg.replace(cpu_threads=1) if self._workers else cfg
         self._pending: deque[tuple[float, Future]] = deque()  # started re-estimates (frame time, job), oldest first
         self._last_s: float | None = None  # the time of the frame the last one was made on
         self.seconds = 0.0
@@ -187,7 +190,7 @@ class Reestimates:
         """On a worker thread (its own stream): a re-estimate on the fixed canvas, or why it is rejected.
         Same roles as the first estimate: the target stays the unwarped view on the fixed canvas."""
         t0 = time.perf_counter()
-        canvas, cfg = self._canvas, self._cfg
+        canvas, cfg = self._canvas, self._estimate_cfg
         shape_src, shape_tgt = (f.y.shape for f in canvas.rig.pick(frame_l, frame_r))
         try:
             with own_stream(cfg.device):

@@ -96,12 +96,13 @@ AFFINE_STEP_PX = 8  # the map is sampled every this many canvas px to fit the in
 
 @dataclass(frozen=True)
 class SeamBand:
-    """The canvas cells within ``half`` of the estimate's seam on every line, and where each view samples them.
+    """The canvas cells within ``half`` of the estimate's seam on every line, and where each view samples them:
+    the rectangle of the canvas from ``half`` before the seam's lowest position to ``half`` past its highest.
 
-    Arrays are (L, 2 half + 1): line by cell across the seam (the source at low cells). ``x0`` (L,) int:
-    the first cell's position on its line; ``index``: (rows, cols) canvas indices of the cells
+    Arrays are (L, W): line by cell across the seam (the source at low cells). ``x0`` (L,) int:
+    the first cell's position on its line (the same on every line); ``index``: (rows, cols) canvas indices of the cells
     (clipped); ``valid_src`` / ``valid_tgt``: a view's bilinear footprint is inside its plane (and
-    the cell on the canvas); ``map_src`` / ``map_tgt``: (L, 2 half + 1, 2) float32 input (x, y), -1
+    the cell on the canvas); ``map_src`` / ``map_tgt``: (L, W, 2) float32 input (x, y), -1
     where not valid.
     """
 
@@ -116,8 +117,11 @@ class SeamBand:
     def around(cls, frame: CompositedFrame, half: int) -> "SeamBand":
         map_src, map_tgt = frame.maps.map_src_luma, frame.maps.map_tgt_luma
         height, width = map_src.shape[:2]
-        x0 = np.rint(frame.seam_home).astype(np.int64) - half
-        cells = x0[:, None] + np.arange(2 * half + 1)[None, :]
+        # One rectangle of the canvas, every line's cells at the same positions: a band that followed a
+        # slanted home line by line would be sheared, and the flow along the lines read across them.
+        home = np.rint(frame.seam_home).astype(np.int64)
+        x0 = np.full(len(home), home.min() - half, np.int64)
+        cells = x0[:, None] + np.arange(int(home.max() - home.min()) + 2 * half + 1)[None, :]
         lines = np.broadcast_to(np.arange(len(x0))[:, None], cells.shape)
         rows, cols, extent = (lines, cells, width) if frame.lines_are_rows else (cells, lines, height)
         on_canvas = (cells >= 0) & (cells < extent)
@@ -129,7 +133,7 @@ class SeamBand:
                    np.where(valid_tgt[..., None], sampled_tgt, -1).astype(np.float32))
 
     def views(self, y_src: np.ndarray, y_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Both Y planes sampled on the band (bilinear), float32 (L, 2 half + 1), 0 where not valid."""
+        """Both Y planes sampled on the band (bilinear), float32 (L, W), 0 where not valid."""
         def one(plane: np.ndarray, positions: np.ndarray, valid: np.ndarray) -> np.ndarray:
             sampled = cv2.remap(plane, positions[..., 0], positions[..., 1], cv2.INTER_LINEAR,
                                 borderMode=cv2.BORDER_REPLICATE)
@@ -137,7 +141,7 @@ class SeamBand:
         return one(y_src, self.map_src, self.valid_src), one(y_tgt, self.map_tgt, self.valid_tgt)
 
     def output(self, y_out: np.ndarray) -> np.ndarray:
-        """The output Y on the band, float32 (L, 2 half + 1)."""
+        """The output Y on the band, float32 (L, W)."""
         return y_out[self.index].astype(np.float32)
 
 
