@@ -17,7 +17,7 @@ them, as ``composite.band_difference`` fills them):
 2. *Copies* (:func:`pair_copies`): a source blob and a target blob on the same lines, of a like
    size, within the band of each other are one object's two copies; their displacement along the
    lines is its parallax. A blob without a partner is an object whose other copy is off the band.
-3. *Strips to keep off* (:func:`keep_off_strips`): per object, the lines its copies cover and the
+3. *Strips to keep off* (:func:`keep_off_cells`): per object, the lines its copies cover and the
    cells from the first copy's start to the second's end, widened by the seam's transition; where
    that reaches to within the same margin of the band's end of the overlap, on to the band's end: an
    object cut by a view's border is shown from the other view, where it is whole.
@@ -47,8 +47,7 @@ from ..config import Config
 from ..seam_path import BandPath
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.kernels.frame_objects import (CellGrid, ViewModels, route_cost_kernel, strip_cells_kernel,
-                                             view_background_kernel)
+from sena_warp.kernels.frame_objects import CellGrid, ViewModels, view_background_kernel
 from sena_warp.kernels.frame_seam import DEVICE
 from sena_warp.kernels.transfer import host_array
 
@@ -119,9 +118,9 @@ class ViewBackground:
         if diff.shape != background.shape[1:] or total.shape != background.shape[1:]:
             raise ValueError(f"band of {diff.shape} / {total.shape} cells for models of {background.shape[1:]}")
         both = diff < 0.5 * NOT_BOTH
-        views = np.stack([0.5 * (total + diff), 0.5 * (total - diff)]).astype(np.float32)
         self.frames += 1
         if self.frames == 1:
+            views = np.stack([0.5 * (total + diff), 0.5 * (total - diff)])
             np.copyto(background, np.where(both, views, 0.0))
             np.copyto(last, background)
             spread.fill(float(self.noise / SPREAD_FACTOR))
@@ -131,9 +130,11 @@ class ViewBackground:
         self._models.learn = float(np.float32(max(self._learn, mean)))
         self._models.learn_off = float(np.float32(max(self._learn_off, mean)))
         fit = (slice(None, None, FIT_STRIDE),) * 2
+        diff_fit, total_fit, both_fit = diff[fit], total[fit], both[fit]
         explained = []
         for view in range(2):  # on the cells that were on the background last frame: an object is no exposure step
-            gain, offset = whole_band_fit(background[view][fit], views[view][fit], both[fit] & (off[view][fit] == 0),
+            luma = 0.5 * (total_fit + diff_fit) if view == 0 else 0.5 * (total_fit - diff_fit)
+            gain, offset = whole_band_fit(background[view][fit], luma, both_fit & (off[view][fit] == 0),
                                           float(self.noise))
             explained += [np.float32(gain - 1.0), np.float32(offset)]
         runtime.launch_row_loops(view_background_kernel, diff.shape[0], diff.shape[1], [
@@ -217,26 +218,27 @@ def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float
     return pairs
 
 
-def keep_off_strips(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarray, first_cell: np.ndarray,
-                    margin_cells: int, margin_lines: int, most: int) -> tuple[np.ndarray, np.ndarray]:
-    """(starts, ends) (K, ``most``) int32: per solved line the strips of cells the seam must keep off
-    (``starts[k, m] <= cell < ends[k, m]``; unused ones empty), for the objects ``pairs``
-    (:func:`pair_copies`) on a band whose cells hold both views where ``both`` (K, cells) bool and
-    whose line k begins at the line's cell ``first_cell[k]`` (K,) int (its position / the cell width:
-    the band follows the estimate's seam): on each line, from the first position either copy covers
-    within ``margin_lines`` lines to the last, widened by ``margin_cells``.
+def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarray, first_cell: np.ndarray,
+                   margin_cells: int, margin_lines: int, most: int, out: np.ndarray) -> np.ndarray:
+    """``out`` (K, cells) uint8 filled with 1 on the cells the seam must keep off, 0 elsewhere: per
+    solved line the strips the objects ``pairs`` (:func:`pair_copies`) span, on a band whose cells hold
+    both views where ``both`` (K, cells) bool and whose line k begins at the line's cell
+    ``first_cell[k]`` (K,) int (its position / the cell width: the band follows the estimate's seam):
+    on each line, from the first position either copy covers within ``margin_lines`` lines to the
+    last, widened by ``margin_cells``.
 
     A copy the overlap's border cuts (within ``margin_cells`` of the first cell holding both views,
     where the target begins, or of the last, where the source ends) is not whole in its view: the
     strip goes on to the band's end there, so that the seam passes on the other side and shows the
     object from the other view. A lone copy near either border: its other copy lies beyond it.
-    Overlapping strips merge; a line with more than ``most`` has its narrowest gaps closed."""
+    Overlapping strips merge; a line with more than ``most`` has its narrowest gaps closed
+    (:func:`merge_strips`)."""
     lines, cells = both.shape
     first_cell = np.asarray(first_cell, np.int64)
     has_both = both.any(axis=1)
     first_both = np.where(has_both, np.argmax(both, axis=1), cells) + first_cell
     last_both = np.where(has_both, cells - 1 - np.argmax(both[:, ::-1], axis=1), -1) + first_cell
-    per_line: list[list[tuple[int, int]]] = [[] for _ in range(lines)]
+    edges = np.zeros((lines, cells + 1), np.int32)  # +1 where a strip starts, -1 where it ends
     for src, tgt in pairs:
         copies = [blob for blob in (src, tgt) if blob is not None]
         top = max(min(b.first_line for b in copies) - margin_lines, 0)
@@ -245,44 +247,50 @@ def keep_off_strips(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarr
                    for name, blob in (("src", src), ("tgt", tgt)) if blob is not None}
         start = np.min([e[0] for e in extents.values()], axis=0) - margin_cells
         end = np.max([e[1] for e in extents.values()], axis=0) + margin_cells
-        near_first = {name: e[0] - margin_cells <= first_both[top:bottom + 1] for name, e in extents.items()}
-        near_last = {name: e[1] + margin_cells > last_both[top:bottom + 1] for name, e in extents.items()}
         lone = len(extents) == 1
-        cut_left = near_first["tgt"] if "tgt" in extents and not lone else next(iter(near_first.values()))
-        cut_right = near_last["src"] if "src" in extents and not lone else next(iter(near_last.values()))
-        for i in np.flatnonzero(end > start + 2 * margin_cells):
-            k = top + i
-            lo = 0 if cut_left[i] else int(np.clip(start[i] - first_cell[k], 0, cells))
-            hi = cells if cut_right[i] else int(np.clip(end[i] - first_cell[k], 0, cells))
-            per_line[k].append((lo, hi))
-    starts = np.zeros((lines, most), np.int32)
-    ends = np.zeros((lines, most), np.int32)
-    for k, strips in enumerate(per_line):
-        for m, (lo, hi) in enumerate(merge_strips(strips, most)):
-            starts[k, m], ends[k, m] = lo, hi
-    return starts, ends
+        # The target's copy decides the left end, the source's the right one (a lone copy: both).
+        left = extents["tgt"] if "tgt" in extents and not lone else next(iter(extents.values()))
+        right = extents["src"] if "src" in extents and not lone else next(iter(extents.values()))
+        on = np.flatnonzero(end > start + 2 * margin_cells)
+        k = top + on
+        cut_left = left[0][on] - margin_cells <= first_both[k]
+        cut_right = right[1][on] + margin_cells > last_both[k]
+        lo = np.where(cut_left, 0, np.minimum(np.maximum(start[on] - first_cell[k], 0), cells))
+        hi = np.where(cut_right, cells, np.minimum(np.maximum(end[on] - first_cell[k], 0), cells))
+        np.add.at(edges, (k, lo), 1)
+        np.add.at(edges, (k, hi), -1)
+    inside = np.cumsum(edges[:, :cells], axis=1) > 0
+    np.copyto(out, inside, casting="unsafe")
+    opens = inside.copy()
+    opens[:, 1:] &= ~inside[:, :-1]
+    for k in np.flatnonzero(opens.sum(axis=1) > most):  # rare: a crowd on one line
+        runs = np.flatnonzero(np.diff(np.concatenate([[0], out[k], [0]]).astype(np.int8)))
+        out[k] = 0
+        for lo, hi in merge_strips(list(zip(runs[::2], runs[1::2])), most):
+            out[k, lo:hi] = 1
+    return out
 
 
 def line_extents(blob: Blob, first_cell: np.ndarray, top: int, bottom: int, reach: int
                  ) -> tuple[np.ndarray, np.ndarray]:
     """(first position, one past the last) (bottom - top + 1,) int64, in cells along the line from
     the line's own origin (band line k begins at ``first_cell[k]``), of ``blob`` on each line from
-    ``top`` to ``bottom``, each line taking its neighbours' within ``reach`` lines too; an empty
-    extent (start > end) where none."""
+    ``top`` to ``bottom`` (``top`` at most its first line), each line taking its neighbours' within
+    ``reach`` lines too; an empty extent (start > end) where none."""
     big = np.iinfo(np.int64).max // 4
-    start = np.full(bottom - top + 1, big, np.int64)
-    end = np.full(bottom - top + 1, -big, np.int64)
+    count = bottom - top + 1
+    start = np.full(count + 2 * reach, big, np.int64)  # ``reach`` lines of padding each side
+    end = np.full(count + 2 * reach, -big, np.int64)
     lines = np.arange(blob.first_line, blob.last_line + 1)
-    on = blob.ends > blob.starts
-    at = lines[on] - top
-    starts = blob.starts[on] + first_cell[lines[on]]
-    ends = blob.ends[on] + first_cell[lines[on]]
-    for shift in range(-reach, reach + 1):
-        near = at + shift
-        keep = (near >= 0) & (near < len(start))
-        np.minimum.at(start, near[keep], starts[keep])
-        np.maximum.at(end, near[keep], ends[keep])
-    return start, end
+    on = (blob.ends > blob.starts) & (lines <= bottom + reach)
+    at = lines[on] - top + reach
+    start[at] = blob.starts[on] + first_cell[lines[on]]
+    end[at] = blob.ends[on] + first_cell[lines[on]]
+    first, last = start[:count].copy(), end[:count].copy()
+    for shift in range(1, 2 * reach + 1):  # the lines within reach: a few shifts of the padded extents
+        np.minimum(first, start[shift:shift + count], out=first)
+        np.maximum(last, end[shift:shift + count], out=last)
+    return first, last
 
 
 def merge_strips(strips: list[tuple[int, int]], most: int) -> list[tuple[int, int]]:
@@ -300,10 +308,15 @@ def merge_strips(strips: list[tuple[int, int]], most: int) -> list[tuple[int, in
     return [(lo, hi) for lo, hi in merged]
 
 
-def strip_cells(starts: np.ndarray, ends: np.ndarray, cells: int, out: np.ndarray) -> np.ndarray:
-    """``out`` (K, cells) uint8 filled with 1 inside the strips ``starts`` / ``ends`` (K, M), 0 elsewhere."""
-    runtime.launch_row_loops(strip_cells_kernel, starts.shape[0], cells, [
-        host_array(starts, int), host_array(ends, int), host_array(out, wp.uint8)], DEVICE, runtime.BAND_THREADS)
+def route_cost(kept_off: np.ndarray, both: np.ndarray, home_term: np.ndarray, cfg: Config, out: np.ndarray
+               ) -> np.ndarray:
+    """``out`` (K, cells) float32: what each cell of the object band costs the seam's route: its cost of
+    leaving the estimate's seam ``home_term`` (K, cells) float32 (``video_seam_home_cost`` per px), plus
+    ``video_seam_object_cost`` on the strips kept off (``kept_off`` (K, cells) uint8) and
+    ``video_seam_blocked_cost`` where the cell lacks a view (not ``both``)."""
+    np.multiply(kept_off, np.float32(cfg.video_seam_object_cost), out=out)
+    np.add(home_term, out, out=out)
+    np.add(out, np.float32(cfg.video_seam_blocked_cost), out=out, where=~both)
     return out
 
 
@@ -366,7 +379,9 @@ class ObjectBand:
                                 cfg.cpu_threads)
         self._views = ViewBackground(grid.shape, fps, cfg)
         self.host = {"moving": np.zeros(grid.shape, np.uint8), "kept_off": np.zeros(grid.shape, np.uint8),
-                     "cost": np.zeros(grid.shape, np.float32), "home": grid.home.astype(np.float32)}
+                     "cost": np.zeros(grid.shape, np.float32)}
+        positions = (grid.x0[:, None] + grid.cell * np.arange(grid.width)[None, :]).astype(np.float32)
+        self._home_term = np.float32(cfg.video_seam_home_cost) * np.abs(positions - grid.home.astype(np.float32)[:, None])
         self.views = {name: host_array(a, wp.uint8 if a.dtype == np.uint8 else float) for name, a in self.host.items()}
         self.pairs: list[tuple[Blob | None, Blob | None]] = []
         self.route = grid.home.copy()  # (Kc,) px: where the seam's band is centred, per object-band line
@@ -384,14 +399,9 @@ class ObjectBand:
         # Most of a view off its background: the camera or the light changed, not an object in front.
         least = (OBJECT_BOXES * box) ** 2  # a person's size, not a head turning or a screen's flicker
         self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), grid.width)
-        starts, ends = keep_off_strips(self.pairs, both, grid.x0 // grid.cell, self._margin_cells,
-                                       self._margin_cells, MOST_STRIPS)
-        strip_cells(starts, ends, grid.width, host["kept_off"])
-        runtime.launch_row_loops(route_cost_kernel, len(grid.lines), grid.width, [
-            band.diff_wp, self.views["kept_off"], grid.kernel, self.views["home"], float(cfg.video_seam_object_cost),
-            float(cfg.video_seam_home_cost), float(cfg.video_seam_blocked_cost), self.views["cost"]], DEVICE,
-            runtime.BAND_THREADS)
-        cost = host["cost"]
+        keep_off_cells(self.pairs, both, grid.x0 // grid.cell, self._margin_cells, self._margin_cells, MOST_STRIPS,
+                       host["kept_off"])
+        cost = route_cost(host["kept_off"], both, self._home_term, cfg, host["cost"])
         route = (self._solver.solve(self.views["cost"], grid.x0 // grid.cell, max(1, int(cfg.seam_max_step_px)), 0.0)
                  * grid.cell).astype(np.int64)  # no steeper than the seam between its lines
         lines = np.arange(len(grid.lines))
