@@ -15,8 +15,9 @@ them, as ``composite.band_difference`` fills them):
    the view's blobs (:func:`blobs`). Where most of a view is off, the camera or the light changed: no
    objects then.
 2. *Copies* (:func:`pair_copies`): a source blob and a target blob on the same lines, of a like
-   size, within the band of each other are one object's two copies; their displacement along the
-   lines is its parallax. A blob without a partner is an object whose other copy is off the band.
+   size, within the band of each other, the source's to the right (nearer than the background) are
+   one object's two copies; their displacement along the lines is its parallax. A blob without a
+   partner is an object whose other copy is off the band.
 3. *Strips to keep off* (:func:`keep_off_cells`): per object, the lines its copies cover and the
    cells from the first copy's start to the second's end, widened by the seam's transition; where
    that reaches to within the same margin of the band's end of the overlap, on to the band's end: an
@@ -56,6 +57,7 @@ SPREAD_FACTOR = 3.0  # a cell is off its background beyond this x its mean absol
 
 PAIR_OVERLAP = 0.5  # two blobs are copies when they share this much of the shorter one's lines
 PAIR_AREA = 0.3  # ... and the smaller has this share of the larger's area at least (a copy cut by a border)
+PAIR_BEHIND = 2  # ... and the source's copy lies at most this many cells left of the target's (noise)
 COARSE_CELLS = 4  # the object band's cells are this many of the per-frame seam's cells wide
 FOREGROUND_MOST = 0.5  # a view off its background on more of the band: the camera or the light changed
 MOST_STRIPS = 8  # strips kept off per line at most
@@ -78,6 +80,13 @@ class Blob:
     @property
     def last_line(self) -> int:
         return self.first_line + len(self.starts) - 1
+
+    def span(self, first_cell: np.ndarray) -> tuple[int, int]:
+        """(first cell, one past the last) it covers on any line, counted from the band's origin (band
+        line k begins at cell ``first_cell[k]``)."""
+        on = self.ends > self.starts
+        lines = np.arange(self.first_line, self.last_line + 1)[on]
+        return int((self.starts[on] + first_cell[lines]).min()), int((self.ends[on] + first_cell[lines]).max())
 
     def shared_lines(self, other: "Blob") -> float:
         """The share of the shorter blob's lines that both cover."""
@@ -103,7 +112,7 @@ class ViewBackground:
         models.off = host_array(self._arrays[3], wp.uint8)
         models.noise, models.spread_factor = float(self.noise), SPREAD_FACTOR
         self._models = models
-        self._learn_off = self._learn * cfg.video_seam_foreground_learn
+        self._crowded = False  # whether most of a view was off its model in the last frame
         self.frames = 0  # frames the models have learnt from
 
     def update(self, diff: np.ndarray, total: np.ndarray) -> np.ndarray:
@@ -112,7 +121,8 @@ class ViewBackground:
         ``band_difference`` fills them); none on the first frame (the models start from it). Learns: over
         the first frames at least as fast as their running mean (a webcam's exposure settles over its
         first frames; a model that kept the first frame saw the whole scene in front for seconds), then
-        at the model's rate. Nothing is off them over the first :data:`SETTLE_S` of video (a camera
+        at the model's rate; ``video_seam_foreground_learn`` x as fast where the view is off, but where
+        most of a view was off in the last frame (``FOREGROUND_MOST``). Nothing is off them over the first :data:`SETTLE_S` of video (a camera
         settling)."""
         background, spread, last, off = self._arrays
         if diff.shape != background.shape[1:] or total.shape != background.shape[1:]:
@@ -126,9 +136,12 @@ class ViewBackground:
             spread.fill(float(self.noise / SPREAD_FACTOR))
             off.fill(0)
             return off
-        mean = 1.0 / self.frames  # the running mean's rate
-        self._models.learn = float(np.float32(max(self._learn, mean)))
-        self._models.learn_off = float(np.float32(max(self._learn_off, mean)))
+        learn = max(self._learn, 1.0 / self.frames)  # at least the running mean's rate
+        self._models.learn = float(np.float32(learn))
+        # Where a view is off, slower in proportion, from the first frames on (a slow walker's cells are
+        # off for seconds while the running mean's rate is high: learnt at it, they would leave a ghost of
+        # him behind); as fast where most of a view was off (the camera or the light changed).
+        self._models.learn_off = float(np.float32(learn if self._crowded else learn * self.cfg.video_seam_foreground_learn))
         fit = (slice(None, None, FIT_STRIDE),) * 2
         diff_fit, total_fit, both_fit = diff[fit], total[fit], both[fit]
         explained = []
@@ -140,6 +153,7 @@ class ViewBackground:
         runtime.launch_row_loops(view_background_kernel, diff.shape[0], diff.shape[1], [
             host_array(diff, float), host_array(total, float), wp.vec4(*explained), self._models], DEVICE,
             runtime.BAND_THREADS)
+        self._crowded = bool(both.any()) and max(float(view[both].mean()) for view in off) > FOREGROUND_MOST
         if self.frames < self._settle:
             off.fill(0)
         return off
@@ -182,10 +196,10 @@ def blobs(foreground: np.ndarray, least: int) -> list[Blob]:
     """The connected parts (8-neighbours) of ``foreground`` (K, cells) uint8 of at least ``least`` cells."""
     count, labels, stats, centroids = cv2.connectedComponentsWithStats(foreground, connectivity=8)
     found = []
-    for label in range(1, count):
-        x, y, w, h, area = (int(v) for v in stats[label])
-        if area < least:
+    for label in np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= least):
+        if label == 0:  # the background
             continue
+        x, y, w, h, area = stats[label].tolist()
         part = labels[y:y + h, x:x + w] == label
         on = part.any(axis=1)
         starts = np.where(on, x + np.argmax(part, axis=1), 0).astype(np.int32)
@@ -194,18 +208,28 @@ def blobs(foreground: np.ndarray, least: int) -> list[Blob]:
     return found
 
 
-def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float
+def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float, first_cell: np.ndarray
                 ) -> list[tuple[Blob | None, Blob | None]]:
     """Each object's (source copy, target copy), one of them None where its other copy was not found:
     source and target blobs sharing :data:`PAIR_OVERLAP` of the shorter one's lines, the smaller
-    :data:`PAIR_AREA` of the larger's area, their centres at most ``reach`` cells apart, paired best
-    first (the most lines shared, the likest size)."""
+    :data:`PAIR_AREA` of the larger's area, their centres at most ``reach`` cells apart, the source's
+    copy not left of the target's (:data:`PAIR_BEHIND` cells at most; on a band whose line k begins at
+    cell ``first_cell[k]``), paired best first (the most lines shared, the likest size).
+
+    An object nearer than the background lies further right in the source (the left view) than in
+    the target once the background is aligned: the source's copy starts and ends right of the
+    target's, where neither is cut by its view's border (a cut end lies at the overlap's border, which
+    keeps the order: the target's at its left end, the source's at its right end). A source blob left
+    of a target blob is another thing (what a model learnt while someone stood there, a second person)."""
     candidates = []
     for i, src in enumerate(blobs_src):
         for j, tgt in enumerate(blobs_tgt):
             shared = src.shared_lines(tgt)
             likeness = min(src.area, tgt.area) / max(src.area, tgt.area)
-            if shared >= PAIR_OVERLAP and likeness >= PAIR_AREA and abs(src.centre - tgt.centre) <= reach:
+            (src_lo, src_hi), (tgt_lo, tgt_hi) = src.span(first_cell), tgt.span(first_cell)
+            behind = min(src_lo - tgt_lo, src_hi - tgt_hi) < -PAIR_BEHIND
+            if shared >= PAIR_OVERLAP and likeness >= PAIR_AREA and abs(src.centre - tgt.centre) <= reach \
+                    and not behind:
                 candidates.append((shared * likeness, i, j))
     pairs, used_src, used_tgt = [], set(), set()
     for _, i, j in sorted(candidates, reverse=True):
@@ -382,6 +406,7 @@ class ObjectBand:
                      "cost": np.zeros(grid.shape, np.float32)}
         positions = (grid.x0[:, None] + grid.cell * np.arange(grid.width)[None, :]).astype(np.float32)
         self._home_term = np.float32(cfg.video_seam_home_cost) * np.abs(positions - grid.home.astype(np.float32)[:, None])
+        self._last_cost = np.full(grid.shape, np.nan, np.float32)  # the route's costs in the last frame
         self.views = {name: host_array(a, wp.uint8 if a.dtype == np.uint8 else float) for name, a in self.host.items()}
         self.pairs: list[tuple[Blob | None, Blob | None]] = []
         self.route = grid.home.copy()  # (Kc,) px: where the seam's band is centred, per object-band line
@@ -398,10 +423,15 @@ class ObjectBand:
         crowded = max(float(s[both].mean()) if both.any() else 0.0 for s in solids) > FOREGROUND_MOST
         # Most of a view off its background: the camera or the light changed, not an object in front.
         least = (OBJECT_BOXES * box) ** 2  # a person's size, not a head turning or a screen's flicker
-        self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), grid.width)
-        keep_off_cells(self.pairs, both, grid.x0 // grid.cell, self._margin_cells, self._margin_cells, MOST_STRIPS,
+        first_cell = grid.x0 // grid.cell
+        self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), grid.width,
+                                                    first_cell)
+        keep_off_cells(self.pairs, both, first_cell, self._margin_cells, self._margin_cells, MOST_STRIPS,
                        host["kept_off"])
         cost = route_cost(host["kept_off"], both, self._home_term, cfg, host["cost"])
+        if np.array_equal(cost, self._last_cost):  # the last frame's costs: its route, which it kept or took
+            return False
+        np.copyto(self._last_cost, cost)
         route = (self._solver.solve(self.views["cost"], grid.x0 // grid.cell, max(1, int(cfg.seam_max_step_px)), 0.0)
                  * grid.cell).astype(np.int64)  # no steeper than the seam between its lines
         lines = np.arange(len(grid.lines))
