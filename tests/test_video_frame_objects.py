@@ -120,23 +120,27 @@ def test_blobs_are_the_connected_parts_with_their_extent_on_each_line():
 
 def test_copies_on_the_same_lines_pair_and_the_rest_stay_alone():
     shape = (LINES, CELLS)
-    origin = np.zeros(LINES, np.int64)
     near = blobs(rectangle(shape, slice(20, 80), slice(40, 52)), 1)[0]  # the source's copy
     far = blobs(rectangle(shape, slice(22, 82), slice(10, 22)), 1)[0]  # the target's, 30 cells left
     other = blobs(rectangle(shape, slice(90, 110), slice(10, 40)), 1)[0]  # someone else, on other lines
-    pairs = pair_copies([near], [far, other], CELLS, origin)
+    pairs = pair_copies([near], [far, other], CELLS)
     assert (near, far) in pairs and (None, other) in pairs and len(pairs) == 2
-    assert pair_copies([near], [far], 20, origin) == [(near, None), (None, far)]  # further apart than reach
+    assert pair_copies([near], [far], 20) == [(near, None), (None, far)]  # further apart than reach
     # A source blob left of the target's is no copy of it (a nearer object's source copy lies right):
     # what the source's model learnt where someone stood, a second person.
-    assert pair_copies([far], [near], CELLS, origin) == [(far, None), (None, near)]
+    assert pair_copies([far], [near], CELLS) == [(far, None), (None, near)]
     # Walking in at the target's border (the band's first cell): its cut copy ends left of the
     # source's, which is whole, and begins where the overlap does.
     entering_tgt = blobs(rectangle(shape, slice(20, 80), slice(0, 10)), 1)[0]
     entering_src = blobs(rectangle(shape, slice(20, 80), slice(0, 14)), 1)[0]
-    assert pair_copies([entering_src], [entering_tgt], CELLS, origin) == [(entering_src, entering_tgt)]
+    assert pair_copies([entering_src], [entering_tgt], CELLS) == [(entering_src, entering_tgt)]
     level = blobs(rectangle(shape, slice(22, 82), slice(41, 53)), 1)[0]  # at the background's depth, a cell off
-    assert pair_copies([level], [near], CELLS, origin) == [(level, near)]
+    assert pair_copies([level], [near], CELLS) == [(level, near)]
+    # A person close to both cameras, wider than the overlap: the source's copy cut by the band's right
+    # end, the target's by its left end, on most of the same lines.
+    wide_src = blobs(rectangle(shape, slice(10, 110), slice(6, CELLS)), 1)[0]
+    wide_tgt = blobs(rectangle(shape, slice(14, 100), slice(0, CELLS - 6)), 1)[0]
+    assert pair_copies([wide_src], [wide_tgt], CELLS) == [(wide_src, wide_tgt)]
 
 
 def kept_off(pairs, both, first, margin_cells=2, margin_lines=3, most=4) -> np.ndarray:

@@ -59,7 +59,8 @@ PAIR_OVERLAP = 0.5  # two blobs are copies when they share this much of the shor
 PAIR_AREA = 0.3  # ... and the smaller has this share of the larger's area at least (a copy cut by a border)
 PAIR_BEHIND = 2  # ... and the source's copy lies at most this many cells left of the target's (noise)
 COARSE_CELLS = 4  # the object band's cells are this many of the per-frame seam's cells wide
-FOREGROUND_MOST = 0.5  # a view off its background on more of the band: the camera or the light changed
+FOREGROUND_MOST = 0.8  # a view off its background on more of the band: the camera or the light changed (a person
+# close to both cameras covers two thirds of it)
 MOST_STRIPS = 8  # strips kept off per line at most
 SETTLE_S = 0.25  # nothing is in front while the models have learnt from less than this much video
 OBJECT_BOXES = 2  # an object covers this x this of an object's boxes at least (smaller things only cost motion)
@@ -81,12 +82,19 @@ class Blob:
     def last_line(self) -> int:
         return self.first_line + len(self.starts) - 1
 
-    def span(self, first_cell: np.ndarray) -> tuple[int, int]:
-        """(first cell, one past the last) it covers on any line, counted from the band's origin (band
-        line k begins at cell ``first_cell[k]``)."""
-        on = self.ends > self.starts
-        lines = np.arange(self.first_line, self.last_line + 1)[on]
-        return int((self.starts[on] + first_cell[lines]).min()), int((self.ends[on] + first_cell[lines]).max())
+    def behind(self, other: "Blob") -> float:
+        """How far (cells) this blob lies right of ``other`` on the lines both cover: the smaller of the
+        medians of their starts' and their ends' differences (negative: left of it; 0 without a line)."""
+        first, last = max(self.first_line, other.first_line), min(self.last_line, other.last_line)
+        if last < first:
+            return 0.0
+        mine = slice(first - self.first_line, last - self.first_line + 1)
+        theirs = slice(first - other.first_line, last - other.first_line + 1)
+        on = (self.ends[mine] > self.starts[mine]) & (other.ends[theirs] > other.starts[theirs])
+        if not on.any():
+            return 0.0
+        return float(min(np.median(self.starts[mine][on] - other.starts[theirs][on]),
+                         np.median(self.ends[mine][on] - other.ends[theirs][on])))
 
     def shared_lines(self, other: "Blob") -> float:
         """The share of the shorter blob's lines that both cover."""
@@ -122,7 +130,7 @@ class ViewBackground:
         the first frames at least as fast as their running mean (a webcam's exposure settles over its
         first frames; a model that kept the first frame saw the whole scene in front for seconds), then
         at the model's rate; ``video_seam_foreground_learn`` x as fast where the view is off, but where
-        most of a view was off in the last frame (``FOREGROUND_MOST``). Nothing is off them over the first :data:`SETTLE_S` of video (a camera
+        most of a view was off in the last frame (:data:`FOREGROUND_MOST`). Nothing is off them over the first :data:`SETTLE_S` of video (a camera
         settling)."""
         background, spread, last, off = self._arrays
         if diff.shape != background.shape[1:] or total.shape != background.shape[1:]:
@@ -208,13 +216,12 @@ def blobs(foreground: np.ndarray, least: int) -> list[Blob]:
     return found
 
 
-def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float, first_cell: np.ndarray
-                ) -> list[tuple[Blob | None, Blob | None]]:
+def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float) -> list[tuple[Blob | None, Blob | None]]:
     """Each object's (source copy, target copy), one of them None where its other copy was not found:
     source and target blobs sharing :data:`PAIR_OVERLAP` of the shorter one's lines, the smaller
     :data:`PAIR_AREA` of the larger's area, their centres at most ``reach`` cells apart, the source's
-    copy not left of the target's (:data:`PAIR_BEHIND` cells at most; on a band whose line k begins at
-    cell ``first_cell[k]``), paired best first (the most lines shared, the likest size).
+    copy not left of the target's on the lines they share (:data:`PAIR_BEHIND` cells at most, in the
+    median: :meth:`Blob.behind`), paired best first (the most lines shared, the likest size).
 
     An object nearer than the background lies further right in the source (the left view) than in
     the target once the background is aligned: the source's copy starts and ends right of the
@@ -226,8 +233,7 @@ def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float, firs
         for j, tgt in enumerate(blobs_tgt):
             shared = src.shared_lines(tgt)
             likeness = min(src.area, tgt.area) / max(src.area, tgt.area)
-            (src_lo, src_hi), (tgt_lo, tgt_hi) = src.span(first_cell), tgt.span(first_cell)
-            behind = min(src_lo - tgt_lo, src_hi - tgt_hi) < -PAIR_BEHIND
+            behind = src.behind(tgt) < -PAIR_BEHIND
             if shared >= PAIR_OVERLAP and likeness >= PAIR_AREA and abs(src.centre - tgt.centre) <= reach \
                     and not behind:
                 candidates.append((shared * likeness, i, j))
@@ -423,10 +429,8 @@ class ObjectBand:
         crowded = max(float(s[both].mean()) if both.any() else 0.0 for s in solids) > FOREGROUND_MOST
         # Most of a view off its background: the camera or the light changed, not an object in front.
         least = (OBJECT_BOXES * box) ** 2  # a person's size, not a head turning or a screen's flicker
-        first_cell = grid.x0 // grid.cell
-        self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), grid.width,
-                                                    first_cell)
-        keep_off_cells(self.pairs, both, first_cell, self._margin_cells, self._margin_cells, MOST_STRIPS,
+        self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), grid.width)
+        keep_off_cells(self.pairs, both, grid.x0 // grid.cell, self._margin_cells, self._margin_cells, MOST_STRIPS,
                        host["kept_off"])
         cost = route_cost(host["kept_off"], both, self._home_term, cfg, host["cost"])
         if np.array_equal(cost, self._last_cost):  # the last frame's costs: its route, which it kept or took
