@@ -4,8 +4,8 @@ The band's cells hold, per solved seam line and cell, the source minus the targe
 ``NOT_BOTH`` where a cell lacks a view) and their sum (``total``), as
 ``composite.band_difference_kernel`` gives them; each view's own luma there is half their sum and
 half their difference. Two kernels: each view's background model (a running mean and mean absolute
-deviation per cell, which flags the cells where that view is off it), and the cells inside the
-strips the seam must keep off (one or a few intervals per line). Both run over
+deviation per cell, which flags the cells where that view is off it), and the object band's masks on
+the seam's finer band. Both run over
 ``runtime.launch_row_loops`` (thread i does line ``row0 + i``, cells j, j + col_step, ... < width).
 """
 
@@ -85,27 +85,6 @@ def view_background_kernel(
                 models.last[view, k, j] = luma
 
 
-@wp.kernel
-def strip_cells_kernel(
-    row0: int,
-    col_step: int,
-    width: int,
-    starts: wp.array2d(dtype=int),
-    ends: wp.array2d(dtype=int),
-    inside: wp.array2d(dtype=wp.uint8),
-):
-    """``inside`` 1 on the cells of line k = row0 + i that lie in one of its strips, cells
-    ``starts[k, m] <= j < ends[k, m]`` (an empty strip has start >= end)."""
-    i, j0 = wp.tid()
-    k = row0 + i
-    for j in range(j0, width, col_step):
-        found = wp.uint8(0)
-        for m in range(starts.shape[1]):
-            if j >= starts[k, m] and j < ends[k, m]:
-                found = wp.uint8(1)
-        inside[k, j] = found
-
-
 @wp.struct
 class CellGrid:
     """A band's cells: solved line k's first cell at position ``x0[k]``, cells ``cell`` px wide; its
@@ -114,33 +93,6 @@ class CellGrid:
     x0: wp.array(dtype=int)
     cell: int
     step: int
-
-
-@wp.kernel
-def route_cost_kernel(
-    row0: int,
-    col_step: int,
-    width: int,
-    diff: wp.array2d(dtype=float),
-    kept_off: wp.array2d(dtype=wp.uint8),
-    grid: CellGrid,
-    home: wp.array(dtype=float),
-    object_cost: float,
-    home_cost: float,
-    blocked_cost: float,
-    cost: wp.array2d(dtype=float),
-):
-    """What each cell of the object band costs the seam's route: ``object_cost`` on the strips it
-    keeps off (``kept_off``), ``blocked_cost`` without both views, and ``home_cost`` per px from the
-    estimate's seam ``home`` (per solved line)."""
-    i, j0 = wp.tid()
-    k = row0 + i
-    for j in range(j0, width, col_step):
-        pos = float(grid.x0[k] + j * grid.cell)
-        c = home_cost * wp.abs(pos - home[k]) + object_cost * float(kept_off[k, j])
-        if not holds_both(diff[k, j]):
-            c = c + blocked_cost
-        cost[k, j] = c
 
 
 @wp.kernel

@@ -9,8 +9,7 @@ import warp as wp
 
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.kernels.frame_objects import (CellGrid, ViewModels, coarse_masks_kernel, route_cost_kernel,
-                                             strip_cells_kernel, view_background_kernel)
+from sena_warp.kernels.frame_objects import CellGrid, ViewModels, coarse_masks_kernel, view_background_kernel
 from test_kernels_frame_seam import LINES, WIDTH, band, on  # noqa: F401 (band: the fixture)
 from test_kernels_maps import DEVICES
 
@@ -51,33 +50,6 @@ def test_each_view_s_model_flags_what_its_spread_and_its_gain_do_not_explain(ban
                                np.where(both, spread + learn * (np.abs(luma - last) - spread), spread), rtol=0, atol=1e-3)
     np.testing.assert_allclose(models.last.numpy(), np.where(both, luma, last), rtol=0, atol=1e-3)
     assert off[0, 30:40, 12:20].all() and not off[1, 30:40, 12:20].any()  # the source's object only
-
-
-@pytest.mark.parametrize("device", DEVICES)
-def test_strip_cells_and_route_costs(band, device, warp_device):  # noqa: F811
-    diff, _ = band
-    both = diff < 0.5 * NOT_BOTH
-    starts = np.zeros((LINES, 3), np.int32)
-    ends = np.zeros((LINES, 3), np.int32)
-    starts[10:30, 0], ends[10:30, 0] = 5, 15
-    starts[20:25, 1], ends[20:25, 1] = 30, WIDTH
-    kept = wp.zeros((LINES, WIDTH), dtype=wp.uint8, device=device)
-    runtime.launch_row_loops(strip_cells_kernel, LINES, WIDTH, [on(device, starts, int), on(device, ends, int), kept],
-                             device, runtime.BAND_THREADS)
-    cells = np.arange(WIDTH)[None, None, :]
-    expected = ((cells >= starts[:, :, None]) & (cells < ends[:, :, None])).any(axis=1)
-    np.testing.assert_array_equal(kept.numpy(), expected)
-
-    grid = CellGrid()
-    x0 = (8 * (40 + np.arange(LINES) // 7)).astype(np.int32)
-    grid.x0, grid.cell, grid.step = on(device, x0, int), 8, 8
-    home = (x0 + 8 * 20 + 3).astype(np.float32)
-    cost = wp.zeros((LINES, WIDTH), dtype=float, device=device)
-    runtime.launch_row_loops(route_cost_kernel, LINES, WIDTH, [
-        on(device, diff), kept, grid, on(device, home), 1000.0, 0.5, 100.0, cost], device, runtime.BAND_THREADS)
-    positions = x0[:, None] + 8 * np.arange(WIDTH)[None, :]
-    reference = 0.5 * np.abs(positions - home[:, None]) + 1000.0 * expected + 100.0 * ~both
-    np.testing.assert_allclose(cost.numpy(), reference, rtol=1e-6)
 
 
 @pytest.mark.parametrize("device", DEVICES)

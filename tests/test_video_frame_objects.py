@@ -9,8 +9,8 @@ import numpy as np
 
 from sena_warp.config import Config
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.video.frame_objects import (ObjectBand, ObjectGrid, ViewBackground, blobs, keep_off_strips, merge_strips,
-                                           pair_copies, solid, strip_cells, whole_band_fit)
+from sena_warp.video.frame_objects import (ObjectBand, ObjectGrid, ViewBackground, blobs, keep_off_cells, merge_strips,
+                                           pair_copies, route_cost, solid, whole_band_fit)
 from sena_warp.video.frame_seam import BandFrame
 
 CFG = Config(device="cpu")
@@ -123,9 +123,35 @@ def test_copies_on_the_same_lines_pair_and_the_rest_stay_alone():
     near = blobs(rectangle(shape, slice(20, 80), slice(40, 52)), 1)[0]  # the source's copy
     far = blobs(rectangle(shape, slice(22, 82), slice(10, 22)), 1)[0]  # the target's, 30 cells left
     other = blobs(rectangle(shape, slice(90, 110), slice(10, 40)), 1)[0]  # someone else, on other lines
-    pairs = pair_copies([near], [far, other], reach=CELLS)
+    pairs = pair_copies([near], [far, other], CELLS)
     assert (near, far) in pairs and (None, other) in pairs and len(pairs) == 2
-    assert pair_copies([near], [far], reach=20) == [(near, None), (None, far)]  # further apart than reach
+    assert pair_copies([near], [far], 20) == [(near, None), (None, far)]  # further apart than reach
+    # A source blob left of the target's is no copy of it (a nearer object's source copy lies right):
+    # what the source's model learnt where someone stood, a second person.
+    assert pair_copies([far], [near], CELLS) == [(far, None), (None, near)]
+    # Walking in at the target's border (the band's first cell): its cut copy ends left of the
+    # source's, which is whole, and begins where the overlap does.
+    entering_tgt = blobs(rectangle(shape, slice(20, 80), slice(0, 10)), 1)[0]
+    entering_src = blobs(rectangle(shape, slice(20, 80), slice(0, 14)), 1)[0]
+    assert pair_copies([entering_src], [entering_tgt], CELLS) == [(entering_src, entering_tgt)]
+    level = blobs(rectangle(shape, slice(22, 82), slice(41, 53)), 1)[0]  # at the background's depth, a cell off
+    assert pair_copies([level], [near], CELLS) == [(level, near)]
+    # A person close to both cameras, wider than the overlap: the source's copy cut by the band's right
+    # end, the target's by its left end, on most of the same lines.
+    wide_src = blobs(rectangle(shape, slice(10, 110), slice(6, CELLS)), 1)[0]
+    wide_tgt = blobs(rectangle(shape, slice(14, 100), slice(0, CELLS - 6)), 1)[0]
+    assert pair_copies([wide_src], [wide_tgt], CELLS) == [(wide_src, wide_tgt)]
+
+
+def kept_off(pairs, both, first, margin_cells=2, margin_lines=3, most=4) -> np.ndarray:
+    return keep_off_cells(pairs, both, first, margin_cells, margin_lines, most, np.zeros(both.shape, np.uint8))
+
+
+def strip_of(line: np.ndarray) -> tuple[int, int]:
+    """(first, one past the last) cell kept off on a line holding one strip; (0, 0) for none."""
+    on = np.flatnonzero(line)
+    assert on.size == 0 or on.size == on[-1] - on[0] + 1, "one strip"
+    return (int(on[0]), int(on[-1]) + 1) if on.size else (0, 0)
 
 
 def test_the_strip_spans_both_copies_and_runs_on_to_a_border_that_cuts_one():
@@ -135,28 +161,43 @@ def test_the_strip_spans_both_copies_and_runs_on_to_a_border_that_cuts_one():
     first = np.zeros(LINES, np.int64)
     src = blobs(rectangle(shape, slice(20, 60), slice(50, 60)), 1)[0]
     tgt = blobs(rectangle(shape, slice(20, 60), slice(30, 40)), 1)[0]
-    starts, ends = keep_off_strips([(src, tgt)], both, first, margin_cells=2, margin_lines=3, most=4)
-    assert starts[17, 0] == 28 and ends[17, 0] == 62 and starts[16, 0] == ends[16, 0] == 0  # 3 lines above
-    assert np.all(starts[17:63, 0] == 28) and np.all(ends[17:63, 0] == 62) and not ends[63:].any()
+    cells = kept_off([(src, tgt)], both, first)
+    assert strip_of(cells[17]) == (28, 62) and not cells[16].any()  # 3 lines above
+    assert all(strip_of(cells[k]) == (28, 62) for k in range(17, 63)) and not cells[63:].any()
     # The source's copy at the source's border (its right end): on to the band's end, shown from the target.
     cut = blobs(rectangle(shape, slice(20, 60), slice(82, 91)), 1)[0]
-    starts, ends = keep_off_strips([(cut, tgt)], both, first, 2, 3, 4)
-    assert starts[30, 0] == 28 and ends[30, 0] == 101
+    assert strip_of(kept_off([(cut, tgt)], both, first)[30]) == (28, 101)
     # A target's copy at the target's border (its left end) on a band whose lines begin 5 cells
     # further on every line: the extents are taken where each line begins.
     shifted = first + 5 * (np.arange(LINES) // 40)
     cut = blobs(rectangle(shape, slice(20, 60), slice(10, 20)), 1)[0]
-    starts, ends = keep_off_strips([(src, cut)], both, shifted, 2, 3, 4)
-    assert starts[30, 0] == starts[45, 0] == 0 and ends[30, 0] == ends[45, 0] == 62
+    cells = kept_off([(src, cut)], both, shifted)
+    assert strip_of(cells[30]) == strip_of(cells[45]) == (0, 62)
 
 
 def test_strips_merge_and_the_narrowest_gaps_close_beyond_the_most():
     assert merge_strips([(10, 20), (15, 30), (40, 50)], 4) == [(10, 30), (40, 50)]
     assert merge_strips([(0, 5), (8, 10), (30, 40), (45, 70)], 2) == [(0, 10), (30, 70)]
-    starts = np.array([[2, 10], [0, 0]], np.int32)
-    ends = np.array([[5, 12], [0, 0]], np.int32)
-    cells = strip_cells(starts, ends, 15, np.zeros((2, 15), np.uint8))
-    assert cells[0].tolist() == [0, 0, 1, 1, 1, 0, 0, 0, 0, 0, 1, 1, 0, 0, 0] and not cells[1].any()
+    # Three people side by side on the same lines: three strips, or two with the narrowest gap closed.
+    shape = (LINES, 101)
+    both = np.ones(shape, bool)
+    first = np.zeros(LINES, np.int64)
+    people = [(blobs(rectangle(shape, slice(20, 60), slice(x, x + 6)), 1)[0], None) for x in (20, 40, 80)]
+    three = kept_off(people, both, first, margin_cells=2, margin_lines=0, most=3)[40]
+    assert np.flatnonzero(np.diff(np.r_[0, three, 0])).tolist() == [18, 28, 38, 48, 78, 88]
+    two = kept_off(people, both, first, margin_cells=2, margin_lines=0, most=2)[40]
+    assert np.flatnonzero(np.diff(np.r_[0, two, 0])).tolist() == [18, 48, 78, 88]
+
+
+def test_the_route_costs_home_and_the_strips_and_blocks_cells_without_both_views():
+    kept = np.zeros((3, 5), np.uint8)
+    kept[1, 1:3] = 1
+    both = np.ones((3, 5), bool)
+    both[2, 4] = False
+    home_term = np.float32([[0.0, 1.5, 3.0, 4.5, 6.0]] * 3)
+    cost = route_cost(kept, both, home_term, CFG, np.zeros((3, 5), np.float32))
+    expected = home_term + CFG.video_seam_object_cost * kept + CFG.video_seam_blocked_cost * ~both
+    np.testing.assert_array_equal(cost, expected.astype(np.float32))
 
 
 class Overlap:

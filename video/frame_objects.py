@@ -15,9 +15,10 @@ them, as ``composite.band_difference`` fills them):
    the view's blobs (:func:`blobs`). Where most of a view is off, the camera or the light changed: no
    objects then.
 2. *Copies* (:func:`pair_copies`): a source blob and a target blob on the same lines, of a like
-   size, within the band of each other are one object's two copies; their displacement along the
-   lines is its parallax. A blob without a partner is an object whose other copy is off the band.
-3. *Strips to keep off* (:func:`keep_off_strips`): per object, the lines its copies cover and the
+   size, within the band of each other, the source's to the right (nearer than the background) are
+   one object's two copies; their displacement along the lines is its parallax. A blob without a
+   partner is an object whose other copy is off the band.
+3. *Strips to keep off* (:func:`keep_off_cells`): per object, the lines its copies cover and the
    cells from the first copy's start to the second's end, widened by the seam's transition; where
    that reaches to within the same margin of the band's end of the overlap, on to the band's end: an
    object cut by a view's border is shown from the other view, where it is whole.
@@ -47,8 +48,7 @@ from ..config import Config
 from ..seam_path import BandPath
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
-from sena_warp.kernels.frame_objects import (CellGrid, ViewModels, route_cost_kernel, strip_cells_kernel,
-                                             view_background_kernel)
+from sena_warp.kernels.frame_objects import CellGrid, ViewModels, view_background_kernel
 from sena_warp.kernels.frame_seam import DEVICE
 from sena_warp.kernels.transfer import host_array
 
@@ -57,8 +57,10 @@ SPREAD_FACTOR = 3.0  # a cell is off its background beyond this x its mean absol
 
 PAIR_OVERLAP = 0.5  # two blobs are copies when they share this much of the shorter one's lines
 PAIR_AREA = 0.3  # ... and the smaller has this share of the larger's area at least (a copy cut by a border)
+PAIR_BEHIND = 2  # ... and the source's copy lies at most this many cells left of the target's (noise)
 COARSE_CELLS = 4  # the object band's cells are this many of the per-frame seam's cells wide
-FOREGROUND_MOST = 0.5  # a view off its background on more of the band: the camera or the light changed
+FOREGROUND_MOST = 0.8  # a view off its background on more of the band: the camera or the light changed (a person
+# close to both cameras covers two thirds of it)
 MOST_STRIPS = 8  # strips kept off per line at most
 SETTLE_S = 0.25  # nothing is in front while the models have learnt from less than this much video
 OBJECT_BOXES = 2  # an object covers this x this of an object's boxes at least (smaller things only cost motion)
@@ -79,6 +81,20 @@ class Blob:
     @property
     def last_line(self) -> int:
         return self.first_line + len(self.starts) - 1
+
+    def behind(self, other: "Blob") -> float:
+        """How far (cells) this blob lies right of ``other`` on the lines both cover: the smaller of the
+        medians of their starts' and their ends' differences (negative: left of it; 0 without a line)."""
+        first, last = max(self.first_line, other.first_line), min(self.last_line, other.last_line)
+        if last < first:
+            return 0.0
+        mine = slice(first - self.first_line, last - self.first_line + 1)
+        theirs = slice(first - other.first_line, last - other.first_line + 1)
+        on = (self.ends[mine] > self.starts[mine]) & (other.ends[theirs] > other.starts[theirs])
+        if not on.any():
+            return 0.0
+        return float(min(np.median(self.starts[mine][on] - other.starts[theirs][on]),
+                         np.median(self.ends[mine][on] - other.ends[theirs][on])))
 
     def shared_lines(self, other: "Blob") -> float:
         """The share of the shorter blob's lines that both cover."""
@@ -104,7 +120,7 @@ class ViewBackground:
         models.off = host_array(self._arrays[3], wp.uint8)
         models.noise, models.spread_factor = float(self.noise), SPREAD_FACTOR
         self._models = models
-        self._learn_off = self._learn * cfg.video_seam_foreground_learn
+        self._crowded = False  # whether most of a view was off its model in the last frame
         self.frames = 0  # frames the models have learnt from
 
     def update(self, diff: np.ndarray, total: np.ndarray) -> np.ndarray:
@@ -113,32 +129,39 @@ class ViewBackground:
         ``band_difference`` fills them); none on the first frame (the models start from it). Learns: over
         the first frames at least as fast as their running mean (a webcam's exposure settles over its
         first frames; a model that kept the first frame saw the whole scene in front for seconds), then
-        at the model's rate. Nothing is off them over the first :data:`SETTLE_S` of video (a camera
+        at the model's rate; ``video_seam_foreground_learn`` x as fast where the view is off, but where
+        most of a view was off in the last frame (:data:`FOREGROUND_MOST`). Nothing is off them over the first :data:`SETTLE_S` of video (a camera
         settling)."""
         background, spread, last, off = self._arrays
         if diff.shape != background.shape[1:] or total.shape != background.shape[1:]:
             raise ValueError(f"band of {diff.shape} / {total.shape} cells for models of {background.shape[1:]}")
         both = diff < 0.5 * NOT_BOTH
-        views = np.stack([0.5 * (total + diff), 0.5 * (total - diff)]).astype(np.float32)
         self.frames += 1
         if self.frames == 1:
+            views = np.stack([0.5 * (total + diff), 0.5 * (total - diff)])
             np.copyto(background, np.where(both, views, 0.0))
             np.copyto(last, background)
             spread.fill(float(self.noise / SPREAD_FACTOR))
             off.fill(0)
             return off
-        mean = 1.0 / self.frames  # the running mean's rate
-        self._models.learn = float(np.float32(max(self._learn, mean)))
-        self._models.learn_off = float(np.float32(max(self._learn_off, mean)))
+        learn = max(self._learn, 1.0 / self.frames)  # at least the running mean's rate
+        self._models.learn = float(np.float32(learn))
+        # Where a view is off, slower in proportion, from the first frames on (a slow walker's cells are
+        # off for seconds while the running mean's rate is high: learnt at it, they would leave a ghost of
+        # him behind); as fast where most of a view was off (the camera or the light changed).
+        self._models.learn_off = float(np.float32(learn if self._crowded else learn * self.cfg.video_seam_foreground_learn))
         fit = (slice(None, None, FIT_STRIDE),) * 2
+        diff_fit, total_fit, both_fit = diff[fit], total[fit], both[fit]
         explained = []
         for view in range(2):  # on the cells that were on the background last frame: an object is no exposure step
-            gain, offset = whole_band_fit(background[view][fit], views[view][fit], both[fit] & (off[view][fit] == 0),
+            luma = 0.5 * (total_fit + diff_fit) if view == 0 else 0.5 * (total_fit - diff_fit)
+            gain, offset = whole_band_fit(background[view][fit], luma, both_fit & (off[view][fit] == 0),
                                           float(self.noise))
             explained += [np.float32(gain - 1.0), np.float32(offset)]
         runtime.launch_row_loops(view_background_kernel, diff.shape[0], diff.shape[1], [
             host_array(diff, float), host_array(total, float), wp.vec4(*explained), self._models], DEVICE,
             runtime.BAND_THREADS)
+        self._crowded = bool(both.any()) and max(float(view[both].mean()) for view in off) > FOREGROUND_MOST
         if self.frames < self._settle:
             off.fill(0)
         return off
@@ -181,10 +204,10 @@ def blobs(foreground: np.ndarray, least: int) -> list[Blob]:
     """The connected parts (8-neighbours) of ``foreground`` (K, cells) uint8 of at least ``least`` cells."""
     count, labels, stats, centroids = cv2.connectedComponentsWithStats(foreground, connectivity=8)
     found = []
-    for label in range(1, count):
-        x, y, w, h, area = (int(v) for v in stats[label])
-        if area < least:
+    for label in np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= least):
+        if label == 0:  # the background
             continue
+        x, y, w, h, area = stats[label].tolist()
         part = labels[y:y + h, x:x + w] == label
         on = part.any(axis=1)
         starts = np.where(on, x + np.argmax(part, axis=1), 0).astype(np.int32)
@@ -193,18 +216,26 @@ def blobs(foreground: np.ndarray, least: int) -> list[Blob]:
     return found
 
 
-def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float
-                ) -> list[tuple[Blob | None, Blob | None]]:
+def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float) -> list[tuple[Blob | None, Blob | None]]:
     """Each object's (source copy, target copy), one of them None where its other copy was not found:
     source and target blobs sharing :data:`PAIR_OVERLAP` of the shorter one's lines, the smaller
-    :data:`PAIR_AREA` of the larger's area, their centres at most ``reach`` cells apart, paired best
-    first (the most lines shared, the likest size)."""
+    :data:`PAIR_AREA` of the larger's area, their centres at most ``reach`` cells apart, the source's
+    copy not left of the target's on the lines they share (:data:`PAIR_BEHIND` cells at most, in the
+    median: :meth:`Blob.behind`), paired best first (the most lines shared, the likest size).
+
+    An object nearer than the background lies further right in the source (the left view) than in
+    the target once the background is aligned: the source's copy starts and ends right of the
+    target's, where neither is cut by its view's border (a cut end lies at the overlap's border, which
+    keeps the order: the target's at its left end, the source's at its right end). A source blob left
+    of a target blob is another thing (what a model learnt while someone stood there, a second person)."""
     candidates = []
     for i, src in enumerate(blobs_src):
         for j, tgt in enumerate(blobs_tgt):
             shared = src.shared_lines(tgt)
             likeness = min(src.area, tgt.area) / max(src.area, tgt.area)
-            if shared >= PAIR_OVERLAP and likeness >= PAIR_AREA and abs(src.centre - tgt.centre) <= reach:
+            behind = src.behind(tgt) < -PAIR_BEHIND
+            if shared >= PAIR_OVERLAP and likeness >= PAIR_AREA and abs(src.centre - tgt.centre) <= reach \
+                    and not behind:
                 candidates.append((shared * likeness, i, j))
     pairs, used_src, used_tgt = [], set(), set()
     for _, i, j in sorted(candidates, reverse=True):
@@ -217,26 +248,27 @@ def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float
     return pairs
 
 
-def keep_off_strips(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarray, first_cell: np.ndarray,
-                    margin_cells: int, margin_lines: int, most: int) -> tuple[np.ndarray, np.ndarray]:
-    """(starts, ends) (K, ``most``) int32: per solved line the strips of cells the seam must keep off
-    (``starts[k, m] <= cell < ends[k, m]``; unused ones empty), for the objects ``pairs``
-    (:func:`pair_copies`) on a band whose cells hold both views where ``both`` (K, cells) bool and
-    whose line k begins at the line's cell ``first_cell[k]`` (K,) int (its position / the cell width:
-    the band follows the estimate's seam): on each line, from the first position either copy covers
-    within ``margin_lines`` lines to the last, widened by ``margin_cells``.
+def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarray, first_cell: np.ndarray,
+                   margin_cells: int, margin_lines: int, most: int, out: np.ndarray) -> np.ndarray:
+    """``out`` (K, cells) uint8 filled with 1 on the cells the seam must keep off, 0 elsewhere: per
+    solved line the strips the objects ``pairs`` (:func:`pair_copies`) span, on a band whose cells hold
+    both views where ``both`` (K, cells) bool and whose line k begins at the line's cell
+    ``first_cell[k]`` (K,) int (its position / the cell width: the band follows the estimate's seam):
+    on each line, from the first position either copy covers within ``margin_lines`` lines to the
+    last, widened by ``margin_cells``.
 
     A copy the overlap's border cuts (within ``margin_cells`` of the first cell holding both views,
     where the target begins, or of the last, where the source ends) is not whole in its view: the
     strip goes on to the band's end there, so that the seam passes on the other side and shows the
     object from the other view. A lone copy near either border: its other copy lies beyond it.
-    Overlapping strips merge; a line with more than ``most`` has its narrowest gaps closed."""
+    Overlapping strips merge; a line with more than ``most`` has its narrowest gaps closed
+    (:func:`merge_strips`)."""
     lines, cells = both.shape
     first_cell = np.asarray(first_cell, np.int64)
     has_both = both.any(axis=1)
     first_both = np.where(has_both, np.argmax(both, axis=1), cells) + first_cell
     last_both = np.where(has_both, cells - 1 - np.argmax(both[:, ::-1], axis=1), -1) + first_cell
-    per_line: list[list[tuple[int, int]]] = [[] for _ in range(lines)]
+    edges = np.zeros((lines, cells + 1), np.int32)  # +1 where a strip starts, -1 where it ends
     for src, tgt in pairs:
         copies = [blob for blob in (src, tgt) if blob is not None]
         top = max(min(b.first_line for b in copies) - margin_lines, 0)
@@ -245,44 +277,50 @@ def keep_off_strips(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarr
                    for name, blob in (("src", src), ("tgt", tgt)) if blob is not None}
         start = np.min([e[0] for e in extents.values()], axis=0) - margin_cells
         end = np.max([e[1] for e in extents.values()], axis=0) + margin_cells
-        near_first = {name: e[0] - margin_cells <= first_both[top:bottom + 1] for name, e in extents.items()}
-        near_last = {name: e[1] + margin_cells > last_both[top:bottom + 1] for name, e in extents.items()}
         lone = len(extents) == 1
-        cut_left = near_first["tgt"] if "tgt" in extents and not lone else next(iter(near_first.values()))
-        cut_right = near_last["src"] if "src" in extents and not lone else next(iter(near_last.values()))
-        for i in np.flatnonzero(end > start + 2 * margin_cells):
-            k = top + i
-            lo = 0 if cut_left[i] else int(np.clip(start[i] - first_cell[k], 0, cells))
-            hi = cells if cut_right[i] else int(np.clip(end[i] - first_cell[k], 0, cells))
-            per_line[k].append((lo, hi))
-    starts = np.zeros((lines, most), np.int32)
-    ends = np.zeros((lines, most), np.int32)
-    for k, strips in enumerate(per_line):
-        for m, (lo, hi) in enumerate(merge_strips(strips, most)):
-            starts[k, m], ends[k, m] = lo, hi
-    return starts, ends
+        # The target's copy decides the left end, the source's the right one (a lone copy: both).
+        left = extents["tgt"] if "tgt" in extents and not lone else next(iter(extents.values()))
+        right = extents["src"] if "src" in extents and not lone else next(iter(extents.values()))
+        on = np.flatnonzero(end > start + 2 * margin_cells)
+        k = top + on
+        cut_left = left[0][on] - margin_cells <= first_both[k]
+        cut_right = right[1][on] + margin_cells > last_both[k]
+        lo = np.where(cut_left, 0, np.minimum(np.maximum(start[on] - first_cell[k], 0), cells))
+        hi = np.where(cut_right, cells, np.minimum(np.maximum(end[on] - first_cell[k], 0), cells))
+        np.add.at(edges, (k, lo), 1)
+        np.add.at(edges, (k, hi), -1)
+    inside = np.cumsum(edges[:, :cells], axis=1) > 0
+    np.copyto(out, inside, casting="unsafe")
+    opens = inside.copy()
+    opens[:, 1:] &= ~inside[:, :-1]
+    for k in np.flatnonzero(opens.sum(axis=1) > most):  # rare: a crowd on one line
+        runs = np.flatnonzero(np.diff(np.concatenate([[0], out[k], [0]]).astype(np.int8)))
+        out[k] = 0
+        for lo, hi in merge_strips(list(zip(runs[::2], runs[1::2])), most):
+            out[k, lo:hi] = 1
+    return out
 
 
 def line_extents(blob: Blob, first_cell: np.ndarray, top: int, bottom: int, reach: int
                  ) -> tuple[np.ndarray, np.ndarray]:
     """(first position, one past the last) (bottom - top + 1,) int64, in cells along the line from
     the line's own origin (band line k begins at ``first_cell[k]``), of ``blob`` on each line from
-    ``top`` to ``bottom``, each line taking its neighbours' within ``reach`` lines too; an empty
-    extent (start > end) where none."""
+    ``top`` to ``bottom`` (``top`` at most its first line), each line taking its neighbours' within
+    ``reach`` lines too; an empty extent (start > end) where none."""
     big = np.iinfo(np.int64).max // 4
-    start = np.full(bottom - top + 1, big, np.int64)
-    end = np.full(bottom - top + 1, -big, np.int64)
+    count = bottom - top + 1
+    start = np.full(count + 2 * reach, big, np.int64)  # ``reach`` lines of padding each side
+    end = np.full(count + 2 * reach, -big, np.int64)
     lines = np.arange(blob.first_line, blob.last_line + 1)
-    on = blob.ends > blob.starts
-    at = lines[on] - top
-    starts = blob.starts[on] + first_cell[lines[on]]
-    ends = blob.ends[on] + first_cell[lines[on]]
-    for shift in range(-reach, reach + 1):
-        near = at + shift
-        keep = (near >= 0) & (near < len(start))
-        np.minimum.at(start, near[keep], starts[keep])
-        np.maximum.at(end, near[keep], ends[keep])
-    return start, end
+    on = (blob.ends > blob.starts) & (lines <= bottom + reach)
+    at = lines[on] - top + reach
+    start[at] = blob.starts[on] + first_cell[lines[on]]
+    end[at] = blob.ends[on] + first_cell[lines[on]]
+    first, last = start[:count].copy(), end[:count].copy()
+    for shift in range(1, 2 * reach + 1):  # the lines within reach: a few shifts of the padded extents
+        np.minimum(first, start[shift:shift + count], out=first)
+        np.maximum(last, end[shift:shift + count], out=last)
+    return first, last
 
 
 def merge_strips(strips: list[tuple[int, int]], most: int) -> list[tuple[int, int]]:
@@ -300,10 +338,15 @@ def merge_strips(strips: list[tuple[int, int]], most: int) -> list[tuple[int, in
     return [(lo, hi) for lo, hi in merged]
 
 
-def strip_cells(starts: np.ndarray, ends: np.ndarray, cells: int, out: np.ndarray) -> np.ndarray:
-    """``out`` (K, cells) uint8 filled with 1 inside the strips ``starts`` / ``ends`` (K, M), 0 elsewhere."""
-    runtime.launch_row_loops(strip_cells_kernel, starts.shape[0], cells, [
-        host_array(starts, int), host_array(ends, int), host_array(out, wp.uint8)], DEVICE, runtime.BAND_THREADS)
+def route_cost(kept_off: np.ndarray, both: np.ndarray, home_term: np.ndarray, cfg: Config, out: np.ndarray
+               ) -> np.ndarray:
+    """``out`` (K, cells) float32: what each cell of the object band costs the seam's route: its cost of
+    leaving the estimate's seam ``home_term`` (K, cells) float32 (``video_seam_home_cost`` per px), plus
+    ``video_seam_object_cost`` on the strips kept off (``kept_off`` (K, cells) uint8) and
+    ``video_seam_blocked_cost`` where the cell lacks a view (not ``both``)."""
+    np.multiply(kept_off, np.float32(cfg.video_seam_object_cost), out=out)
+    np.add(home_term, out, out=out)
+    np.add(out, np.float32(cfg.video_seam_blocked_cost), out=out, where=~both)
     return out
 
 
@@ -366,7 +409,10 @@ class ObjectBand:
                                 cfg.cpu_threads)
         self._views = ViewBackground(grid.shape, fps, cfg)
         self.host = {"moving": np.zeros(grid.shape, np.uint8), "kept_off": np.zeros(grid.shape, np.uint8),
-                     "cost": np.zeros(grid.shape, np.float32), "home": grid.home.astype(np.float32)}
+                     "cost": np.zeros(grid.shape, np.float32)}
+        positions = (grid.x0[:, None] + grid.cell * np.arange(grid.width)[None, :]).astype(np.float32)
+        self._home_term = np.float32(cfg.video_seam_home_cost) * np.abs(positions - grid.home.astype(np.float32)[:, None])
+        self._last_cost = np.full(grid.shape, np.nan, np.float32)  # the route's costs in the last frame
         self.views = {name: host_array(a, wp.uint8 if a.dtype == np.uint8 else float) for name, a in self.host.items()}
         self.pairs: list[tuple[Blob | None, Blob | None]] = []
         self.route = grid.home.copy()  # (Kc,) px: where the seam's band is centred, per object-band line
@@ -384,14 +430,12 @@ class ObjectBand:
         # Most of a view off its background: the camera or the light changed, not an object in front.
         least = (OBJECT_BOXES * box) ** 2  # a person's size, not a head turning or a screen's flicker
         self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), grid.width)
-        starts, ends = keep_off_strips(self.pairs, both, grid.x0 // grid.cell, self._margin_cells,
-                                       self._margin_cells, MOST_STRIPS)
-        strip_cells(starts, ends, grid.width, host["kept_off"])
-        runtime.launch_row_loops(route_cost_kernel, len(grid.lines), grid.width, [
-            band.diff_wp, self.views["kept_off"], grid.kernel, self.views["home"], float(cfg.video_seam_object_cost),
-            float(cfg.video_seam_home_cost), float(cfg.video_seam_blocked_cost), self.views["cost"]], DEVICE,
-            runtime.BAND_THREADS)
-        cost = host["cost"]
+        keep_off_cells(self.pairs, both, grid.x0 // grid.cell, self._margin_cells, self._margin_cells, MOST_STRIPS,
+                       host["kept_off"])
+        cost = route_cost(host["kept_off"], both, self._home_term, cfg, host["cost"])
+        if np.array_equal(cost, self._last_cost):  # the last frame's costs: its route, which it kept or took
+            return False
+        np.copyto(self._last_cost, cost)
         route = (self._solver.solve(self.views["cost"], grid.x0 // grid.cell, max(1, int(cfg.seam_max_step_px)), 0.0)
                  * grid.cell).astype(np.int64)  # no steeper than the seam between its lines
         lines = np.arange(len(grid.lines))

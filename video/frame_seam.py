@@ -450,12 +450,16 @@ class FrameSeam:
 def gentle(positions: np.ndarray, most: float) -> np.ndarray:
     """(K,) float64 ``positions`` (K,) moved as little as it takes to change by at most ``most`` from
     one line to the next (clamped forwards, then backwards)."""
-    out = np.asarray(positions, np.float64).copy()
+    out = np.asarray(positions, np.float64)
+    if np.all(np.abs(np.diff(out)) <= most):  # gentle already (the route's own steps are): nothing moves
+        return out.copy()
+    out = out.tolist()  # Python floats: a loop over numpy scalars is 10x slower
+    most = float(most)
     for k in range(1, len(out)):
         out[k] = min(max(out[k], out[k - 1] - most), out[k - 1] + most)
     for k in range(len(out) - 2, -1, -1):
         out[k] = min(max(out[k], out[k + 1] - most), out[k + 1] + most)
-    return out
+    return np.array(out, np.float64)
 
 
 def separation_band_cost(lines: np.ndarray, x0: np.ndarray, cell: int, width: int, copies_tgt: np.ndarray,
