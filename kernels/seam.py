@@ -7,7 +7,8 @@ anchors. For pixel (x, y), with t = x - s(y):
 
 * alpha = the linear ramp ``clip(1/2 - t/T, 0, 1)`` across the transition T, convolved with a
   Gaussian of sigma across the seam (the paper's "light Gaussian smoothing", closed form below);
-  it differs from the plain ramp only within a few sigma of the ramp's ends.
+  it differs from the plain ramp only within a few sigma of the ramp's ends, and is 0 or 1 exactly
+  where it is within 1e-4 of them, as the compositor shows it.
 * the step-6 source map is resampled at ``(x + f dx, y + f dy)`` where the fade f is 1 inside the
   transition and falls to 0 (smootherstep) over ``fade_px`` beyond it, so the source far from the
   seam keeps its step-6 shape.
@@ -25,6 +26,7 @@ wp.set_module_options(MODULE_OPTIONS)  # see the package docstring
 
 INV_SQRT2 = 0.7071067811865476
 INV_SQRT_2PI = 0.3989422804014327
+ALPHA_TAIL_SIGMAS = wp.constant(8.0)  # the smoothed ramp is within 1e-4 of 0 or 1 this many sigmas past its ends
 
 
 @wp.func
@@ -45,6 +47,17 @@ def source_alpha(t: float, transition_px: float, sigma_px: float) -> float:
         return wp.clamp(0.5 - t / transition_px, 0.0, 1.0)
     ramp = smoothed_positive_part(half - t, sigma_px) - smoothed_positive_part(-half - t, sigma_px)
     return wp.clamp(ramp / transition_px, 0.0, 1.0)
+
+
+@wp.func
+def shown_source_alpha(t: float, transition_px: float, sigma_px: float) -> float:
+    """:func:`source_alpha` as the panorama shows it: exactly 0 or 1 where it is within 1e-4 of them
+    (the compositor's band rule, ``kernels/composite.py``'s ``pixel_rule``). The smoothed ramp's tails
+    pass 1e-4 well within ``ALPHA_TAIL_SIGMAS`` of the ramp's ends, so there no erf or exp is evaluated."""
+    if wp.abs(t) >= 0.5 * transition_px + ALPHA_TAIL_SIGMAS * sigma_px:
+        return wp.where(t > 0.0, 0.0, 1.0)
+    a = source_alpha(t, transition_px, sigma_px)
+    return wp.where(a > 0.9999, 1.0, wp.where(a < 0.0001, 0.0, a))
 
 
 @wp.func
@@ -94,7 +107,7 @@ def seam_maps_kernel(
     q = wp.vec2(fx + fade * shift_x[y], fy + fade * (src_row_y[y] - fy))
     map_src_out[y, x] = bilinear_map(map_src_in, q)
     map_tgt_out[y, x] = wp.vec2(fx, fy) - offset_tgt
-    alpha_out[y, x] = source_alpha(t, transition_px, smooth_sigma_px)
+    alpha_out[y, x] = shown_source_alpha(t, transition_px, smooth_sigma_px)
 
 
 @wp.kernel

@@ -45,7 +45,7 @@ from .partition import (BorderOffsets, SeamMaps, SeamOffsets, border_offsets, se
 from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .seam_path import SeamPath, seam_line
-from .switch_align import aligned_source_map, shown_labels, view_weights
+from .switch_align import aligned_source_map, seam_side_alpha, shown_labels, view_weights
 from .warp_map import CanvasViews, canvas_views, forward_points, source_map_canvas
 from .zone import Zone, adequate_zone
 from sena_warp.kernels import runtime
@@ -192,31 +192,46 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndar
     separate its two copies. ``prior_seam_tgt``: a seam to stay near, x per target row in target
     pixels (NaN: none), e.g. the current seam of a video.
 
-    With ``cfg.switch_align`` the source is then aligned to the target wherever that stitch switches
-    views (``switch_align``) and steps 7-9 run again on the aligned source, ``cfg.switch_rounds`` times.
+    With ``cfg.switch_align`` the source is aligned to the target wherever the cut switches views
+    (``switch_align``) and the seam cut again on the aligned source, ``cfg.switch_rounds`` times; step
+    9 runs once, on the last cut.
     """
     supported = neighbour_supported(matches_src, matches_tgt, cfg.support_neighbours, cfg.support_tol_px,
                                     cfg.support_min)
     prior = _prior_on_canvas(prior_seam_tgt, warp.overlap.canvas)
     copies = matches_src[supported], matches_tgt[supported]
-    seam, views = cut_seam(img_src, img_tgt, *copies, warp, warp.map_src_canvas, cfg, clock, prior)
+    cut = cut_seam(img_src, img_tgt, *copies, warp, warp.map_src_canvas, cfg, clock, prior)
     for _ in range(cfg.switch_rounds if cfg.switch_align else 0):
         with clock("switch_align"):
-            map_aligned = aligned_source_map(seam.map_cut_canvas, *views.grey(), views.valid_src, views.valid_tgt,
-                                             seam.maps.alpha_canvas, cfg)
-        seam, views = cut_seam(img_src, img_tgt, *copies, warp, map_aligned, cfg, clock, prior, seam.gains)
-    return seam
+            map_aligned = aligned_source_map(cut.map_src_canvas, *cut.views.grey(), cut.views.valid_src,
+                                             cut.views.valid_tgt, cut.path.seam_x_canvas, cfg)
+        cut = cut_seam(img_src, img_tgt, *copies, warp, map_aligned, cfg, clock, prior, cut.gains)
+    return partitioned(cut, warp.overlap.canvas, img_tgt.shape[0], _diagonal_px(img_src, img_tgt), cfg, clock)
+
+
+@dataclass(frozen=True)
+class SeamCut:
+    """Steps 7-8 on one source map: the zone, the seam's path, the views it was cut on (with their
+    gains, where the panorama shows them: thin strips left out), the gains, the thin strips
+    (``thin_src``, ``thin_tgt``: (H, W) bool) and ``map_src_canvas`` (H, W, 2) float32 the source map."""
+
+    zone: Zone
+    path: SeamPath
+    views: CanvasViews
+    gains: Gains
+    thin_src: np.ndarray
+    thin_tgt: np.ndarray
+    map_src_canvas: np.ndarray
 
 
 def cut_seam(img_src: np.ndarray, img_tgt: np.ndarray, copies_src: np.ndarray, copies_tgt: np.ndarray, warp: Warp,
              map_src_canvas: np.ndarray, cfg: Config, clock: StageClock, prior_x_canvas: np.ndarray | None,
-             gains: Gains | None = None) -> tuple[Seam, CanvasViews]:
-    """Steps 7-9 on the source map ``map_src_canvas`` (H, W, 2) (step 6's, or aligned at the switches):
-    the seam runs where that source and the target agree, the seam maps resample that map.
-    ``copies_*``: the matches whose two copies the seam does not separate (N, 2), working-frame source /
-    target pixels; ``prior_x_canvas``: ``seam_line``'s; ``gains``: the views' gains, measured here when
-    None (a source aligned locally keeps the gains measured before). Returns the seam and the views it
-    was cut on, with their gains, where the panorama shows them (thin strips left out)."""
+             gains: Gains | None = None) -> SeamCut:
+    """Steps 7-8 on the source map ``map_src_canvas`` (H, W, 2) (step 6's, or aligned at the switches):
+    the seam runs where that source and the target agree. ``copies_*``: the matches whose two copies
+    the seam does not separate (N, 2), working-frame source / target pixels; ``prior_x_canvas``:
+    ``seam_line``'s; ``gains``: the views' gains, measured here when None (a source aligned locally
+    keeps the gains measured before)."""
     canvas = warp.overlap.canvas
     affine = warp.glob.affine_src_to_tgt
     with clock("forward_points"):
@@ -233,19 +248,28 @@ def cut_seam(img_src: np.ndarray, img_tgt: np.ndarray, copies_src: np.ndarray, c
     with clock("chain"):
         path = seam_line(zone, views, pts_src_canvas, pts_tgt_canvas, copies_src_canvas,
                          canvas.tgt_to_canvas(copies_tgt), cfg, prior_x_canvas)
-    with clock("seam_maps"):
-        maps = seam_maps(map_src_canvas, canvas, path, cfg)
-        if cfg.thin_strip_ratio > 0:  # left out: a view shown only in a thin strip where the other takes over
-            label = shown_labels(*view_weights(maps.alpha_canvas, views.valid_src, views.valid_tgt))
+    thin_src = thin_tgt = np.zeros(canvas.shape, bool)
+    if cfg.thin_strip_ratio > 0:  # left out: a view shown only in a thin strip where the other takes over
+        with clock("thin_strips"):
+            label = shown_labels(*view_weights(seam_side_alpha(path.seam_x_canvas, canvas.width), views.valid_src,
+                                               views.valid_tgt))
             thin_src, thin_tgt = thin_strips(label, cfg.thin_strip_ratio * _diagonal_px(img_src, img_tgt))
-            nan = np.float32(np.nan)
-            maps = replace(maps, map_src_canvas=np.where(thin_src[..., None], nan, maps.map_src_canvas),
-                           map_tgt_canvas=np.where(thin_tgt[..., None], nan, maps.map_tgt_canvas))
             views = replace(views, valid_src=views.valid_src & ~thin_src, valid_tgt=views.valid_tgt & ~thin_tgt)
+    return SeamCut(zone, path, views, gains, thin_src, thin_tgt, map_src_canvas)
+
+
+def partitioned(cut: SeamCut, canvas, height_tgt: int, diag_px: float, cfg: Config, clock: StageClock) -> Seam:
+    """Step 9 on a cut: the seam maps (the thin strips sampling nothing), the seam and border blend."""
+    with clock("seam_maps"):
+        maps = seam_maps(cut.map_src_canvas, canvas, cut.path, cfg)
+        if cut.thin_src.any() or cut.thin_tgt.any():
+            nan = np.float32(np.nan)
+            maps = replace(maps, map_src_canvas=np.where(cut.thin_src[..., None], nan, maps.map_src_canvas),
+                           map_tgt_canvas=np.where(cut.thin_tgt[..., None], nan, maps.map_tgt_canvas))
     with clock("seam_blend"):
-        offsets = seam_offsets(views, path.seam_x_canvas, _diagonal_px(img_src, img_tgt), cfg)
-        border = border_offsets(views, path.seam_x_canvas, offsets, canvas.offset_tgt, img_tgt.shape[0], cfg)
-    return Seam(zone, path, maps, gains, offsets, border, map_src_canvas), views
+        offsets = seam_offsets(cut.views, cut.path.seam_x_canvas, diag_px, cfg)
+        border = border_offsets(cut.views, cut.path.seam_x_canvas, offsets, canvas.offset_tgt, height_tgt, cfg)
+    return Seam(cut.zone, cut.path, maps, cut.gains, offsets, border, cut.map_src_canvas)
 
 
 def estimate_maps(img_a: np.ndarray, img_b: np.ndarray, cfg: Config, reference: str = "auto",

@@ -49,6 +49,14 @@ FOLD_SLOPE = 0.5  # the field is scaled down where it changes by more than this 
 SLOPE_ROUNDS = 4  # slope_limited: rounds of scaling the field down where it is steep
 
 
+def seam_side_alpha(seam_x_canvas: np.ndarray, width: int) -> np.ndarray:
+    """(H, W) float32: 1 left of the seam and on it (x <= seam x), 0 right of it: the side of the seam
+    each pixel takes, as the seam maps' alpha gives it (at least 0.5 on the source's side), without
+    step 9. seam_x_canvas: (H,) the seam's x per canvas row."""
+    cols = np.arange(width, dtype=np.float32)[None, :]
+    return (cols <= np.asarray(seam_x_canvas, np.float32)[:, None]).astype(np.float32)
+
+
 def view_weights(alpha_canvas: np.ndarray, valid_src: np.ndarray, valid_tgt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(weight of the source, weight of the target) per canvas pixel, float32 (H, W): what each view
     contributes to the panorama, given the source alpha and where each view is defined."""
@@ -240,16 +248,16 @@ def displaced_map(map_src_canvas: np.ndarray, field_canvas: np.ndarray, cfg: Con
 
 
 def aligned_source_map(map_src_canvas: np.ndarray, grey_src: np.ndarray, grey_tgt: np.ndarray, valid_src: np.ndarray,
-                       valid_tgt: np.ndarray, alpha_canvas: np.ndarray, cfg: Config) -> np.ndarray:
+                       valid_tgt: np.ndarray, seam_x_canvas: np.ndarray, cfg: Config) -> np.ndarray:
     """A source map aligned to the target at every switch of a stitch (module docstring).
 
     map_src_canvas: (H, W, 2) float32 the map the stitch was cut on (step 6's, or one aligned before);
     grey_*: (H, W) float32 grey views it and the target give on the canvas, with their gains (NaN
     where undefined); valid_*: (H, W) bool;
-    alpha_canvas: (H, W) float32 the stitch's source weight (where the seam runs). Runs on
+    seam_x_canvas: (H,) the seam's x per canvas row (where the seam runs). Runs on
     ``cfg.device`` (resolved) with ``cfg.cpu_threads``.
     """
-    weight_src, weight_tgt = view_weights(alpha_canvas, valid_src, valid_tgt)
+    weight_src, weight_tgt = view_weights(seam_side_alpha(seam_x_canvas, valid_src.shape[1]), valid_src, valid_tgt)
     seam, border = switch_pixels(shown_labels(weight_src, weight_tgt), valid_src, valid_tgt)
     switches = seam | border
     both = valid_src & valid_tgt

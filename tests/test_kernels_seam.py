@@ -84,5 +84,6 @@ def test_seam_kernel_matches_numpy_reference(sigma):
     np.testing.assert_allclose(map_src_out, _bilinear_reference(map_src, qx, qy), atol=1e-3)
     np.testing.assert_allclose(map_tgt_out, np.stack([xs - offset[0], ys - offset[1]], -1), atol=1e-4)
     alpha_ref = np.clip(0.5 - t / transition, 0, 1) if sigma == 0 else _alpha_reference(t, transition, sigma)
-    np.testing.assert_allclose(alpha_out, alpha_ref, atol=1e-5)
+    np.testing.assert_allclose(alpha_out, alpha_ref, atol=1.01e-4)  # within 1e-4 of 0 or 1 it is 0 or 1 (as shown)
+    assert np.all(alpha_out[alpha_ref > 0.9999] == 1.0) and np.all(alpha_out[alpha_ref < 0.0001] == 0.0)
     assert alpha_out.min() == 0.0 and alpha_out.max() == 1.0

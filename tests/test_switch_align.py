@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sena_warp.config import Config
-from sena_warp.switch_align import aligned_source_map, shown_labels, switch_pixels, view_weights
+from sena_warp.switch_align import aligned_source_map, seam_side_alpha, shown_labels, switch_pixels, view_weights
 
 CFG = Config(device="cpu")
 
@@ -16,7 +16,7 @@ CFG = Config(device="cpu")
 def canvas_case(img: np.ndarray, shift_x: float, rows_tgt: slice):
     """The image as the target in ``rows_tgt`` (the whole width) and as a source whose step-6 map is off
     by ``shift_x`` (the map samples u + shift: the source shows each point shift_x left of the target);
-    a straight seam down x = 256. (map, grey_src, grey_tgt, valid_src, valid_tgt, alpha)."""
+    a straight seam down x = 256. (map, grey_src, grey_tgt, valid_src, valid_tgt, seam x per row)."""
     height, width = img.shape[:2]
     ys, xs = np.mgrid[0:height, 0:width].astype(np.float32)
     map_src = np.stack([xs + shift_x, ys], axis=-1)
@@ -26,8 +26,7 @@ def canvas_case(img: np.ndarray, shift_x: float, rows_tgt: slice):
     valid_tgt = np.zeros((height, width), bool)
     valid_tgt[rows_tgt] = True
     grey_tgt = np.where(valid_tgt, grey, np.nan).astype(np.float32)
-    alpha = np.clip(0.5 - (xs - 256.0) / 8.0, 0, 1).astype(np.float32)
-    return map_src, grey_src, grey_tgt, valid_src, valid_tgt, alpha
+    return map_src, grey_src, grey_tgt, valid_src, valid_tgt, np.full(height, 256.0, np.float32)
 
 
 def test_a_shifted_source_is_aligned_at_the_seam_and_the_borders_and_kept_far_from_them(udisd_pair):
@@ -40,7 +39,7 @@ def test_a_shifted_source_is_aligned_at_the_seam_and_the_borders_and_kept_far_fr
     aligned = aligned_source_map(map_src, *views, CFG)
     ys, xs = np.mgrid[0:512, 0:512].astype(np.float32)
     error = np.hypot(aligned[..., 0] - xs, aligned[..., 1] - ys)
-    weight_src, weight_tgt = view_weights(views[4], views[2], views[3])
+    weight_src, weight_tgt = view_weights(seam_side_alpha(views[4], 512), views[2], views[3])
     seam, border = switch_pixels(shown_labels(weight_src, weight_tgt), views[2], views[3])
     assert seam[150:350].any(axis=1).all() and border[99, 300:500].all() and border[400, 300:500].all()
     assert np.median(error[150:350, 250:263]) < 0.3  # at the seam
