@@ -195,8 +195,8 @@ class Config:
     video_drift_px: float = 2.0  # static rig: a view's move (input px) beyond this from what the maps follow moves them
     video_drift_speed_px: float = 0.5  # static rig: a drift move is blended in at this many px a frame (faster jolts)
     video_blend_frames: int = 10  # frames over which new maps are blended in linearly (at least): a drift's, a moving rig's new key
-    video_moving_edge_share: float = 0.75  # moving rig: an overlap this share of the target across the seam or more
-    # (a stereo rig) puts the seam's home at the overlap's target-side edge; above 1: the estimate's seam (the paper's)
+    video_edge_home_share: float = 0.75  # an overlap this share of the target across the seam or more (a mostly shared
+    # view: a stereo rig, webcams side by side) puts the seam's home at its target-side edge; above 1: the estimate's seam
     video_seam_edge_px: float = 3.0  # ... this far inside the overlap
     video_seam_speed_px: float = 2.0  # the seam moves at most this (or one cell) per frame (a blend lasts long enough), but for jumps
     video_estimate_lookahead_s: float = 1.5  # moving rig, worker: a re-estimate starts on the frame this far ahead of
@@ -388,7 +388,7 @@ RANGES: dict[str, Range] = {
     "video_screen_max_side": Range(32, 4096), "video_estimate_max_side": Range(64, 8192),
     "video_min_inlier_ratio": Range(0, 1), "video_max_median_change_px": Range(0, 10000),
     "video_drift_check_s": Range(0, 3600), "video_drift_px": _above(0, 10000), "video_drift_speed_px": _above(0, 10000),
-    "video_blend_frames": Range(0, 10000), "video_seam_speed_px": _above(0, 10000), "video_moving_edge_share": Range(0, 2),
+    "video_blend_frames": Range(0, 10000), "video_seam_speed_px": _above(0, 10000), "video_edge_home_share": Range(0, 2),
     "video_seam_edge_px": Range(0, 10000), "video_rig_moving_share": _above(0, 1),
     "video_rig_switch_share": _above(0, 1), "video_rig_still_share": _above(0, 1), "video_rig_still_s": _above(0, 3600),
     "video_align_short_px": Range(32, 4096), "video_align_points": Range(1, 10000), "video_align_min_share": Range(0, 1),

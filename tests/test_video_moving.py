@@ -21,8 +21,8 @@ from sena_warp.evaluation.crossing import write_clip
 from sena_warp.evaluation.rig_decisions import RECORDINGS, decisions
 from sena_warp.video.estimate import estimate_pair
 from sena_warp.video.loop import VideoOptions
-from sena_warp.video.maps import plane_maps, sampled_mask, target_offset
-from sena_warp.video.moving import MovingRig, edge_home, with_home
+from sena_warp.video.maps import edge_home, plane_maps, sampled_mask, target_offset, with_home
+from sena_warp.video.moving import MovingRig
 from sena_warp.video.stitch import fixed_canvas, stitch_videos
 from helpers import decoded_frames
 

@@ -18,6 +18,7 @@ import numpy as np
 import warp as wp
 
 from ..composite import BorderBlend, SeamLayout
+from ..config import Config
 from ..rig import Rig
 from ..stitch import StitchMaps
 from sena_warp.kernels import map_change, runtime
@@ -472,6 +473,49 @@ def overlap_lines(maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[
     first = np.argmax(both, axis=1)
     last = both.shape[1] - 1 - np.argmax(both[:, ::-1], axis=1)
     return np.stack([np.where(has, first, 0), np.where(has, last, -1)], axis=1).astype(np.int32)
+
+
+def edge_home(overlap: np.ndarray, home: np.ndarray, edge_px: float, most_px: float) -> np.ndarray:
+    """(L,) float32 a seam home ``edge_px`` inside the target's side of the ``overlap`` (L, 2) (first, last
+    position holding both views per line; the target lies above the seam), changing by at most
+    ``most_px`` from one line to the next and nowhere nearer the edge than that (raised where the
+    overlap's edge steps). Lines whose overlap is less than half the median's wide (where a view's slanted
+    top or bottom border cuts it) do not count: there the home runs on from the lines that do (off the
+    overlap the seam picks no view: each pixel shows the view that has it, the target first); ``home``
+    where no line has an overlap."""
+    width = overlap[:, 1] - overlap[:, 0] + 1
+    has = width > 0
+    if not has.any():
+        return np.asarray(home, np.float32)
+    full = width >= 0.5 * np.median(width[has])
+    lines = np.arange(len(overlap))
+    goal = np.interp(lines, lines[full], (overlap[full, 0] + np.minimum(edge_px, width[full] - 1)).astype(np.float64))
+    for k in range(1, len(goal)):  # the lowest home within the bound of its neighbours: raised, never lowered
+        goal[k] = max(goal[k], goal[k - 1] - most_px)
+    for k in range(len(goal) - 2, -1, -1):
+        goal[k] = max(goal[k], goal[k + 1] - most_px)
+    return goal.astype(np.float32)
+
+
+def with_home(key: PlaneMaps, shapes: tuple[tuple[int, int], tuple[int, int]], cfg: Config) -> PlaneMaps:
+    """``key`` with its seam's home for a rig of Y ``shapes`` (source, target): where its overlap spans
+    ``video_edge_home_share`` or more of the target across the seam (a mostly shared view: a stereo rig,
+    two webcams side by side, whose views differ most where things are near), the home is
+    ``video_seam_edge_px`` inside the overlap's target-side edge (:func:`edge_home`): the output is the
+    target, the source only beyond it, and a near object (a person close to both cameras) is not cut
+    between two views whose parallax differs; else the estimate's seam (the paper's)."""
+    overlap = overlap_lines(key, *shapes)
+    has = overlap[:, 1] >= overlap[:, 0]
+    rows = key.seam_luma.lines_are_rows
+    across = shapes[1][1] if rows else shapes[1][0]  # the target's extent across the seam
+    if not has.any() or np.median(overlap[has, 1] - overlap[has, 0] + 1) < cfg.video_edge_home_share * across:
+        return key
+    home = edge_home(overlap, key.seam_luma.positions, cfg.video_seam_edge_px, cfg.seam_max_step_px)
+    # The plan keeps both views as far from the new home as from the estimate's (a static plan's whole overlap).
+    moved = float(np.nanmax(np.abs(home - key.seam_luma.positions), initial=0.0))
+    return replace(key, seam_luma=replace(key.seam_luma, positions=home, band_px=key.seam_luma.band_px + moved),
+                   seam_chroma=replace(key.seam_chroma, positions=chroma_lines(home),
+                                       band_px=key.seam_chroma.band_px + 0.5 * moved))
 
 
 def seam_change_px(before: PlaneMaps, after: PlaneMaps) -> float:
