@@ -113,13 +113,15 @@ def copy_figures(copies_src_canvas: np.ndarray, copies_tgt_canvas: np.ndarray, w
 
 
 def seam_steps(pano_grey: np.ndarray, src_grey: np.ndarray, tgt_grey: np.ndarray, valid_src: np.ndarray,
-               valid_tgt: np.ndarray, seam_x: np.ndarray) -> np.ndarray:
+               valid_tgt: np.ndarray, seam_x: np.ndarray, one_view: bool = False) -> np.ndarray:
     """The signed seam step of each row, averaged over ``STEP_ROWS`` rows (module docstring): (H,) float64
     grey levels, NaN where a row or too many of its neighbours lack both views on both strips or have
     views that disagree about the scene's own change there (``STEP_AGREE_GREY``).
 
     Arguments as :func:`seam_step`. A positive step: the panorama is brighter just left of the seam
-    than the views' own change explains.
+    than the views' own change explains. ``one_view``: a row where only one view covers both strips
+    counts too, with that view's own change (a seam at the overlap's edge, where the view beyond it
+    goes on alone: as the border step reads a view's border).
     """
     height, width = pano_grey.shape
     offsets = np.arange(STEP_NEAR_PX, STEP_FAR_PX + 1)
@@ -130,15 +132,18 @@ def seam_steps(pano_grey: np.ndarray, src_grey: np.ndarray, tgt_grey: np.ndarray
     known = finite & (left.min(axis=1) >= 0) & (right.max(axis=1) < width)
     left, right = np.clip(left, 0, width - 1), np.clip(right, 0, width - 1)
     rows = np.arange(height)[:, None]
-    both = np.asarray(valid_src) & np.asarray(valid_tgt)
-    known &= both[rows, left].all(axis=1) & both[rows, right].all(axis=1)
+    on_src, on_tgt = (np.asarray(v)[rows, left].all(axis=1) & np.asarray(v)[rows, right].all(axis=1)
+                      for v in (valid_src, valid_tgt))
 
     def across(img: np.ndarray) -> np.ndarray:
         return img[rows, left].mean(axis=1) - img[rows, right].mean(axis=1)
 
     change_src, change_tgt = across(src_grey), across(tgt_grey)
-    known &= np.abs(change_src - change_tgt) <= STEP_AGREE_GREY
-    steps = np.where(known, across(pano_grey) - 0.5 * (change_src + change_tgt), 0.0)
+    both = on_src & on_tgt
+    agree = both & (np.abs(change_src - change_tgt) <= STEP_AGREE_GREY)
+    known &= (agree | (on_src ^ on_tgt)) if one_view else agree
+    change = np.where(both, 0.5 * (change_src + change_tgt), np.where(on_src, change_src, change_tgt))
+    steps = np.where(known, across(pano_grey) - change, 0.0)
     window = np.ones(STEP_ROWS)
     total = np.convolve(steps, window, "same")
     count = np.convolve(known.astype(np.float64), window, "same")

@@ -13,7 +13,8 @@ rig), in a band of :data:`BAND_MARGIN_PX` beyond the per-frame seam's reach arou
 * *Exposure step* (grey levels per frame): ``naturalness.seam_step`` on the band: the output luma
   just before the seam minus just after, less the two views' own change across those pixels (the
   views as they enter the output: warped, with the frame's gains; the seam blend's offsets are part
-  of the output, not of the views), on the lines where the views are aligned at the seam (the median
+  of the output, not of the views; on a line where one view alone covers both strips, a seam at the
+  overlap's edge, that view's own change), on the lines where the views are aligned at the seam (the median
   flow of the misalignment below at its textured cells within ``naturalness.STEP_FAR_PX`` of the seam
   at most :data:`STEP_ALIGNED_PX`, as last measured): where they are not, the two strips show each view
   something else (a near door in one, the room behind it in the other), the step is the scene's and
@@ -311,7 +312,7 @@ class VideoFigures:
         src_g = np.where(band.valid_src, tone_curve(src, gain_src, bias_src, knee, white), 0.0).astype(np.float32)
         tgt_g = np.where(band.valid_tgt, tone_curve(tgt, gain_tgt, bias_tgt, knee, white), 0.0).astype(np.float32)
         seam_band = np.asarray(frame.seam, np.float64) - band.x0
-        steps = naturalness.seam_steps(out, src_g, tgt_g, band.valid_src, band.valid_tgt, seam_band)
+        steps = naturalness.seam_steps(out, src_g, tgt_g, band.valid_src, band.valid_tgt, seam_band, one_view=True)
         last = self._last
         record = self.per_frame
         record["time_s"].append(frame.time_s)
