@@ -133,6 +133,7 @@ class ViewBackground:
         models.noise, models.spread_factor = float(self.noise), SPREAD_FACTOR
         self._models = models
         self._crowded = False  # whether most of a view was off its model in the last frame
+        self._band: tuple | None = None  # the last band's (diff, total) and their Warp views (a video's are the same arrays)
         self.frames = 0  # frames the models have learnt from
 
     def update(self, diff: np.ndarray, total: np.ndarray) -> np.ndarray:
@@ -170,9 +171,10 @@ class ViewBackground:
             gain, offset = whole_band_fit(background[view][fit], luma, both_fit & (off[view][fit] == 0),
                                           float(self.noise))
             explained += [np.float32(gain - 1.0), np.float32(offset)]
+        if self._band is None or self._band[0] is not diff or self._band[1] is not total:
+            self._band = diff, total, host_array(diff, float), host_array(total, float)
         runtime.launch_row_loops(view_background_kernel, diff.shape[0], diff.shape[1], [
-            host_array(diff, float), host_array(total, float), wp.vec4(*explained), self._models], DEVICE,
-            runtime.BAND_THREADS)
+            *self._band[2:], wp.vec4(*explained), self._models], DEVICE, runtime.BAND_THREADS)
         self._crowded = bool(both.any()) and max(float(view[both].mean()) for view in off) > FOREGROUND_MOST
         if self.frames < self._settle:
             off.fill(0)
