@@ -90,12 +90,15 @@ class Blob:
             return 0.0
         mine = slice(first - self.first_line, last - self.first_line + 1)
         theirs = slice(first - other.first_line, last - other.first_line + 1)
-        on = (self.ends[mine] > self.starts[mine]) & (other.ends[theirs] > other.starts[theirs])
-        if not on.any():
+        starts, ends = [], []  # on a blob's few lines, Python lists cost a third of numpy's calls
+        for start, end, start_other, end_other in zip(self.starts[mine].tolist(), self.ends[mine].tolist(),
+                                                      other.starts[theirs].tolist(), other.ends[theirs].tolist()):
+            if end > start and end_other > start_other:
+                starts.append(start - start_other)
+                ends.append(end - end_other)
+        if not starts:
             return 0.0
-        starts, ends = row_medians(np.stack([self.starts[mine][on] - other.starts[theirs][on],
-                                             self.ends[mine][on] - other.ends[theirs][on]]))
-        return min(starts, ends)
+        return min(median(starts), median(ends))
 
     def shared_lines(self, other: "Blob") -> float:
         """The share of the shorter blob's lines that both cover."""
@@ -104,15 +107,12 @@ class Blob:
         return max(shared, 0) / shorter
 
 
-def row_medians(values: np.ndarray) -> list[float]:
-    """Each row's median of ``values`` (R, n) int, n > 0, as ``np.median`` gives it (the mean of the two
-    middle values where n is even), in a tenth of its time on a blob's few lines."""
-    ordered = np.sort(values, axis=1)
-    n = ordered.shape[1]
-    middle = ordered[:, n // 2].astype(np.float64)
-    if n % 2 == 0:
-        middle = (ordered[:, n // 2 - 1].astype(np.float64) + middle) / 2.0
-    return middle.tolist()
+def median(values: list[int]) -> float:
+    """The median of ``values`` (not empty) as ``np.median`` gives it: the mean of the two middle values
+    where there are an even number."""
+    ordered = sorted(values)
+    n = len(ordered)
+    return float(ordered[n // 2]) if n % 2 else (float(ordered[n // 2 - 1]) + float(ordered[n // 2])) / 2.0
 
 
 class ViewBackground:
