@@ -323,13 +323,16 @@ def copy_extents(copies: list[Blob | None], first_cell: np.ndarray, lines: int, 
     big = np.iinfo(np.int64).max // 4
     start = np.full((len(copies), lines + 2 * reach), big, np.int64)  # ``reach`` lines of padding each side
     end = np.full((len(copies), lines + 2 * reach), -big, np.int64)
-    for row, blob in enumerate(copies):
-        if blob is None:
-            continue
-        on = blob.ends > blob.starts
-        at = np.arange(blob.first_line, blob.last_line + 1)[on]
-        start[row, at + reach] = blob.starts[on] + first_cell[at]
-        end[row, at + reach] = blob.ends[on] + first_cell[at]
+    present = [(row, blob) for row, blob in enumerate(copies) if blob is not None]
+    if present:  # every copy's lines at once
+        rows = np.concatenate([np.full(len(blob.starts), row) for row, blob in present])
+        at = np.concatenate([np.arange(blob.first_line, blob.last_line + 1) for _, blob in present])
+        starts = np.concatenate([blob.starts for _, blob in present])
+        ends = np.concatenate([blob.ends for _, blob in present])
+        on = ends > starts
+        rows, at = rows[on], at[on]
+        start[rows, at + reach] = starts[on] + first_cell[at]
+        end[rows, at + reach] = ends[on] + first_cell[at]
     first, last = start[:, :lines].copy(), end[:, :lines].copy()
     for shift in range(1, 2 * reach + 1):  # the lines within reach: a few shifts of the padded extents
         np.minimum(first, start[:, shift:shift + lines], out=first)
