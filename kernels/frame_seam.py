@@ -7,7 +7,8 @@ from ``kernels/frame_objects.py``. Two kernels follow on Warp's CPU device (:dat
 band's few thousand cells are, so the band is read a few times rather than by a dozen array
 expressions: what each cell costs the seam's paths, and the difference next to the chosen seam (the
 seam blend's). Both run one thread per line (``runtime.launch_rows`` with width 1): they reduce along
-it.
+it. A third, on one thread, moves the band's centre no faster than a path can follow (a chain of
+clamps, each on the last: a loop, 10x cheaper compiled than in Python).
 """
 
 from __future__ import annotations
@@ -149,3 +150,31 @@ def strip_mean_kernel(
             found = found + 1
     mean[k] = total / float(wp.max(found, 1))
     count[k] = found
+
+
+@wp.kernel
+def gentle_kernel(row0: int, positions: wp.array(dtype=wp.float64), most: wp.float64):
+    """``positions`` in place, each clamped to within ``most`` of the one before it, forwards and then
+    backwards (``frame_seam.gentle``: a band centre a path can follow); each clamp as Python's
+    ``min(max(x, lo), hi)``. One thread (``runtime.launch_rows`` of 1 x 1): the clamps run in order."""
+    _i, _j = wp.tid()
+    count = positions.shape[0]
+    for k in range(1, count):
+        v = positions[k]
+        lo = positions[k - 1] - most
+        hi = positions[k - 1] + most
+        if lo > v:
+            v = lo
+        if hi < v:
+            v = hi
+        positions[k] = v
+    for n in range(count - 1):
+        k = count - 2 - n
+        v = positions[k]
+        lo = positions[k + 1] - most
+        hi = positions[k + 1] + most
+        if lo > v:
+            v = lo
+        if hi < v:
+            v = hi
+        positions[k] = v

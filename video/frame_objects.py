@@ -90,17 +90,29 @@ class Blob:
             return 0.0
         mine = slice(first - self.first_line, last - self.first_line + 1)
         theirs = slice(first - other.first_line, last - other.first_line + 1)
-        on = (self.ends[mine] > self.starts[mine]) & (other.ends[theirs] > other.starts[theirs])
-        if not on.any():
+        starts, ends = [], []  # on a blob's few lines, Python lists cost a third of numpy's calls
+        for start, end, start_other, end_other in zip(self.starts[mine].tolist(), self.ends[mine].tolist(),
+                                                      other.starts[theirs].tolist(), other.ends[theirs].tolist()):
+            if end > start and end_other > start_other:
+                starts.append(start - start_other)
+                ends.append(end - end_other)
+        if not starts:
             return 0.0
-        return float(min(np.median(self.starts[mine][on] - other.starts[theirs][on]),
-                         np.median(self.ends[mine][on] - other.ends[theirs][on])))
+        return min(median(starts), median(ends))
 
     def shared_lines(self, other: "Blob") -> float:
         """The share of the shorter blob's lines that both cover."""
         shared = min(self.last_line, other.last_line) - max(self.first_line, other.first_line) + 1
         shorter = min(len(self.starts), len(other.starts))
         return max(shared, 0) / shorter
+
+
+def median(values: list[int]) -> float:
+    """The median of ``values`` (not empty) as ``np.median`` gives it: the mean of the two middle values
+    where there are an even number."""
+    ordered = sorted(values)
+    n = len(ordered)
+    return float(ordered[n // 2]) if n % 2 else (float(ordered[n // 2 - 1]) + float(ordered[n // 2])) / 2.0
 
 
 class ViewBackground:
@@ -121,6 +133,7 @@ class ViewBackground:
         models.noise, models.spread_factor = float(self.noise), SPREAD_FACTOR
         self._models = models
         self._crowded = False  # whether most of a view was off its model in the last frame
+        self._band: tuple | None = None  # the last band's (diff, total) and their Warp views (a video's are the same arrays)
         self.frames = 0  # frames the models have learnt from
 
     def update(self, diff: np.ndarray, total: np.ndarray) -> np.ndarray:
@@ -158,9 +171,10 @@ class ViewBackground:
             gain, offset = whole_band_fit(background[view][fit], luma, both_fit & (off[view][fit] == 0),
                                           float(self.noise))
             explained += [np.float32(gain - 1.0), np.float32(offset)]
+        if self._band is None or self._band[0] is not diff or self._band[1] is not total:
+            self._band = diff, total, host_array(diff, float), host_array(total, float)
         runtime.launch_row_loops(view_background_kernel, diff.shape[0], diff.shape[1], [
-            host_array(diff, float), host_array(total, float), wp.vec4(*explained), self._models], DEVICE,
-            runtime.BAND_THREADS)
+            *self._band[2:], wp.vec4(*explained), self._models], DEVICE, runtime.BAND_THREADS)
         self._crowded = bool(both.any()) and max(float(view[both].mean()) for view in off) > FOREGROUND_MOST
         if self.frames < self._settle:
             off.fill(0)
@@ -204,14 +218,11 @@ def blobs(foreground: np.ndarray, least: int) -> list[Blob]:
     """The connected parts (8-neighbours) of ``foreground`` (K, cells) uint8 of at least ``least`` cells."""
     count, labels, stats, centroids = cv2.connectedComponentsWithStats(foreground, connectivity=8)
     found = []
-    for label in np.flatnonzero(stats[:, cv2.CC_STAT_AREA] >= least):
-        if label == 0:  # the background
-            continue
+    for label in (np.flatnonzero(stats[1:, cv2.CC_STAT_AREA] >= least) + 1).tolist():  # label 0: the background
         x, y, w, h, area = stats[label].tolist()
-        part = labels[y:y + h, x:x + w] == label
-        on = part.any(axis=1)
-        starts = np.where(on, x + np.argmax(part, axis=1), 0).astype(np.int32)
-        ends = np.where(on, x + w - np.argmax(part[:, ::-1], axis=1), 0).astype(np.int32)
+        part = labels[y:y + h, x:x + w] == label  # a connected part has a cell on every line of its box
+        starts = (x + np.argmax(part, axis=1)).astype(np.int32)
+        ends = (x + w - np.argmax(part[:, ::-1], axis=1)).astype(np.int32)
         found.append(Blob(y, starts, ends, area, float(centroids[label, 0])))
     return found
 
@@ -230,12 +241,11 @@ def pair_copies(blobs_src: list[Blob], blobs_tgt: list[Blob], reach: float) -> l
     of a target blob is another thing (what a model learnt while someone stood there, a second person)."""
     candidates = []
     for i, src in enumerate(blobs_src):
-        for j, tgt in enumerate(blobs_tgt):
+        for j, tgt in enumerate(blobs_tgt):  # the cheap tests first: most pairs of blobs fail one
             shared = src.shared_lines(tgt)
             likeness = min(src.area, tgt.area) / max(src.area, tgt.area)
-            behind = src.behind(tgt) < -PAIR_BEHIND
             if shared >= PAIR_OVERLAP and likeness >= PAIR_AREA and abs(src.centre - tgt.centre) <= reach \
-                    and not behind:
+                    and src.behind(tgt) >= -PAIR_BEHIND:
                 candidates.append((shared * likeness, i, j))
     pairs, used_src, used_tgt = [], set(), set()
     for _, i, j in sorted(candidates, reverse=True):
@@ -269,24 +279,27 @@ def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarra
     first_both = np.where(has_both, np.argmax(both, axis=1), cells) + first_cell
     last_both = np.where(has_both, cells - 1 - np.argmax(both[:, ::-1], axis=1), -1) + first_cell
     edges = np.zeros((lines, cells + 1), np.int32)  # +1 where a strip starts, -1 where it ends
-    for src, tgt in pairs:
-        copies = [blob for blob in (src, tgt) if blob is not None]
-        top = max(min(b.first_line for b in copies) - margin_lines, 0)
-        bottom = min(max(b.last_line for b in copies) + margin_lines, lines - 1)
-        extents = {name: line_extents(blob, first_cell, top, bottom, margin_lines)
-                   for name, blob in (("src", src), ("tgt", tgt)) if blob is not None}
-        start = np.min([e[0] for e in extents.values()], axis=0) - margin_cells
-        end = np.max([e[1] for e in extents.values()], axis=0) + margin_cells
-        lone = len(extents) == 1
+    if pairs:
+        # Per object (rows) and line: each copy's extent (a lone copy's partner: none), and the lines the
+        # strip may take, its copies' within ``margin_lines``.
+        (src_start, src_end), (tgt_start, tgt_end) = (
+            copy_extents([pair[view] for pair in pairs], first_cell, lines, margin_lines) for view in (0, 1))
+        tops = [max(min(b.first_line for b in pair if b is not None) - margin_lines, 0) for pair in pairs]
+        bottoms = [min(max(b.last_line for b in pair if b is not None) + margin_lines, lines - 1) for pair in pairs]
+        start = np.minimum(src_start, tgt_start) - margin_cells
+        end = np.maximum(src_end, tgt_end) + margin_cells
         # The target's copy decides the left end, the source's the right one (a lone copy: both).
-        left = extents["tgt"] if "tgt" in extents and not lone else next(iter(extents.values()))
-        right = extents["src"] if "src" in extents and not lone else next(iter(extents.values()))
-        on = np.flatnonzero(end > start + 2 * margin_cells)
-        k = top + on
-        cut_left = left[0][on] - margin_cells <= first_both[k]
-        cut_right = right[1][on] + margin_cells > last_both[k]
-        lo = np.where(cut_left, 0, np.minimum(np.maximum(start[on] - first_cell[k], 0), cells))
-        hi = np.where(cut_right, cells, np.minimum(np.maximum(end[on] - first_cell[k], 0), cells))
+        lone_src = np.array([tgt is None for _, tgt in pairs])[:, None]
+        lone_tgt = np.array([src is None for src, _ in pairs])[:, None]
+        left = np.where(lone_src, src_start, tgt_start)
+        right = np.where(lone_tgt, tgt_end, src_end)
+        line = np.arange(lines)[None, :]
+        spans = (line >= np.array(tops)[:, None]) & (line <= np.array(bottoms)[:, None])
+        obj, k = np.nonzero(spans & (end > start + 2 * margin_cells))
+        cut_left = left[obj, k] - margin_cells <= first_both[k]
+        cut_right = right[obj, k] + margin_cells > last_both[k]
+        lo = np.where(cut_left, 0, np.minimum(np.maximum(start[obj, k] - first_cell[k], 0), cells))
+        hi = np.where(cut_right, cells, np.minimum(np.maximum(end[obj, k] - first_cell[k], 0), cells))
         np.add.at(edges, (k, lo), 1)
         np.add.at(edges, (k, hi), -1)
     inside = np.cumsum(edges[:, :cells], axis=1) > 0
@@ -301,25 +314,29 @@ def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarra
     return out
 
 
-def line_extents(blob: Blob, first_cell: np.ndarray, top: int, bottom: int, reach: int
+def copy_extents(copies: list[Blob | None], first_cell: np.ndarray, lines: int, reach: int
                  ) -> tuple[np.ndarray, np.ndarray]:
-    """(first position, one past the last) (bottom - top + 1,) int64, in cells along the line from
-    the line's own origin (band line k begins at ``first_cell[k]``), of ``blob`` on each line from
-    ``top`` to ``bottom`` (``top`` at most its first line), each line taking its neighbours' within
-    ``reach`` lines too; an empty extent (start > end) where none."""
+    """(first position, one past the last) (C, lines) int64, in cells along the line from the line's own
+    origin (band line k begins at ``first_cell[k]``), of each of ``copies`` on each of the band's
+    ``lines`` lines, each line taking its neighbours' within ``reach`` lines too; an empty extent
+    (start > end) where none, and everywhere for a copy that is None."""
     big = np.iinfo(np.int64).max // 4
-    count = bottom - top + 1
-    start = np.full(count + 2 * reach, big, np.int64)  # ``reach`` lines of padding each side
-    end = np.full(count + 2 * reach, -big, np.int64)
-    lines = np.arange(blob.first_line, blob.last_line + 1)
-    on = (blob.ends > blob.starts) & (lines <= bottom + reach)
-    at = lines[on] - top + reach
-    start[at] = blob.starts[on] + first_cell[lines[on]]
-    end[at] = blob.ends[on] + first_cell[lines[on]]
-    first, last = start[:count].copy(), end[:count].copy()
+    start = np.full((len(copies), lines + 2 * reach), big, np.int64)  # ``reach`` lines of padding each side
+    end = np.full((len(copies), lines + 2 * reach), -big, np.int64)
+    present = [(row, blob) for row, blob in enumerate(copies) if blob is not None]
+    if present:  # every copy's lines at once
+        rows = np.concatenate([np.full(len(blob.starts), row) for row, blob in present])
+        at = np.concatenate([np.arange(blob.first_line, blob.last_line + 1) for _, blob in present])
+        starts = np.concatenate([blob.starts for _, blob in present])
+        ends = np.concatenate([blob.ends for _, blob in present])
+        on = ends > starts
+        rows, at = rows[on], at[on]
+        start[rows, at + reach] = starts[on] + first_cell[at]
+        end[rows, at + reach] = ends[on] + first_cell[at]
+    first, last = start[:, :lines].copy(), end[:, :lines].copy()
     for shift in range(1, 2 * reach + 1):  # the lines within reach: a few shifts of the padded extents
-        np.minimum(first, start[shift:shift + count], out=first)
-        np.maximum(last, end[shift:shift + count], out=last)
+        np.minimum(first, start[:, shift:shift + lines], out=first)
+        np.maximum(last, end[:, shift:shift + lines], out=last)
     return first, last
 
 

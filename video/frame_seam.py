@@ -62,7 +62,8 @@ from ..seam_path import BandPath, separation_spans
 from sena_warp.kernels import runtime
 from sena_warp.kernels.composite import NOT_BOTH
 from sena_warp.kernels.frame_objects import CellGrid, coarse_masks_kernel
-from sena_warp.kernels.frame_seam import DEVICE, CellCosts, LastSeam, SeamCosts, band_cost_kernel, strip_mean_kernel
+from sena_warp.kernels.frame_seam import (DEVICE, CellCosts, LastSeam, SeamCosts, band_cost_kernel, gentle_kernel,
+                                          strip_mean_kernel)
 from sena_warp.kernels.transfer import host_array
 from .frame_objects import ObjectBand, ObjectGrid
 
@@ -137,13 +138,17 @@ class BandPlace:
     @staticmethod
     def of(home: np.ndarray, grid: BandGrid, cfg: Config, centre: np.ndarray | None = None) -> "BandPlace":
         """The band about ``centre`` (K,) px on the solved lines, or about ``home`` without one."""
-        half = grid.width // 2
-        centre = home[grid.lines] if centre is None else centre
-        x0 = ((np.floor_divide(np.rint(centre).astype(np.int32), grid.cell) - half) * grid.cell).astype(np.int32)
+        x0 = BandPlace.first_cells(home[grid.lines] if centre is None else centre, grid)
         cells = x0[:, None] + grid.cell * np.arange(grid.width, dtype=np.int32)[None, :]
         home_term = np.empty(grid.shape, np.float32)
         np.copyto(home_term, cfg.video_seam_home_cost * np.abs(cells - home[grid.lines, None]), casting="unsafe")
         return BandPlace(home, x0, cells, home_term, host_array(x0, int), host_array(home_term, float))
+
+    @staticmethod
+    def first_cells(centre: np.ndarray, grid: BandGrid) -> np.ndarray:
+        """(K,) int32 each solved line's first cell (px) of a band about ``centre`` (K,) px."""
+        half = grid.width // 2
+        return ((np.floor_divide(np.rint(centre).astype(np.int32), grid.cell) - half) * grid.cell).astype(np.int32)
 
 
 @dataclass(frozen=True)
@@ -298,9 +303,9 @@ class FrameSeam:
         the band left the seam last shown behind, the next solve is free in the band."""
         grid, place = self.grid, self.place
         centre = gentle(self.objects.centre(grid.lines), max(grid.max_step - 1, 1) * grid.cell)
-        moved = BandPlace.of(place.home, grid, self.cfg, centre)
-        if np.array_equal(moved.x0, place.x0):
+        if np.array_equal(BandPlace.first_cells(centre, grid), place.x0):
             return
+        moved = BandPlace.of(place.home, grid, self.cfg, centre)
         self._shift = np.where(np.abs(self._shift) >= grid.width, self._shift,
                                (moved.x0 - place.x0) // grid.cell).astype(np.int32)
         self._moved = bool(np.any((self._shown < moved.x0) | (self._shown > moved.cells[:, -1])))
@@ -453,13 +458,9 @@ def gentle(positions: np.ndarray, most: float) -> np.ndarray:
     out = np.asarray(positions, np.float64)
     if np.all(np.abs(np.diff(out)) <= most):  # gentle already (the route's own steps are): nothing moves
         return out.copy()
-    out = out.tolist()  # Python floats: a loop over numpy scalars is 10x slower
-    most = float(most)
-    for k in range(1, len(out)):
-        out[k] = min(max(out[k], out[k - 1] - most), out[k - 1] + most)
-    for k in range(len(out) - 2, -1, -1):
-        out[k] = min(max(out[k], out[k + 1] - most), out[k + 1] + most)
-    return np.array(out, np.float64)
+    out = out.copy()
+    runtime.launch_rows(gentle_kernel, 1, 1, [host_array(out, wp.float64), float(most)], DEVICE, runtime.BAND_THREADS)
+    return out
 
 
 def separation_band_cost(lines: np.ndarray, x0: np.ndarray, cell: int, width: int, copies_tgt: np.ndarray,
