@@ -258,9 +258,10 @@ class SenaFrameCompositor:
         self.output_size = (shown[2], shown[3])
         self._steady = SteadyCanvas(shape, (shown[3], shown[2]), self._canvas.scale, cfg)
         # A rig that may be static: its seam may go round what is in front anywhere in the overlap.
-        static = rig.pick(*frame_shapes) if cfg.video_rig != "moving" else None
+        shapes_src_tgt = rig.pick(*frame_shapes)
+        static = shapes_src_tgt if cfg.video_rig != "moving" else None
         maps = with_home(maps_on_canvas(first, self._canvas.stitched_shape, offset_tgt, self._canvas.band_px, shape,
-                                        static), rig.pick(*frame_shapes), cfg)
+                                        static), shapes_src_tgt, cfg)
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": maps.inliers, "seconds": round(sum(first.seconds.values()), 4)}
         first_s = next(a.time_s for a in first_attempts if a.pair == first_pair)
