@@ -43,9 +43,13 @@ def test_a_new_key_takes_over_without_a_jump(clips):
     shapes = (left[0].y.shape, right[0].y.shape) if src_is_left else (right[0].y.shape, left[0].y.shape)
     x0, y0, width, height = fixed_canvas(first, shapes, False)
     offset = target_offset(first.map_tgt_input) - np.array([x0, y0], np.float64)
-    key, new = plane_maps(first, (height, width), offset), plane_maps(later, (height, width), offset)
     pick = (lambda i: (left[i].y, right[i].y)) if src_is_left else (lambda i: (right[i].y, left[i].y))
-    rig = MovingRig(key, offset, (pick(0)[0].shape, pick(0)[1].shape), CFG)
+    shapes_src_tgt = (pick(0)[0].shape, pick(0)[1].shape)
+    estimated = plane_maps(later, (height, width), offset)
+    # The rooftop's overlap spans 83 % of the target: each key's home is at the overlap's edge (with_home).
+    key, new = (with_home(plane_maps(first, (height, width), offset), shapes_src_tgt, CFG),
+                with_home(estimated, shapes_src_tgt, CFG))
+    rig = MovingRig(key, offset, shapes_src_tgt, CFG)
     gains = (1.0, 0.0, 1.0, 0.0)
     maps = [rig.frame_maps(*pick(i), gains) for i in range(25, 31)]
     earlier, before = maps[-2], maps[-1]
@@ -60,10 +64,9 @@ def test_a_new_key_takes_over_without_a_jump(clips):
     step = np.abs(after.map_src_luma - before.map_src_luma)[shown]
     usual = np.abs(before.map_src_luma - earlier.map_src_luma)[shown]
     assert np.percentile(step, 99) < 1.5 * np.percentile(usual, 99) < 0.5 * np.percentile(keys_apart, 99)
-    # Its seam's home moves towards the new key's, at most video_seam_speed_px a frame (the rooftop's overlap
-    # spans 83 % of the target: the home is at the overlap's edge, with_home) ...
-    home = with_home(new, rig.shapes, CFG).seam_luma.positions
-    assert not np.allclose(home, new.seam_luma.positions)
+    # Its seam's home moves towards the new key's, at most video_seam_speed_px a frame ...
+    home = new.seam_luma.positions
+    assert not np.allclose(home, estimated.seam_luma.positions)
     assert np.abs(after.seam_luma.positions - before.seam_luma.positions).max() <= CFG.video_seam_speed_px + 1e-3
     # ... and reaches it once it could have at that speed (and after video_blend_frames at least).
     frames = max(CFG.video_blend_frames,

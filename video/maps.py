@@ -152,19 +152,20 @@ def plane_maps(maps: StitchMaps, shape: tuple[int, int], offset_fixed: np.ndarra
 
 
 def maps_on_canvas(maps: StitchMaps, shape: tuple[int, int], offset_fixed: np.ndarray, band_px: int,
-                   shape_out: tuple[int, int],
-                   static_shapes: tuple[tuple[int, int], tuple[int, int]] | None = None) -> PlaneMaps:
+                   shape_out: tuple[int, int], shapes: tuple[tuple[int, int], tuple[int, int]], static: bool,
+                   cfg: Config) -> PlaneMaps:
     """:func:`plane_maps` of an estimate on the fixed canvas of ``shape``, scaled to the output of
-    ``shape_out`` (:func:`scaled_plane_maps`), its plan's band widened by ``band_px``, the reach of the
-    per-frame seam (``frame_seam.band_half_width``, output pixels), so both views are kept wherever the
-    frame's seam may go. ``static_shapes``: for a static rig, the (rows, cols) of the source's and the
-    target's Y planes: its seam may go round what is in front anywhere in the overlap, so the overlap is
-    kept (``overlap_luma``, output pixels) and the plan's band reaches over all of it."""
-    plane = scaled_plane_maps(plane_maps(maps, shape, offset_fixed), shape_out)
+    ``shape_out`` (:func:`scaled_plane_maps`), with its seam's home for a rig of Y ``shapes`` (rows, cols
+    of the source's and the target's planes; :func:`with_home`), its plan's band widened by ``band_px``,
+    the reach of the per-frame seam (``frame_seam.band_half_width``, output pixels), so both views are kept
+    wherever the frame's seam may go. ``static``: a static rig, whose seam may go round what is in front
+    anywhere in the overlap: the overlap is kept (``overlap_luma``, output pixels) and the plan's band
+    reaches over all of it from the home."""
+    plane = with_home(scaled_plane_maps(plane_maps(maps, shape, offset_fixed), shape_out), shapes, cfg)
     reach = band_px + plane.seam_luma.band_px
     overlap = None
-    if static_shapes is not None:
-        overlap = overlap_lines(plane, *static_shapes)
+    if static:
+        overlap = overlap_lines(plane, *shapes)
         home, inside = plane.seam_luma.positions, overlap[:, 1] >= overlap[:, 0]
         far = np.maximum(home - overlap[:, 0], overlap[:, 1] - home)[inside & np.isfinite(home)]
         reach += float(far.max()) if far.size else 0.0
@@ -511,11 +512,8 @@ def with_home(key: PlaneMaps, shapes: tuple[tuple[int, int], tuple[int, int]], c
     if not has.any() or np.median(overlap[has, 1] - overlap[has, 0] + 1) < cfg.video_edge_home_share * across:
         return key
     home = edge_home(overlap, key.seam_luma.positions, cfg.video_seam_edge_px, cfg.seam_max_step_px)
-    # The plan keeps both views as far from the new home as from the estimate's (a static plan's whole overlap).
-    moved = float(np.nanmax(np.abs(home - key.seam_luma.positions), initial=0.0))
-    return replace(key, seam_luma=replace(key.seam_luma, positions=home, band_px=key.seam_luma.band_px + moved),
-                   seam_chroma=replace(key.seam_chroma, positions=chroma_lines(home),
-                                       band_px=key.seam_chroma.band_px + 0.5 * moved))
+    return replace(key, seam_luma=replace(key.seam_luma, positions=home),
+                   seam_chroma=replace(key.seam_chroma, positions=chroma_lines(home)))
 
 
 def seam_change_px(before: PlaneMaps, after: PlaneMaps) -> float:

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..config import Config
 from .align import Alignment, FrameAlignment, Seam, copies_apart, sample_map
-from .maps import PlaneMaps, with_home
+from .maps import PlaneMaps
 
 KEY_GRID_PX = 16  # a new key's correction is fitted to the map of the moment on a grid this fine (canvas px)
 POOR_SHARE = 0.5  # the alignment is poor on a frame where fewer of its points than this follow the warp ...
@@ -92,7 +92,8 @@ def home_fade(now: PlaneMaps, key: PlaneMaps, frames: int, cfg: Config
 class MovingRig:
     """The maps of a moving rig's frames (module docstring).
 
-    ``key``: the key estimate's :class:`PlaneMaps` on the fixed canvas; ``offset_tgt`` (x, y) whole px the
+    ``key``: the key estimate's :class:`PlaneMaps` on the fixed canvas, with its seam's home
+    (``maps.maps_on_canvas``); ``offset_tgt`` (x, y) whole px the
     target's canvas offset; ``shapes``: (rows, cols) of the source's and the target's Y planes. Each
     frame, :meth:`frame_maps` gives the maps to composite it with; ``alignment`` is its
     :class:`~sena_warp.video.align.Alignment`.
@@ -102,7 +103,7 @@ class MovingRig:
                  cfg: Config):
         self.cfg = cfg
         self.shapes = shapes
-        self.key = with_home(key, shapes, cfg)
+        self.key = key
         self.aligner = FrameAlignment(key.map_src_luma, offset_tgt, shapes, cfg)
         self.alignment: Alignment | None = None
         self.maps = key
@@ -169,10 +170,9 @@ class MovingRig:
         return self._poor_frames >= POOR_FRAMES
 
     def rekey(self, key: PlaneMaps) -> None:
-        """Make ``key`` (a new estimate on the fixed canvas, its target maps the canvas's) the key, from
-        the next frame on, without a jump (module docstring)."""
+        """Make ``key`` (a new estimate on the fixed canvas with its seam's home, its target maps the
+        canvas's) the key, from the next frame on, without a jump (module docstring)."""
         now = self.maps
-        key = with_home(key, self.shapes, self.cfg)
         height, width = key.shape
         rows, cols = np.mgrid[KEY_GRID_PX // 2:height:KEY_GRID_PX, KEY_GRID_PX // 2:width:KEY_GRID_PX]
         pts = np.stack([cols.ravel(), rows.ravel()], axis=1).astype(np.float64)

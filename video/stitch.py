@@ -58,7 +58,7 @@ from .frame_seam import BandFrame, FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_still, run_video
 from .maps import (PlaneMaps, chroma_lines, map_change_px, maps_on_canvas, output_shape, sampled_mask,
                    seam_change_px, seam_on_canvas_lines, seam_per_target_line, target_offset, windowed_lines,
-                   windowed_seam, with_home)
+                   windowed_seam)
 from .reader import YuvFrame, probe_video
 from .align import Seam
 from .rig_motion import RigMotion
@@ -259,9 +259,8 @@ class SenaFrameCompositor:
         self._steady = SteadyCanvas(shape, (shown[3], shown[2]), self._canvas.scale, cfg)
         # A rig that may be static: its seam may go round what is in front anywhere in the overlap.
         shapes_src_tgt = rig.pick(*frame_shapes)
-        static = shapes_src_tgt if cfg.video_rig != "moving" else None
-        maps = with_home(maps_on_canvas(first, self._canvas.stitched_shape, offset_tgt, self._canvas.band_px, shape,
-                                        static), shapes_src_tgt, cfg)
+        maps = maps_on_canvas(first, self._canvas.stitched_shape, offset_tgt, self._canvas.band_px, shape,
+                              shapes_src_tgt, cfg.video_rig != "moving", cfg)
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": maps.inliers, "seconds": round(sum(first.seconds.values()), 4)}
         first_s = next(a.time_s for a in first_attempts if a.pair == first_pair)

@@ -198,9 +198,8 @@ class Reestimates:
             if estimate.rig.vertical != canvas.rig.vertical:
                 return None, "rig orientation changed"
             # Under --rig auto the key may be kept by a static plan later: its overlap is kept too.
-            static = (shape_src, shape_tgt) if cfg.video_rig == "auto" else None
             candidate = maps_on_canvas(estimate, canvas.stitched_shape, canvas.offset_tgt, canvas.band_px, canvas.shape,
-                                       static)
+                                       (shape_src, shape_tgt), cfg.video_rig == "auto", cfg)
             reason = rejection_reason(candidate, current(), self._first_inliers, shape_src, shape_tgt, cfg)
             return (candidate, None) if reason is None else (None, reason)
         except StitchError as exc:
