@@ -231,9 +231,6 @@ def past_target_src(views: CanvasViews, seam_x_canvas: np.ndarray, offset_tgt: t
     ox, oy = (int(round(v)) for v in offset_tgt)
     rows_tgt, cols_tgt = shape_tgt[:2]
     strip = max(1, cfg.seam_blend_strip_px)
-    grey_src, grey_tgt = views.grey()
-    diff = np.nan_to_num(grey_src - grey_tgt)
-    smooth = smoothed_over(diff, views.both, cfg.past_target_sigma_px)
     kept = np.zeros_like(past)
     for inside, beyond, edge in ((slice(max(oy, 0), max(oy + strip, 0)), slice(0, max(oy, 0)), oy - 1),
                                  (slice(max(oy + rows_tgt - strip, 0), max(oy + rows_tgt, 0)), slice(oy + rows_tgt, height),
@@ -243,7 +240,8 @@ def past_target_src(views: CanvasViews, seam_x_canvas: np.ndarray, offset_tgt: t
         start = int(np.floor(seam_x[edge])) + 1
         shown_tgt = views.both[inside] & (cols > seam_x[inside, None] + 0.5 * cfg.transition_px)
         used = shown_tgt & cv2.erode(views.both[inside].astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
-        end = agreeing_end(views.valid_src[edge], (diff[inside], smooth[inside]), used, start, min(width, ox + cols_tgt), cfg)
+        end = agreeing_end(views.valid_src[edge], band_differences(views, inside, cfg.past_target_sigma_px), used, start,
+                           min(width, ox + cols_tgt), cfg)
         kept[beyond, :end] = True
     return past & ~kept
 
@@ -270,6 +268,19 @@ def agreeing_end(goes_on: np.ndarray, diffs: tuple[np.ndarray, np.ndarray], used
         if gap.size:
             return x0 + int(gap[0])
     return max(start, stop, 0)
+
+
+def band_differences(views: CanvasViews, rows: slice, sigma_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """(R, W) float32 each: the grey difference source minus target on canvas rows ``rows`` (0 where a
+    view is not defined) as it is and ``smoothed_over`` the overlap by ``sigma_px``, from those rows and
+    the few beyond them the smoothing reaches (the rest of the canvas is not converted)."""
+    reach = int(np.ceil(4.0 * sigma_px)) + 1
+    lo, hi = max(rows.start - reach, 0), min(rows.stop + reach, views.both.shape[0])
+    band = CanvasViews(views.src[lo:hi], views.tgt[lo:hi], views.valid_src[lo:hi], views.valid_tgt[lo:hi])
+    grey_src, grey_tgt = band.grey()
+    diff = np.nan_to_num(grey_src - grey_tgt)
+    inside = slice(rows.start - lo, rows.stop - lo)
+    return diff[inside], smoothed_over(diff, band.both, sigma_px)[inside]
 
 
 def smoothed_over(values: np.ndarray, known: np.ndarray, sigma_px: float) -> np.ndarray:
