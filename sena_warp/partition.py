@@ -213,11 +213,10 @@ def past_target_src(views: CanvasViews, seam_x_canvas: np.ndarray, offset_tgt: t
     the border: per block of ``cfg.seam_blend_rows`` columns of the ``cfg.seam_blend_strip_px`` rows
     inside, the median absolute deviation of their grey difference at most ``cfg.past_target_mad_grey``
     as it is or smoothed by ``cfg.past_target_sigma_px`` (more in both: they show other content there,
-    which the border would cut; ``agreeing_end``). From the first block that fails
-    on, and past the target's far edge, it is left out: the strip ends with the panorama's outline,
-    not with a cut through content, and a detached piece (beyond a gap) is never shown. Every such
-    pixel, whether or not step 6's source reaches it (step 9's correction moves the source's edge by a
-    few px).
+    which the border would cut; ``agreeing_end``). From the first block that fails on, and past the
+    target's far edge, it is left out: the strip ends with the panorama's outline, not with a cut
+    through content, and a detached piece (beyond a gap) is never shown. Every such pixel, whether or
+    not step 6's source reaches it (step 9's correction moves the source's edge by a few px).
 
     views: the gain-compensated canvas views; seam_x_canvas: (H,) the seam's x per canvas row (NaN: no
     seam in that row, nothing left out); offset_tgt: the target's (x, y) on the canvas; shape_tgt: its

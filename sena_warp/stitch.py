@@ -12,8 +12,8 @@ compositor never transposes frames.
 
 Where this departs from the paper (``docs/method.md``; what each departure buys: ``docs/evaluation.md``),
 the paper's version stays one setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
-``seam_model="paper"`` (steps 8-9), ``thin_strip_ratio=0``, ``source_past_target=True``, ``gain_model="none"``, ``seam_blend_ratio=0``,
-``border_blend=False``, ``transition_px=24``. Switch alignment (``switch_align=True``), no step of the paper,
+``seam_model="paper"`` (steps 8-9), ``thin_strip_ratio=0``, ``source_past_target=True`` (step 9),
+``gain_model="none"``, ``seam_blend_ratio=0``, ``border_blend=False``, ``transition_px=24``. Switch alignment (``switch_align=True``), no step of the paper,
 is off by default: it costs more than the stitch's time allows.
 """
 
