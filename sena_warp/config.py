@@ -139,6 +139,11 @@ class Config:
     border_blend_mad_grey: float = 6.0  # seam and border blend: a row or block whose views differ by more (MAD) shows other content
     thin_strip_ratio: float = 0.02  # a view shown only in a strip thinner than this x image diagonal where the other
     # takes over (beyond the other's border) is left out: it shows nothing whole (0: kept, the earlier and the paper's)
+    source_past_target: bool = False  # the source shown on the target's side of the seam wherever the target has no
+    # pixel (beyond its borders, past the seam's ends: the paper's); False: only as far along each border as the views agree
+    past_target_mad_grey: float = 6.0  # there: a block inside the border whose views differ by more (MAD), as they are
+    # and smoothed, shows other content
+    past_target_sigma_px: float = 2.0  # there: the smoothing of that difference (Gaussian sigma; 0: none)
     seam_blend_gain: bool = True  # seam and border blend: applied as a relative gain (no contrast change);
     # False: per-channel grey levels added (the earlier version)
     seam_blend_colour: bool = True  # seam blend as a gain: per channel, each within 10 % of the grey one
@@ -374,7 +379,8 @@ RANGES: dict[str, Range] = {
     "seam_zone_margin": Range(0, 100), "seam_anchor_px": _above(0, 1000), "seam_anchor_spacing_px": _above(0, 10000),
     "seam_refine_px": Range(0, 256), "correction_smooth": Range(0, 1e9), "seam_smooth_sigma_px": Range(0, 64),
     "seam_fade_px": Range(0, 10000), "seam_blend_strip_px": Range(1, 1024), "seam_blend_rows": Range(1, 1023),
-    "border_blend_mad_grey": _above(0, 255), "thin_strip_ratio": Range(0, 1), "switch_rounds": Range(0, 8),
+    "border_blend_mad_grey": _above(0, 255), "past_target_mad_grey": _above(0, 255), "past_target_sigma_px": Range(0, 64),
+    "thin_strip_ratio": Range(0, 1), "switch_rounds": Range(0, 8),
     "switch_flow_preset": Range(0, 2), "switch_band_px": _above(0, 1024), "switch_sigma_px": _above(0, 256),
     "switch_max_px": _above(0, 10000), "switch_fade_px": Range(0, 10000), "switch_max_slope": _above(0, 10),
     "switch_cell_px": Range(1, 64),

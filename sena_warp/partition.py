@@ -18,6 +18,8 @@ off the brighter side and added to the darker one, fading to nothing ``cfg.seam_
 image diagonal away, while detail still switches sides within the narrow transition. Beyond the
 seam's ends the canvas also switches views, along the target's top and bottom borders where the source
 goes on beyond them; ``border_offsets`` does the same there, per canvas column (``cfg.border_blend``).
+The source goes on there only as far along each border as the two views agree just inside it
+(``past_target_src``): beyond, the border would cut other content.
 Convention: the source is the LEFT view on the canvas (the caller transposes/flips other rigs).
 """
 
@@ -198,6 +200,101 @@ def thin_strips(label: np.ndarray, max_px: float) -> tuple[np.ndarray, np.ndarra
         mask = mask[::-1] if flip_rows else mask
         thin |= mask.T if transpose else mask
     return thin & (label == 1), thin & (label == 2)
+
+
+def past_target_src(views: CanvasViews, seam_x_canvas: np.ndarray, offset_tgt: tuple[float, float],
+                    shape_tgt: tuple[int, ...], cfg: Config) -> np.ndarray:
+    """(H, W) bool: the canvas pixels on the target's side of the seam (x > the seam's x, where the seam
+    maps' alpha is below 0.5) outside the target where the source is left out.
+
+    Past the seam's ends the source goes on beyond the target's top and bottom borders, and meets the
+    target along a straight border the seam did not choose. Along each border, from the seam outward,
+    it is kept as far as it goes on beyond the border without a gap and the two views agree just inside
+    the border: per block of ``cfg.seam_blend_rows`` columns of the ``cfg.seam_blend_strip_px`` rows
+    inside, the median absolute deviation of their grey difference at most ``cfg.past_target_mad_grey``
+    as it is or smoothed by ``cfg.past_target_sigma_px`` (more in both: they show other content there,
+    which the border would cut; ``agreeing_end``). From the first block that fails on, and past the
+    target's far edge, it is left out: the strip ends with the panorama's outline, not with a cut
+    through content, and a detached piece (beyond a gap) is never shown. Every such pixel, whether or
+    not step 6's source reaches it (step 9's correction moves the source's edge by a few px).
+
+    views: the gain-compensated canvas views; seam_x_canvas: (H,) the seam's x per canvas row (NaN: no
+    seam in that row, nothing left out); offset_tgt: the target's (x, y) on the canvas; shape_tgt: its
+    (rows, columns, ...).
+    """
+    height, width = views.both.shape
+    seam_x = np.asarray(seam_x_canvas, np.float32)
+    cols = np.arange(width, dtype=np.float32)[None, :]
+    with np.errstate(invalid="ignore"):
+        past = (cols > seam_x[:, None]) & ~views.valid_tgt
+    ox, oy = (int(round(v)) for v in offset_tgt)
+    rows_tgt, cols_tgt = shape_tgt[:2]
+    strip = max(1, cfg.seam_blend_strip_px)
+    kept = np.zeros_like(past)
+    for inside, beyond, edge in ((slice(max(oy, 0), max(oy + strip, 0)), slice(0, max(oy, 0)), oy - 1),
+                                 (slice(max(oy + rows_tgt - strip, 0), max(oy + rows_tgt, 0)), slice(oy + rows_tgt, height),
+                                  oy + rows_tgt)):
+        if not 0 <= edge < height or not np.isfinite(seam_x[edge]):
+            continue
+        start = int(np.floor(seam_x[edge])) + 1
+        shown_tgt = views.both[inside] & (cols > seam_x[inside, None] + 0.5 * cfg.transition_px)
+        used = shown_tgt & cv2.erode(views.both[inside].astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
+        end = agreeing_end(views.valid_src[edge], band_differences(views, inside, cfg.past_target_sigma_px), used, start,
+                           min(width, ox + cols_tgt), cfg)
+        kept[beyond, :end] = True
+    return past & ~kept
+
+
+def agreeing_end(goes_on: np.ndarray, diffs: tuple[np.ndarray, np.ndarray], used: np.ndarray, start: int, stop: int,
+                 cfg: Config) -> int:
+    """The first column from ``start`` (before ``stop``) where a source strip beyond a target's border
+    ends: where it stops going on (``goes_on`` (W,) bool, the source's validity beyond the border), or the
+    start of the first block of ``cfg.seam_blend_rows`` columns inside the border whose used pixels
+    (``used`` (R, W)) are under a third of the block or whose grey differences spread too much: the
+    median absolute deviation above ``cfg.past_target_mad_grey`` both as they are and smoothed
+    (``diffs``: (R, W) each). A fine texture shifted by a pixel spreads only the first, a strong edge
+    shifted by a pixel mostly the second; other content both. ``stop`` when none."""
+    block = max(1, cfg.seam_blend_rows)
+    for x0 in range(max(start, 0), stop, block):
+        x1 = min(x0 + block, stop)
+        mask = used[:, x0:x1]
+        if mask.sum() < mask.size / 3:
+            return x0
+        spreads = [mad(diff[:, x0:x1][mask]) for diff in diffs]
+        if min(spreads) > cfg.past_target_mad_grey:
+            return x0
+        gap = np.flatnonzero(~goes_on[x0:x1])
+        if gap.size:
+            return x0 + int(gap[0])
+    return max(start, stop, 0)
+
+
+def band_differences(views: CanvasViews, rows: slice, sigma_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """(R, W) float32 each: the grey difference source minus target on canvas rows ``rows`` (0 where a
+    view is not defined) as it is and ``smoothed_over`` the overlap by ``sigma_px``, from those rows and
+    the few beyond them the smoothing reaches (the rest of the canvas is not converted)."""
+    reach = int(np.ceil(4.0 * sigma_px)) + 1
+    lo, hi = max(rows.start - reach, 0), min(rows.stop + reach, views.both.shape[0])
+    band = CanvasViews(views.src[lo:hi], views.tgt[lo:hi], views.valid_src[lo:hi], views.valid_tgt[lo:hi])
+    grey_src, grey_tgt = band.grey()
+    diff = np.nan_to_num(grey_src - grey_tgt)
+    inside = slice(rows.start - lo, rows.stop - lo)
+    return diff[inside], smoothed_over(diff, band.both, sigma_px)[inside]
+
+
+def smoothed_over(values: np.ndarray, known: np.ndarray, sigma_px: float) -> np.ndarray:
+    """(H, W) float32: ``values`` smoothed by a Gaussian of ``sigma_px`` over the pixels where ``known``
+    alone (a normalised blur: nothing outside them is mixed in); as they are where sigma_px is 0."""
+    if sigma_px <= 0:
+        return values.astype(np.float32)
+    weight = cv2.GaussianBlur(known.astype(np.float32), (0, 0), sigma_px)
+    total = cv2.GaussianBlur(np.where(known, values, 0).astype(np.float32), (0, 0), sigma_px)
+    return np.where(weight > 1e-6, total / np.maximum(weight, 1e-6), 0.0).astype(np.float32)
+
+
+def mad(values: np.ndarray) -> float:
+    """The median absolute deviation of ``values`` (any shape, at least one value) from their median."""
+    return float(np.median(np.abs(values - np.median(values))))
 
 
 LEVEL_MIN_GREY = 16.0  # relative offsets: a view's level is taken as at least this (dark rows: no huge gains)

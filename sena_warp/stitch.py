@@ -12,8 +12,8 @@ compositor never transposes frames.
 
 Where this departs from the paper (``docs/method.md``; what each departure buys: ``docs/evaluation.md``),
 the paper's version stays one setting away: ``ffd_model="blend"`` (steps 3-4), ``gate_model="paper"`` (step 5),
-``seam_model="paper"`` (steps 8-9), ``thin_strip_ratio=0``, ``gain_model="none"``, ``seam_blend_ratio=0``,
-``border_blend=False``, ``transition_px=24``. Switch alignment (``switch_align=True``), no step of the paper,
+``seam_model="paper"`` (steps 8-9), ``thin_strip_ratio=0``, ``source_past_target=True`` (step 9),
+``gain_model="none"``, ``seam_blend_ratio=0``, ``border_blend=False``, ``transition_px=24``. Switch alignment (``switch_align=True``), no step of the paper,
 is off by default: it costs more than the stitch's time allows.
 """
 
@@ -40,8 +40,8 @@ from .global_affine import GlobalAffine, check_views_alike, fit_global_affine, n
 from .imageio import check_image, described
 from .local_affine import LocalAffines, fit_local_affines, sigma_f
 from .overlap import Overlap, plan_overlap, source_only_mask
-from .partition import (BorderOffsets, SeamMaps, SeamOffsets, border_offsets, seam_maps, seam_offsets,
-                        thin_strips)
+from .partition import (BorderOffsets, SeamMaps, SeamOffsets, border_offsets, past_target_src, seam_maps,
+                        seam_offsets, thin_strips)
 from .progress import LOGGER, stage
 from .rig import Rig, detect_rig, image_to_working, map_from_working, matches_to_working
 from .seam_path import SeamPath, seam_line
@@ -212,8 +212,9 @@ def estimate_seam(img_src: np.ndarray, img_tgt: np.ndarray, matches_src: np.ndar
 @dataclass(frozen=True)
 class SeamCut:
     """Steps 7-8 on one source map: the zone, the seam's path, the views it was cut on (with their
-    gains, where the panorama shows them: thin strips left out), the gains, the thin strips
-    (``thin_src``, ``thin_tgt``: (H, W) bool) and ``map_src_canvas`` (H, W, 2) float32 the source map."""
+    gains, where the panorama shows them: the source past the target and thin strips left out), the
+    gains, what is left out (``thin_src``, ``thin_tgt``: (H, W) bool) and ``map_src_canvas`` (H, W, 2)
+    float32 the source map."""
 
     zone: Zone
     path: SeamPath
@@ -249,11 +250,16 @@ def cut_seam(img_src: np.ndarray, img_tgt: np.ndarray, copies_src: np.ndarray, c
         path = seam_line(zone, views, pts_src_canvas, pts_tgt_canvas, copies_src_canvas,
                          canvas.tgt_to_canvas(copies_tgt), cfg, prior_x_canvas)
     thin_src = thin_tgt = np.zeros(canvas.shape, bool)
+    if not cfg.source_past_target:  # left out: the source where the seam gives the target, which has no pixel there
+        with clock("past_target"):
+            thin_src = past_target_src(views, path.seam_x_canvas, canvas.offset_tgt, img_tgt.shape, cfg)
+            views = replace(views, valid_src=views.valid_src & ~thin_src)
     if cfg.thin_strip_ratio > 0:  # left out: a view shown only in a thin strip where the other takes over
         with clock("thin_strips"):
             label = shown_labels(*view_weights(seam_side_alpha(path.seam_x_canvas, canvas.width), views.valid_src,
                                                views.valid_tgt))
-            thin_src, thin_tgt = thin_strips(label, cfg.thin_strip_ratio * _diagonal_px(img_src, img_tgt))
+            strip_src, thin_tgt = thin_strips(label, cfg.thin_strip_ratio * _diagonal_px(img_src, img_tgt))
+            thin_src = thin_src | strip_src
             views = replace(views, valid_src=views.valid_src & ~thin_src, valid_tgt=views.valid_tgt & ~thin_tgt)
     return SeamCut(zone, path, views, gains, thin_src, thin_tgt, map_src_canvas)
 

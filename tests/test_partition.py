@@ -10,7 +10,8 @@ from sena_warp.canvas import Canvas
 from sena_warp.config import Config
 from sena_warp.evaluation.metrics import anchor_residuals_px, transition_mad
 from sena_warp.imageio import read_image
-from sena_warp.partition import (BLEND_COLOUR_MAX, SeamOffsets, border_offsets, seam_maps, seam_offsets, seam_rows, smooth_curve,
+from sena_warp.partition import (BLEND_COLOUR_MAX, SeamOffsets, border_offsets, past_target_src, seam_maps, seam_offsets,
+                                 seam_rows, smooth_curve,
                                  thin_strips)
 from sena_warp.seam_path import straight_path
 from sena_warp.warp_map import CanvasViews
@@ -276,3 +277,43 @@ def test_thin_strips_of_either_view_where_the_other_takes_over_are_found():
     assert not thin_src[:, :61].any()
     assert thin_src.sum() == 5 * 39 + 3 * 79 + 60 * 4
     assert thin_tgt[0:3, 40:61].all() and thin_tgt.sum() == 3 * 21
+
+
+def test_the_source_past_the_target_is_kept_along_a_border_only_as_far_as_the_views_agree():
+    """A 70 x 200 canvas, the target at rows 20-49, columns 40-179, a seam down x 60.5, the source everywhere
+    left of x 190 above the target and, below it, at columns 0-100 and 140-170. Just inside the top border
+    the two views show the same texture up to column 122 and other content from 123 (a block start): above
+    the target the source is kept up to there; below, the views agree all along but the source stops at
+    column 101, so the piece beyond the gap is left out; past the target's far edge it is left out too;
+    left of the seam nothing is. With the same texture all along, or a limit no difference exceeds, the
+    source above the target is kept up to the far edge; with the texture a pixel off (a fine texture's
+    difference spreads, not once smoothed) the same as with it exact, and without the smoothing it all
+    goes from the seam on."""
+    rng = np.random.default_rng(5)
+    texture = rng.integers(40, 216, (70, 200)).astype(np.uint8)
+    other = rng.integers(40, 216, (70, 200)).astype(np.uint8)
+    valid_tgt = np.zeros((70, 200), bool)
+    valid_tgt[20:50, 40:180] = True
+    valid_src = np.zeros((70, 200), bool)
+    valid_src[:50, :190] = True
+    valid_src[50:, :101] = valid_src[50:, 140:171] = True
+    grey_src = np.where(np.arange(200)[None, :] < 123, texture, other)
+    views = CanvasViews(np.repeat(np.where(valid_src, grey_src, 0)[:, :, None], 3, axis=2),
+                        np.repeat(np.where(valid_tgt, texture, 0)[:, :, None], 3, axis=2), valid_src, valid_tgt)
+    seam_x = np.full(70, 60.5, np.float32)
+    cfg = Config(device=DEVICE)
+    left_out = past_target_src(views, seam_x, (40.0, 20.0), (30, 140, 3), cfg)
+    expected = np.zeros((70, 200), bool)
+    expected[:20, 123:] = True
+    expected[20:50, 180:] = True
+    expected[50:, 101:] = True
+    np.testing.assert_array_equal(left_out, expected)
+    agreeing = CanvasViews(np.repeat(np.where(valid_src, texture, 0)[:, :, None], 3, axis=2), views.tgt, valid_src,
+                           valid_tgt)  # the same texture all along the top border: kept up to the target's far edge
+    left_out = past_target_src(agreeing, seam_x, (40.0, 20.0), (30, 140, 3), cfg)
+    assert not left_out[:20, :180].any() and left_out[:20, 180:].all()
+    assert not past_target_src(views, seam_x, (40.0, 20.0), (30, 140, 3), cfg.replace(past_target_mad_grey=255.0))[:20, :180].any()
+    shifted = np.where(np.arange(200)[None, :] < 123, np.roll(texture, 1, axis=1), other)  # the texture a pixel off
+    views = CanvasViews(np.repeat(np.where(valid_src, shifted, 0)[:, :, None], 3, axis=2), views.tgt, valid_src, valid_tgt)
+    np.testing.assert_array_equal(past_target_src(views, seam_x, (40.0, 20.0), (30, 140, 3), cfg), expected)
+    assert past_target_src(views, seam_x, (40.0, 20.0), (30, 140, 3), cfg.replace(past_target_sigma_px=0.0))[:20, 61:].all()

@@ -95,3 +95,21 @@ def test_the_input_order_does_not_change_the_panorama(pano, udisd_pair, warp_dev
     swapped = stitch_images(udisd_pair[1], udisd_pair[0], Config(device=warp_device))
     assert swapped.maps.rig.source == "a"  # the same image (b of the original order) is the source
     np.testing.assert_array_equal(swapped.image, pano.image)
+
+
+def test_a_detached_piece_of_the_source_below_the_target_is_left_out(bundled_dir, warp_device):
+    """graf_gt: right of the seam the warped source reaches below the target's bottom edge again after
+    a gap, a piece of other content (columns 366-531) cut by both views' borders. By default the
+    panorama shows none of it; with the paper's coverage (``source_past_target``) it does."""
+    from helpers import read_pair
+
+    img_a, img_b = read_pair(bundled_dir / "graf_gt")
+    shown = {}
+    for on in (False, True):
+        pano = stitch_images(img_a, img_b, Config(device=warp_device, source_past_target=on))
+        maps = pano.maps
+        assert not maps.rig.vertical
+        oy = int(round(maps.warp.overlap.canvas.offset_tgt[1]))
+        below = pano.image[oy + maps.rig.pick(img_a, img_b)[1].shape[0]:, 366:532, 3]
+        shown[on] = int((below > 0).sum())
+    assert shown[False] == 0 and shown[True] > 500

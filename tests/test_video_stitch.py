@@ -425,8 +425,9 @@ def test_the_office_rig_gets_the_border_blend_on_its_y_plane(clips):
     """The office estimate's target border lies between canvas rows 37 and 38 and 517 and 518 of the
     fixed canvas (its target offset); the Y pass adds the estimate's border offsets there and nowhere
     beyond their fade, and where the source goes on above the target's top border (the columns the
-    offsets reach) the first frame's Y step across it is smaller than without them. Thin strips are
-    kept (``thin_strip_ratio=0``): the source above this target's top is one, left out by default."""
+    offsets reach) the first frame's Y step across it is smaller than without them. The source above
+    this target's top is kept (``thin_strip_ratio=0``, ``source_past_target``): it is a thin strip on
+    the target's side of the seam, left out by default."""
     import av
 
     def first_y(path: Path) -> np.ndarray:
@@ -439,7 +440,8 @@ def test_the_office_rig_gets_the_border_blend_on_its_y_plane(clips):
     outs = {}
     for on in (True, False):
         comp = SenaFrameCompositor.from_videos(clips / "office_cam1.mp4", clips / "office_cam2.mp4", 0.0,
-                                               CFG.replace(video_estimate_pairs=1, border_blend=on, thin_strip_ratio=0.0),
+                                               CFG.replace(video_estimate_pairs=1, border_blend=on, thin_strip_ratio=0.0,
+                                                           source_past_target=True),
                                                "auto")
         try:
             outs[on] = comp.composite_yuv(y_l, uv, uv, y_r, uv, uv)[0].astype(np.float64)

@@ -65,7 +65,7 @@ METHODS = (*SENA_RUNS, "affine", "homography", *OPENCV_MODES)
 # SENA as the paper has it: every departure undone (docs/method.md; what each buys: docs/evaluation.md).
 PAPER_SETTINGS = dict(ffd_model="blend", gate_model="paper", seam_model="paper", gain_model="none",
                       seam_blend_ratio=0.0, border_blend=False, transition_px=24, global_model_choice="inliers",
-                      switch_align=False, thin_strip_ratio=0.0)
+                      switch_align=False, thin_strip_ratio=0.0, source_past_target=True)
 # The methods that make a panorama (the pictures show them), with their names on the pictures.
 SHEET_METHODS = {"sena": "SENA", "sena_paper": "SENA (paper)", "opencv_panorama": "OpenCV PANORAMA",
                  "opencv_scans": "OpenCV SCANS"}
