@@ -163,6 +163,11 @@ class ViewBackground:
         # off for seconds while the running mean's rate is high: learnt at it, they would leave a ghost of
         # him behind); as fast where most of a view was off (the camera or the light changed).
         self._models.learn_off = float(np.float32(learn if self._crowded else learn * self.cfg.video_seam_foreground_learn))
+        # The spread, slower where a view is off once the cameras have settled (a textured object walking
+        # past changes its cells every frame: learnt at full rate, it would soon count as their usual
+        # change and no longer be in front); while they settle, their swings are what it learns.
+        settled = self.frames >= self._settle and not self._crowded
+        self._models.spread_off = float(np.float32(learn * self.cfg.video_seam_spread_learn if settled else learn))
         fit = (slice(None, None, FIT_STRIDE),) * 2
         diff_fit, total_fit, both_fit = diff[fit], total[fit], both[fit]
         explained = []
