@@ -206,6 +206,30 @@ def test_the_strip_spans_both_copies_and_runs_on_to_a_border_that_cuts_one():
     assert strip_of(cells[30]) == strip_of(cells[45]) == (0, 62)
 
 
+def test_an_object_wider_than_the_overlap_allows_is_passed_at_one_end_on_all_its_lines():
+    # The overlap: cells 10 to 90. A figure whose target copy lies against the target's border (cells
+    # 10-69) and whose source copy reaches to within a cell of the source's border on its upper lines
+    # (30-88) and to 5 cells of it below (30-84): no room on either side of the upper lines, room on
+    # the source's side of the lower ones. Shown from the source, where its copy has the more room: on
+    # every line the strip stops at the source's copy, the last cell holding both views left open.
+    shape = (LINES, 101)
+    both = np.zeros(shape, bool)
+    both[:, 10:91] = True
+    first = np.zeros(LINES, np.int64)
+    tgt = blobs(rectangle(shape, slice(20, 61), slice(10, 70)), 1)[0]
+    src_cells = rectangle(shape, slice(20, 41), slice(30, 89)) | rectangle(shape, slice(41, 61), slice(30, 85))
+    src = blobs(src_cells, 1)[0]
+    cells = kept_off([(src, tgt)], both, first)
+    assert cells[20:61, :87].all() and not cells[20:61, 89:].any()
+    assert strip_of(cells[30]) == (0, 89) and strip_of(cells[55]) == (0, 87)  # the copy, its margin below
+    # The other way round (the source's copy against its border, the target's a cell and five cells
+    # off its own): shown from the target, on every line.
+    tgt_cells = rectangle(shape, slice(20, 41), slice(11, 70)) | rectangle(shape, slice(41, 61), slice(15, 70))
+    src = blobs(rectangle(shape, slice(20, 61), slice(31, 91)), 1)[0]
+    cells = kept_off([(src, blobs(tgt_cells, 1)[0])], both, first)
+    assert cells[20:61, 13:].all() and not cells[20:61, :11].any()
+
+
 def test_strips_merge_and_the_narrowest_gaps_close_beyond_the_most():
     assert merge_strips([(10, 20), (15, 30), (40, 50)], 4) == [(10, 30), (40, 50)]
     assert merge_strips([(0, 5), (8, 10), (30, 40), (45, 70)], 2) == [(0, 10), (30, 70)]

@@ -275,8 +275,11 @@ def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarra
     A copy the overlap's border cuts (within ``margin_cells`` of the first cell holding both views,
     where the target begins, or of the last, where the source ends) is not whole in its view: the
     strip goes on to the band's end there, so that the seam passes on the other side and shows the
-    object from the other view. A lone copy near either border: its other copy lies beyond it.
-    Overlapping strips merge; a line with more than ``most`` has its narrowest gaps closed
+    object from the other view. A lone copy near either border: its other copy lies beyond it. An
+    object cut so on both ends of one of its lines (wider than the overlap allows) is passed at the end
+    where its copies have more room from their views' borders, on all its lines: there its strip stops
+    at the copy, leaving at least the end cell holding both views (shown from the view where it is
+    whole, or most nearly). Overlapping strips merge; a line with more than ``most`` has its narrowest gaps closed
     (:func:`merge_strips`)."""
     lines, cells = both.shape
     first_cell = np.asarray(first_cell, np.int64)
@@ -301,10 +304,21 @@ def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarra
         line = np.arange(lines)[None, :]
         spans = (line >= np.array(tops)[:, None]) & (line <= np.array(bottoms)[:, None])
         obj, k = np.nonzero(spans & (end > start + 2 * margin_cells))
-        cut_left = left[obj, k] - margin_cells <= first_both[k]
-        cut_right = right[obj, k] + margin_cells > last_both[k]
+        left, right = left[obj, k], right[obj, k]
+        cut_left = left - margin_cells <= first_both[k]
+        cut_right = right + margin_cells > last_both[k]
         lo = np.where(cut_left, 0, np.minimum(np.maximum(start[obj, k] - first_cell[k], 0), cells))
         hi = np.where(cut_right, cells, np.minimum(np.maximum(end[obj, k] - first_cell[k], 0), cells))
+        # An object that leaves the seam no room on either side of one of its lines: passed on all its
+        # lines at the overlap's end where its copies have the more room from their views' borders (the
+        # target's copy at the first cell holding both views, the source's at the last), so that the
+        # seam need not cross it from line to line.
+        wide = np.bincount(obj[cut_left & cut_right], minlength=len(pairs))[obj] > 0
+        if wide.any():
+            room = np.bincount(obj, left - first_both[k] - (last_both[k] - right), len(pairs))[obj]
+            at_first, at_last = wide & cut_left & (room >= 0.0), wide & cut_right & (room < 0.0)
+            lo = np.where(at_first, np.minimum(np.maximum(left, first_both[k] + 1) - first_cell[k], cells), lo)
+            hi = np.where(at_last, np.maximum(np.minimum(right, last_both[k]) - first_cell[k], 0), hi)
         np.add.at(edges, (k, lo), 1)
         np.add.at(edges, (k, hi), -1)
     inside = np.cumsum(edges[:, :cells], axis=1) > 0
