@@ -238,7 +238,7 @@ class Config:
     video_seam_background_s: float = 2.0  # static rig: time constant of the band's background model (seconds)
     video_seam_foreground_learn: float = 0.1  # static rig: a view's model learns this x as fast where the view is
     # off it (someone standing still stays in front for ten time constants, not one)
-    video_seam_spread_learn: float = 0.25  # static rig: a view's spread (a cell's usual change a frame) learns this x
+    video_seam_spread_learn: float = 0.5  # static rig: a view's spread (a cell's usual change a frame) learns this x
     # as fast where the view is off (a textured object walking past changes its cells every frame; 1: as elsewhere)
     video_seam_object_cost: float = 1000.0  # static rig: cost of a band cell on an object's two copies or between
     # them (video/frame_objects.py): the seam keeps off them and shows the object whole from one view

@@ -11,8 +11,9 @@ them, as ``composite.band_difference`` fills them):
 1. *Foreground in each view* (:class:`ViewBackground`): each view's luma against its own background
    model (``kernels/frame_objects.py``), beyond the view's whole-band gain and offset (an exposure
    step, a flickering light) and the cell's usual change from one frame to the next (leaves in the
-   wind); cells off it in most of a box are the view's foreground (:func:`solid`), its connected parts
-   the view's blobs (:func:`blobs`). Where most of a view is off, the camera or the light changed: no
+   wind; learnt more slowly where the view is off, ``video_seam_spread_learn``: a textured object
+   walking past changes its cells every frame, and is no background); cells off it in most of a box
+   are the view's foreground (:func:`solid`), its connected parts the view's blobs (:func:`blobs`). Where most of a view is off, the camera or the light changed: no
    objects then.
 2. *Copies* (:func:`pair_copies`): a source blob and a target blob on the same lines, of a like
    size, within the band of each other, the source's to the right (nearer than the background) are
@@ -21,7 +22,9 @@ them, as ``composite.band_difference`` fills them):
 3. *Strips to keep off* (:func:`keep_off_cells`): per object, the lines its copies cover and the
    cells from the first copy's start to the second's end, widened by the seam's transition; where
    that reaches to within the same margin of the band's end of the overlap, on to the band's end: an
-   object cut by a view's border is shown from the other view, where it is whole.
+   object cut by a view's border is shown from the other view, where it is whole. An object that so
+   closes both ends of a line (wider than the overlap allows) is passed at the end where its copies
+   have more room from their borders, on all its lines.
 4. *The route* (:class:`ObjectBand`): the cheapest path over the whole overlap with the strips at
    ``video_seam_object_cost`` and ``video_seam_home_cost`` per px from the estimate's seam; it replaces
    the last route only where that saves ``video_seam_margin`` per line, so the seam passes each object
