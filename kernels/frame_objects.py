@@ -26,8 +26,9 @@ class ViewModels:
     to the next as a rule (a running mean of that change: leaves in the wind, a flickering screen);
     ``last`` its luma in the last frame; ``off`` (2, K, width) uint8 1 where the last frame was off the
     background by more than ``noise`` and ``spread_factor`` x the spread. Both learn at ``learn`` per
-    frame, the background at ``learn_off`` where the cell is off (what stands still in front of the
-    background stays in front for a while)."""
+    frame, where the cell is off the background at ``learn_off`` (what stands still in front of the
+    background stays in front for a while) and the spread at ``spread_off`` (an object's own texture
+    passing by changes the cell every frame: it is not the background's usual change)."""
 
     background: wp.array3d(dtype=float)
     spread: wp.array3d(dtype=float)
@@ -37,6 +38,7 @@ class ViewModels:
     spread_factor: float
     learn: float
     learn_off: float
+    spread_off: float
 
 
 @wp.func
@@ -76,12 +78,14 @@ def view_background_kernel(
                 deviation = wp.abs(change - (explained[2 * view] * model + explained[2 * view + 1]))
                 spread_now = models.spread[view, k, j]
                 rate = models.learn
+                spread_rate = models.learn
                 if deviation > wp.max(models.noise, models.spread_factor * spread_now):
                     models.off[view, k, j] = wp.uint8(1)
                     rate = models.learn_off
+                    spread_rate = models.spread_off
                 models.background[view, k, j] = model + rate * change
                 step = wp.abs(luma - models.last[view, k, j]) - spread_now
-                models.spread[view, k, j] = spread_now + models.learn * step
+                models.spread[view, k, j] = spread_now + spread_rate * step
                 models.last[view, k, j] = luma
 
 

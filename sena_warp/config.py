@@ -243,6 +243,8 @@ class Config:
     video_seam_background_s: float = 2.0  # static rig: time constant of the band's background model (seconds)
     video_seam_foreground_learn: float = 0.1  # static rig: a view's model learns this x as fast where the view is
     # off it (someone standing still stays in front for ten time constants, not one)
+    video_seam_spread_learn: float = 0.5  # static rig: a view's spread (a cell's usual change a frame) learns this x
+    # as fast where the view is off (a textured object walking past changes its cells every frame; 1: as elsewhere)
     video_seam_object_cost: float = 1000.0  # static rig: cost of a band cell on an object's two copies or between
     # them (video/frame_objects.py): the seam keeps off them and shows the object whole from one view
 
@@ -409,7 +411,7 @@ RANGES: dict[str, Range] = {
     "video_seam_stay_cost": Range(0, 10000), "video_seam_home_cost": Range(0, 10000),
     "video_seam_blocked_cost": _above(0, 1e6), "video_seam_margin": Range(0, 10000),
     "video_seam_jump_cost": Range(0, 10000), "video_seam_motion_cost": Range(0, 1e6),
-    "video_seam_background_s": _above(0, 3600), "video_seam_foreground_learn": Range(0, 1),
+    "video_seam_background_s": _above(0, 3600), "video_seam_foreground_learn": Range(0, 1), "video_seam_spread_learn": Range(0, 1),
     "video_seam_object_cost": Range(0, 1e6), "video_start_s": Range(0, 1e6), "video_end_s": Range(0, 1e6),
     "video_max_width": Range(0, 16384),
     # sync

@@ -27,11 +27,13 @@ def test_each_view_s_model_flags_what_its_spread_and_its_gain_do_not_explain(ban
     now[0, 30:40, 12:20] += 90.0  # ... and something in front of the source
     explained = np.float32([0.05, 4.0, -0.03, -2.0])
     noise, factor, learn, learn_off = np.float32(12.0), np.float32(3.0), np.float32(1 / 60), np.float32(1 / 600)
+    spread_off = np.float32(1 / 240)
     models = ViewModels()
     models.background, models.spread, models.last = on(device, background), on(device, spread), on(device, last)
     models.off = wp.zeros(views.shape, dtype=wp.uint8, device=device)
     models.noise, models.spread_factor, models.learn, models.learn_off = (float(v) for v in (noise, factor, learn,
                                                                                             learn_off))
+    models.spread_off = float(spread_off)
     now_diff = np.where(both, now[0] - now[1], NOT_BOTH).astype(np.float32)
     now_total = np.where(both, now[0] + now[1], 0.0).astype(np.float32)
     runtime.launch_row_loops(view_background_kernel, LINES, WIDTH, [
@@ -46,8 +48,10 @@ def test_each_view_s_model_flags_what_its_spread_and_its_gain_do_not_explain(ban
     np.testing.assert_array_equal(models.off.numpy(), off)
     np.testing.assert_allclose(models.background.numpy(), np.where(both, background + rate * change, background),
                                rtol=0, atol=1e-3)
+    spread_rate = np.where(off, spread_off, learn)  # an object's own texture is not the background's usual change
     np.testing.assert_allclose(models.spread.numpy(),
-                               np.where(both, spread + learn * (np.abs(luma - last) - spread), spread), rtol=0, atol=1e-3)
+                               np.where(both, spread + spread_rate * (np.abs(luma - last) - spread), spread),
+                               rtol=0, atol=1e-3)
     np.testing.assert_allclose(models.last.numpy(), np.where(both, luma, last), rtol=0, atol=1e-3)
     assert off[0, 30:40, 12:20].all() and not off[1, 30:40, 12:20].any()  # the source's object only
 

@@ -11,8 +11,9 @@ them, as ``composite.band_difference`` fills them):
 1. *Foreground in each view* (:class:`ViewBackground`): each view's luma against its own background
    model (``kernels/frame_objects.py``), beyond the view's whole-band gain and offset (an exposure
    step, a flickering light) and the cell's usual change from one frame to the next (leaves in the
-   wind); cells off it in most of a box are the view's foreground (:func:`solid`), its connected parts
-   the view's blobs (:func:`blobs`). Where most of a view is off, the camera or the light changed: no
+   wind; learnt more slowly where the view is off, ``video_seam_spread_learn``: a textured object
+   walking past changes its cells every frame, and is no background); cells off it in most of a box
+   are the view's foreground (:func:`solid`), its connected parts the view's blobs (:func:`blobs`). Where most of a view is off, the camera or the light changed: no
    objects then.
 2. *Copies* (:func:`pair_copies`): a source blob and a target blob on the same lines, of a like
    size, within the band of each other, the source's to the right (nearer than the background) are
@@ -21,7 +22,9 @@ them, as ``composite.band_difference`` fills them):
 3. *Strips to keep off* (:func:`keep_off_cells`): per object, the lines its copies cover and the
    cells from the first copy's start to the second's end, widened by the seam's transition; where
    that reaches to within the same margin of the band's end of the overlap, on to the band's end: an
-   object cut by a view's border is shown from the other view, where it is whole.
+   object cut by a view's border is shown from the other view, where it is whole. An object that so
+   closes both ends of a line (wider than the overlap allows) is passed at the end where its copies
+   have more room from their borders, on all its lines.
 4. *The route* (:class:`ObjectBand`): the cheapest path over the whole overlap with the strips at
    ``video_seam_object_cost`` and ``video_seam_home_cost`` per px from the estimate's seam; it replaces
    the last route only where that saves ``video_seam_margin`` per line, so the seam passes each object
@@ -163,6 +166,11 @@ class ViewBackground:
         # off for seconds while the running mean's rate is high: learnt at it, they would leave a ghost of
         # him behind); as fast where most of a view was off (the camera or the light changed).
         self._models.learn_off = float(np.float32(learn if self._crowded else learn * self.cfg.video_seam_foreground_learn))
+        # The spread, slower where a view is off once the cameras have settled (a textured object walking
+        # past changes its cells every frame: learnt at full rate, it would soon count as their usual
+        # change and no longer be in front); while they settle, their swings are what it learns.
+        settled = self.frames >= self._settle and not self._crowded
+        self._models.spread_off = float(np.float32(learn * self.cfg.video_seam_spread_learn if settled else learn))
         fit = (slice(None, None, FIT_STRIDE),) * 2
         diff_fit, total_fit, both_fit = diff[fit], total[fit], both[fit]
         explained = []
@@ -270,8 +278,11 @@ def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarra
     A copy the overlap's border cuts (within ``margin_cells`` of the first cell holding both views,
     where the target begins, or of the last, where the source ends) is not whole in its view: the
     strip goes on to the band's end there, so that the seam passes on the other side and shows the
-    object from the other view. A lone copy near either border: its other copy lies beyond it.
-    Overlapping strips merge; a line with more than ``most`` has its narrowest gaps closed
+    object from the other view. A lone copy near either border: its other copy lies beyond it. An
+    object cut so on both ends of one of its lines (wider than the overlap allows) is passed at the end
+    where its copies have more room from their views' borders, on all its lines: there its strip stops
+    at the copy, leaving at least the end cell holding both views (shown from the view where it is
+    whole, or most nearly). Overlapping strips merge; a line with more than ``most`` has its narrowest gaps closed
     (:func:`merge_strips`)."""
     lines, cells = both.shape
     first_cell = np.asarray(first_cell, np.int64)
@@ -296,10 +307,21 @@ def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarra
         line = np.arange(lines)[None, :]
         spans = (line >= np.array(tops)[:, None]) & (line <= np.array(bottoms)[:, None])
         obj, k = np.nonzero(spans & (end > start + 2 * margin_cells))
-        cut_left = left[obj, k] - margin_cells <= first_both[k]
-        cut_right = right[obj, k] + margin_cells > last_both[k]
+        left, right = left[obj, k], right[obj, k]
+        cut_left = left - margin_cells <= first_both[k]
+        cut_right = right + margin_cells > last_both[k]
         lo = np.where(cut_left, 0, np.minimum(np.maximum(start[obj, k] - first_cell[k], 0), cells))
         hi = np.where(cut_right, cells, np.minimum(np.maximum(end[obj, k] - first_cell[k], 0), cells))
+        # An object that leaves the seam no room on either side of one of its lines: passed on all its
+        # lines at the overlap's end where its copies have the more room from their views' borders (the
+        # target's copy at the first cell holding both views, the source's at the last), so that the
+        # seam need not cross it from line to line.
+        wide = np.bincount(obj[cut_left & cut_right], minlength=len(pairs))[obj] > 0
+        if wide.any():
+            room = np.bincount(obj, left - first_both[k] - (last_both[k] - right), len(pairs))[obj]
+            at_first, at_last = wide & cut_left & (room >= 0.0), wide & cut_right & (room < 0.0)
+            lo = np.where(at_first, np.minimum(np.maximum(left, first_both[k] + 1) - first_cell[k], cells), lo)
+            hi = np.where(at_last, np.maximum(np.minimum(right, last_both[k]) - first_cell[k], 0), hi)
         np.add.at(edges, (k, lo), 1)
         np.add.at(edges, (k, hi), -1)
     inside = np.cumsum(edges[:, :cells], axis=1) > 0
