@@ -13,8 +13,8 @@ them, as ``composite.band_difference`` fills them):
    step, a flickering light) and the cell's usual change from one frame to the next (leaves in the
    wind; learnt more slowly where the view is off, ``video_seam_spread_learn``: a textured object
    walking past changes its cells every frame, and is no background); cells off it in most of a box
-   are the view's foreground (:func:`solid`), its connected parts the view's blobs (:func:`blobs`). Where most of a view is off, the camera or the light changed: no
-   objects then.
+   are the view's foreground (:func:`solid`), its connected parts the view's blobs (:func:`blobs`).
+   Where most of a view is off, the camera or the light changed: no objects then.
 2. *Copies* (:func:`pair_copies`): a source blob and a target blob on the same lines, of a like
    size, within the band of each other, the source's to the right (nearer than the background) are
    one object's two copies; their displacement along the lines is its parallax. A blob without a
@@ -282,8 +282,8 @@ def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarra
     object cut so on both ends of one of its lines (wider than the overlap allows) is passed at the end
     where its copies have more room from their views' borders, on all its lines: there its strip stops
     at the copy, leaving at least the end cell holding both views (shown from the view where it is
-    whole, or most nearly). Overlapping strips merge; a line with more than ``most`` has its narrowest gaps closed
-    (:func:`merge_strips`)."""
+    whole, or most nearly). Overlapping strips merge; a line with more than ``most`` has its narrowest
+    gaps closed (:func:`merge_strips`)."""
     lines, cells = both.shape
     first_cell = np.asarray(first_cell, np.int64)
     has_both = both.any(axis=1)
