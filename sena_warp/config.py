@@ -189,6 +189,10 @@ class Config:
     # --- video, fine tuning: estimates and drift ----------------------------------------------
     video_estimate_spacing: int = 5  # frame pairs between two of those tries
     video_screen_max_side: int = 640  # those tries are ranked by XFeat at this long side at most; the best is estimated at xfeat_max_side
+    video_recur_px: float = 2.0  # first estimate: a match recurs where the pairs beside it have one within this (screening px) at both ends
+    video_moving_recur: float = 0.05  # ... a model whose inliers recur at most this share is something that moves, left out
+    video_still_recur: float = 0.2  # ... where a model whose inliers recur this share at least (the still background) follows it
+    video_moving_models: int = 3  # ... at most this many moving models left out of one pair
     video_estimate_max_side: int = 1920  # an estimate runs on the frames made this small (long side) and is scaled up
     video_rig_moving_share: float = 0.004  # auto: a view drifting this x its width a second or more moves (first second)
     video_rig_switch_share: float = 0.015  # auto: ... and a static rig whose view drifts this much later becomes moving
@@ -393,6 +397,8 @@ RANGES: dict[str, Range] = {
     "video_gain_stride_px": Range(1, 256), "video_gain_settle_s": Range(0, 3600), "video_gain_step_grey": _above(0, 255),
     # video
     "video_reestimate_s": _above(0, 3600), "video_estimate_pairs": Range(1, 100), "video_estimate_spacing": Range(1, 1000),
+    "video_recur_px": _above(0, 100), "video_moving_recur": Range(0, 1), "video_still_recur": Range(0, 1),
+    "video_moving_models": Range(0, 20),
     "video_screen_max_side": Range(32, 4096), "video_estimate_max_side": Range(64, 8192),
     "video_min_inlier_ratio": Range(0, 1), "video_max_median_change_px": Range(0, 10000),
     "video_drift_check_s": Range(0, 3600), "video_drift_px": _above(0, 10000), "video_drift_speed_px": _above(0, 10000),

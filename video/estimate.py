@@ -14,6 +14,8 @@ from dataclasses import dataclass, replace
 from fractions import Fraction
 from operator import attrgetter
 
+import numpy as np
+
 from ..config import Config
 from ..errors import InputError, StitchError, VideoError
 from ..features import Matches, match_images
@@ -24,6 +26,7 @@ from ..xfeat import working_size
 from .maps import PlaneMaps, map_change_px
 from .pairing import pair_by_time
 from .reader import FrameReader, YuvFrame, probe_video, span_of
+from .still_matches import moving_models, without_models
 from .working import prior_to_small, scaled_up, shrunk_pair, small_matches, working_scale
 
 MEDIAN_PERCENTILE = 50.0  # the rejection test compares the median map change
@@ -38,9 +41,11 @@ class Attempt:
     time_s: float
     inliers: int | None
     error: str | None
+    moving_left_out: int = 0  # matches on something that moved, left out (``still_matches.py``)
 
     def as_dict(self) -> dict:
-        return {"pair": self.pair, "time_s": round(self.time_s, 4), "inliers": self.inliers, "error": self.error}
+        return {"pair": self.pair, "time_s": round(self.time_s, 4), "inliers": self.inliers, "error": self.error,
+                "moving_left_out": self.moving_left_out}
 
 
 def spaced_span(cfg: Config) -> int:
@@ -123,9 +128,47 @@ def screen_pair(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config, reference: st
     count (raises StitchError)."""
     screen = screening_config(cfg, (frame_l.y.shape, frame_r.y.shape))
     matches = match_images(frame_l.to_bgr(), frame_r.to_bgr(), screen)
-    rig = detect_rig(matches.pts_a, matches.pts_b, frame_l.y.shape, reference)
+    return matches, inlier_count(matches, frame_l.y.shape, screen, reference)
+
+
+def inlier_count(matches: Matches, shape_l: tuple[int, int], cfg: Config, reference: str) -> int:
+    """The global-affine inlier count of a pair's ``matches`` (left frame of (rows, cols) ``shape_l``)."""
+    rig = detect_rig(matches.pts_a, matches.pts_b, shape_l, reference)
     pts_src, pts_tgt = matches_to_working(matches.pts_a, matches.pts_b, rig)
-    return matches, fit_global_affine(pts_src, pts_tgt, screen).n_inliers
+    return fit_global_affine(pts_src, pts_tgt, cfg).n_inliers
+
+
+def screening_px(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config) -> float:
+    """How many input pixels one pixel of the screening's XFeat covers (1 at full resolution)."""
+    shapes = (frame_l.y.shape, frame_r.y.shape)
+    side = screening_config(cfg, shapes).xfeat_max_side
+    return max(1.0, max(max(shape) for shape in shapes) / side)
+
+
+def without_moving(screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]], cfg: Config, reference: str
+                   ) -> tuple[list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]], dict[int, list[np.ndarray]],
+                              set[int]]:
+    """The screened pairs (inliers, index, left, right, matches) with the matches on what moves left out
+    where a still background follows them (``still_matches.py``), their inliers counted again; per pair
+    index the moving models left out (a -> b affines, input pixels); and the pairs whose background was
+    found (first or after what moves)."""
+    all_matches = [s[4] for s in screened if s[4] is not None]
+    kept, moving, background = [], {}, set()
+    for inliers, index, frame_l, frame_r, matches in screened:
+        models, found = ([], False) if matches is None else moving_models(
+            matches, [m for m in all_matches if m is not matches],
+            cfg.video_recur_px * screening_px(frame_l, frame_r, cfg), cfg)
+        if models:
+            still = without_models(matches, models, cfg.ransac_reproj_px * screening_px(frame_l, frame_r, cfg))
+            try:
+                inliers = inlier_count(still, frame_l.y.shape, cfg, reference)
+                matches, moving[index] = still, models
+            except StitchError:  # the background alone is too little to stitch from: as it was
+                found = False
+        if found:
+            background.add(index)
+        kept.append((inliers, index, frame_l, frame_r, matches))
+    return kept, moving, background
 
 
 def best_first_estimate(first: Iterable[tuple[int, YuvFrame, YuvFrame]], cfg: Config,
@@ -155,21 +198,28 @@ def best_first_estimate(first: Iterable[tuple[int, YuvFrame, YuvFrame]], cfg: Co
             if not screened_at_full_resolution(frame_l, frame_r, cfg):
                 screened.append((FAILED_SCREENING, index, frame_l, frame_r, None))
             continue
-        attempts.append(Attempt(index, float(frame_l.time_s), inliers, None))
         screened.append((inliers, index, frame_l, frame_r, matches))
-    # Most inliers first; among equals the earliest pair.
-    for inliers, index, frame_l, frame_r, matches in sorted(screened, key=lambda s: (-s[0], s[1])):
+    still, moving, background = without_moving(screened, cfg, reference)
+    attempts += [Attempt(index, float(frame_l.time_s), inliers, None, len(before[4]) - len(matches))
+                 for before, (inliers, index, frame_l, _, matches) in zip(screened, still) if matches is not None]
+    attempts.sort(key=attrgetter("pair"))
+    # Most inliers first; among equals the earliest pair. Where something moved in front of a still
+    # background, the pairs whose inliers are that background come first.
+    for inliers, index, frame_l, frame_r, matches in sorted(still, key=lambda s: (bool(moving) and s[1] not in background,
+                                                                                   -s[0], s[1])):
         if not screened_at_full_resolution(frame_l, frame_r, cfg):
-            matches = None
+            matches = None if index not in moving else without_models(
+                match_images(frame_l.to_bgr(), frame_r.to_bgr(), cfg), moving[index],
+                cfg.ransac_reproj_px * screening_px(frame_l, frame_r, cfg))
         try:
             maps = estimate_pair(frame_l, frame_r, cfg, reference, matches)
             if inliers == FAILED_SCREENING:  # what the report gives is the full estimate's
-                attempts = [Attempt(a.pair, a.time_s, maps.warp.glob.n_inliers, None) if a.pair == index else a
+                attempts = [replace(a, inliers=maps.warp.glob.n_inliers, error=None) if a.pair == index else a
                             for a in attempts]
             return maps, index, attempts
         except StitchError as exc:
             last_error = exc
-            attempts = [Attempt(a.pair, a.time_s, a.inliers, str(exc)) if a.pair == index else a for a in attempts]
+            attempts = [replace(a, error=str(exc)) if a.pair == index else a for a in attempts]
     if last_error is None:
         raise VideoError("no frame pairs to estimate the stitch from")
     raise type(last_error)(no_estimate_message(tried, last_error, cfg)) from last_error
