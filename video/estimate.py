@@ -199,7 +199,8 @@ def best_first_estimate(first: Iterable[tuple[int, YuvFrame, YuvFrame]], cfg: Co
                 screened.append((FAILED_SCREENING, index, frame_l, frame_r, None))
             continue
         screened.append((inliers, index, frame_l, frame_r, matches))
-    still, moving, background = without_moving(screened, cfg, reference)
+    still, moving, background = without_moving(screened, cfg, reference) if cfg.video_still_background else (
+        screened, {}, set())
     attempts += [Attempt(index, float(frame_l.time_s), inliers, None, len(before[4]) - len(matches))
                  for before, (inliers, index, frame_l, _, matches) in zip(screened, still) if matches is not None]
     attempts.sort(key=attrgetter("pair"))
