@@ -107,20 +107,26 @@ def test_switch_settings_reach_the_seam_stage(udisd_pair, monkeypatch, changes, 
     assert (moved > 0.1) == (aligned > 0)
 
 
-@pytest.mark.parametrize("gain", [True, False])
-def test_seam_blend_gain_reaches_the_compositor(udisd_pair, monkeypatch, gain):
-    """``seam_blend_gain``: the panorama is composited with the seam blend as relative gains (or grey
-    levels), and the offsets it is given are those (a few % against a few levels)."""
-    states = []
+@pytest.fixture
+def composited(monkeypatch) -> list:
+    """The (plan, state) of every panorama ``stitch.composite_image`` composites."""
+    calls = []
     real = stitch.composite_image
 
     def spy(img_src, img_tgt, plan, state, cfg, *args):
-        states.append(state)
+        calls.append((plan, state))
         return real(img_src, img_tgt, plan, state, cfg, *args)
 
     monkeypatch.setattr(stitch, "composite_image", spy)
+    return calls
+
+
+@pytest.mark.parametrize("gain", [True, False])
+def test_seam_blend_gain_reaches_the_compositor(udisd_pair, composited, gain):
+    """``seam_blend_gain``: the panorama is composited with the seam blend as relative gains (or grey
+    levels), and the offsets it is given are those (a few % against a few levels)."""
     pano = stitch.stitch_images(*udisd_pair, Config(device="cpu", seam_blend_gain=gain))
-    state = states[-1]
+    state = composited[-1][1]
     assert state.relative_offsets is gain
     applied = np.abs(state.offsets[0]).max()
     assert applied == pytest.approx(np.abs(pano.maps.seam.offsets.relative()[0] if gain else pano.maps.seam.offsets.src).max(),
@@ -128,17 +134,9 @@ def test_seam_blend_gain_reaches_the_compositor(udisd_pair, monkeypatch, gain):
 
 
 @pytest.mark.parametrize("peak", [True, False])
-def test_gain_knee_peak_reaches_the_views_and_the_compositor(udisd_pair, monkeypatch, peak):
+def test_gain_knee_peak_reaches_the_views_and_the_compositor(udisd_pair, composited, peak):
     """``gain_knee_peak``: the views the seam is cut on and the panorama's plan both take the knee as
     set (a pixel's channels sharing it, or each its own), the kernels through the plan's tone."""
-    plans = []
-    real = stitch.composite_image
-
-    def spy(img_src, img_tgt, plan, state, cfg, *args):
-        plans.append(plan)
-        return real(img_src, img_tgt, plan, state, cfg, *args)
-
-    monkeypatch.setattr(stitch, "composite_image", spy)
     pano = stitch.stitch_images(*udisd_pair, Config(device="cpu", gain_knee_peak=peak))
     assert pano.maps.seam.gains.knee_peak is peak
-    assert plans[-1].knee_peak is peak and plans[-1].tone[2] == int(peak)
+    assert composited[-1][0].knee_peak is peak and composited[-1][0].tone[2] == int(peak)
