@@ -476,24 +476,19 @@ def overlap_lines(maps: PlaneMaps, shape_src: tuple[int, int], shape_tgt: tuple[
     return np.stack([np.where(has, first, 0), np.where(has, last, -1)], axis=1).astype(np.int32)
 
 
-# edge_home: a line's overlap counts when it is this x the median's wide at least. At a half, the lines a
-# slightly rotated view's bottom border cuts to 51 % (the cafe's) counted, and the home, raised 2 px a line
-# to meet them, ran diagonally across 150 rows and a near person's shoulder.
-WHOLE_OVERLAP = 0.9
-
 def edge_home(overlap: np.ndarray, home: np.ndarray, edge_px: float, most_px: float) -> np.ndarray:
     """(L,) float32 a seam home ``edge_px`` inside the target's side of the ``overlap`` (L, 2) (first, last
     position holding both views per line; the target lies above the seam), changing by at most
     ``most_px`` from one line to the next and nowhere nearer the edge than that (raised where the
-    overlap's edge steps). Lines whose overlap is narrower than :data:`WHOLE_OVERLAP` x the median's
-    (where a view's slanted top or bottom border cuts it) do not count: there the home runs on from the
-    lines that do (off the overlap the seam picks no view: each pixel shows the view that has it, the
-    target first); ``home`` where no line has an overlap."""
+    overlap's edge steps). Lines whose overlap is less than half the median's wide (where a view's slanted
+    top or bottom border cuts it) do not count: there the home runs on from the lines that do (off the
+    overlap the seam picks no view: each pixel shows the view that has it, the target first); ``home``
+    where no line has an overlap."""
     width = overlap[:, 1] - overlap[:, 0] + 1
     has = width > 0
     if not has.any():
         return np.asarray(home, np.float32)
-    full = width >= WHOLE_OVERLAP * np.median(width[has])
+    full = width >= 0.5 * np.median(width[has])
     lines = np.arange(len(overlap))
     goal = np.interp(lines, lines[full], (overlap[full, 0] + np.minimum(edge_px, width[full] - 1)).astype(np.float64))
     for k in range(1, len(goal)):  # the lowest home within the bound of its neighbours: raised, never lowered
