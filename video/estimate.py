@@ -155,11 +155,11 @@ def without_moving(screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches | 
     all_matches = [s[4] for s in screened if s[4] is not None]
     kept, moving, background = [], {}, set()
     for inliers, index, frame_l, frame_r, matches in screened:
+        px = screening_px(frame_l, frame_r, cfg)
         models, found = ([], False) if matches is None else moving_models(
-            matches, [m for m in all_matches if m is not matches],
-            cfg.video_recur_px * screening_px(frame_l, frame_r, cfg), cfg)
+            matches, [m for m in all_matches if m is not matches], cfg.video_recur_px * px, cfg)
         if models:
-            still = without_models(matches, models, cfg.ransac_reproj_px * screening_px(frame_l, frame_r, cfg))
+            still = without_models(matches, models, cfg.ransac_reproj_px * px)
             try:
                 inliers = inlier_count(still, frame_l.y.shape, cfg, reference)
                 matches, moving[index] = still, models
