@@ -151,8 +151,8 @@ class CompositePlan:
     uint8 255 where a side is sampled; ``seam`` the static seam (``layout.positions``) on the device;
     ``border`` the border blend as the kernels take it (``border_source``: its host values, or None);
     ``fill`` the value per channel where no side is sampled; ``tone`` the highlight knee in kernel units
-    (``knee``: (knee, white) grey levels, or None; ``knee_peak``: it follows each pixel's largest channel,
-    ``Config.gain_knee_peak``); ``reach_px`` how far from a frame's seam its offsets
+    (``knee``: (knee, white) grey levels, or None; its third: 1 where it follows each colour pixel's
+    largest channel, ``Config.gain_knee_peak``); ``reach_px`` how far from a frame's seam its offsets
     change a pixel (with the float32 margin); ``runs`` each row's runs (``RowRuns``, found by
     :func:`with_runs`) or None.
     """
@@ -169,7 +169,6 @@ class CompositePlan:
     border_source: BorderBlend | None
     fill: tuple[int, ...]
     knee: tuple[float, float] | None
-    knee_peak: bool
     tone: wp.vec3i
     reach_px: float
     runs: wp.array | None = None
@@ -181,6 +180,11 @@ class CompositePlan:
     @property
     def lines(self) -> int:
         return len(self.layout.positions)
+
+    @property
+    def knee_peak(self) -> bool:
+        """Whether near white a pixel's channels share its largest one's knee (``tone``'s third)."""
+        return bool(self.tone[2])
 
 
 def _border_on_device(border: BorderBlend | None, positions: int, channels: int, device: str) -> Border:
@@ -280,10 +284,10 @@ def _planned(kernel, maps: list, canvas_shape: tuple[int, int], layout: SeamLayo
         kernel_border = _border_on_device(border, positions, channels, device)
     knee = None if white is None else (float(white) * cfg.gain_knee_ratio, float(white))
     knee_level, white_level = knee or (0.0, 0.0)
-    knee_peak = cfg.gain_knee_peak and channels > 1  # a plane (a video's Y) is its own peak
+    knee_peak = cfg.gain_knee_peak and channels >= 3  # a colour pixel's channels; a plane (a video's Y) is its own
     reach = (max(layout.lf_px, 0.0) if offsets else 0.0) + RUN_MARGIN_PX
     return CompositePlan(canvas_shape, (shape_src, shape_tgt), layout, device, words, words_tgt, coverage, seam,
-                         kernel_border, border, tuple(values), knee, knee_peak,
+                         kernel_border, border, tuple(values), knee,
                          wp.vec3i(int(round(knee_level * LEVEL)), int(round(white_level * LEVEL)), int(knee_peak)),
                          reach)
 

@@ -177,7 +177,7 @@ def compensated(img: np.ndarray, gain: np.ndarray, bias: np.ndarray, knee: float
     levels = np.repeat(np.arange(256, dtype=np.float32)[:, None], img.shape[2], axis=1)
     table = np.clip(tone_curve(levels, gain, bias, knee) + 0.5, 0, 255).astype(np.uint8)
     out = cv2.LUT(img, table.reshape(256, 1, img.shape[2])).reshape(img.shape)
-    if by_peak and img.shape[2] > 1 and knee < WHITE:
+    if by_peak and img.shape[2] >= 3 and knee < WHITE:
         planes = cv2.split(img)  # OpenCV's per-pixel max and min: numpy's over the last axis took 40 ms a view
         near = (functools.reduce(cv2.max, planes) > knee) & (functools.reduce(cv2.min, planes) > 2 * knee - WHITE)
         out[near] = np.clip(tone_curve(img[near], gain, bias, knee, shared=True) + 0.5, 0, 255).astype(np.uint8)
