@@ -73,7 +73,8 @@ def sample_only_kernel(row0: int, col_step: int, width: int, planes: Planes, pla
             sample = sample_fixed(planes.tgt, p, word_fx(word), word_fy(word), planes.steps[2], planes.steps[3])
         else:
             sample = sample_fixed(planes.src, p, word_fx(word), word_fy(word), planes.steps[0], planes.steps[1])
-        out[q] = grey_level(adjusted(sample, gains.gain_src[0], gains.bias_src[0], 0, gains.tone))
+        out[q] = grey_level(adjusted(sample, gains.gain_src[0], gains.bias_src[0], 0, gains.tone,
+                                     wp.vec2i(sample, sample)))
 
 
 def cpu_ms(call, calls: int) -> float:

@@ -97,7 +97,8 @@ class SeamState:
 @wp.struct
 class Gains:
     """A frame's gains per channel of each side: gains in 1/2**12, biases in 1/2**20 grey levels;
-    ``tone`` = (knee, white) in 1/2**20 grey levels (white 0: no knee, ``adjusted``); ``relative`` 1:
+    ``tone`` = (knee, white, peak) (knee and white in 1/2**20 grey levels, white 0: no knee; peak 1: the
+    channels near a pixel's largest share its knee, ``adjusted``); ``relative`` 1:
     the seam's and the borders' offsets change each side's gain relatively (``with_offset``), 0: they
     are added; ``table``: the target's gains tabulated per channel and grey level
     (``gain_table_kernel``)."""
@@ -106,7 +107,7 @@ class Gains:
     bias_src: wp.vec4i
     gain_tgt: wp.vec4i
     bias_tgt: wp.vec4i
-    tone: wp.vec2i
+    tone: wp.vec3i
     relative: int
     table: wp.array(dtype=wp.uint8)
 
@@ -343,28 +344,47 @@ def grey_level(sample: int) -> wp.uint8:
 
 
 @wp.func
-def adjusted(sample: int, gain: int, bias: int, offset: int, tone: wp.vec2i) -> int:
+def knee_line(v: int, gain: int, bias: int, knee: int, white: int) -> int:
+    """The gain's line at v (1/2**20 grey levels), bent at ``knee`` to run straight on to (white, white)
+    where the knee's own value is below white (``gains.tone_curve``)."""
+    at_knee = int((wp.int64(knee) * wp.int64(gain)) >> wp.int64(GAIN_BITS)) + bias
+    if v > knee and at_knee < white:
+        return at_knee + int(wp.int64(v - knee) * wp.int64(white - at_knee) / wp.int64(white - knee))
+    return int((wp.int64(v) * wp.int64(gain)) >> wp.int64(GAIN_BITS)) + bias
+
+
+@wp.func
+def adjusted(sample: int, gain: int, bias: int, offset: int, tone: wp.vec3i, extent: wp.vec2i) -> int:
     """gain * sample + bias + offset, all in 1/2**20 grey levels (gain in 1/2**GAIN_BITS), with a
     highlight knee: above ``tone[0]`` the gain's line runs straight on to (``tone[1]``, ``tone[1]``),
-    so a view's white stays white whatever its gain (``tone[1]`` 0: no knee)."""
-    v = int((wp.int64(sample) * wp.int64(gain)) >> wp.int64(GAIN_BITS)) + bias
+    so a view's white stays white whatever its gain (``tone[1]`` 0: no knee). With ``tone[2]`` a
+    pixel's channels share its largest one's knee as it nears white (``gains.tone_curve``: no colour
+    made); ``extent``: (smallest, largest) of the pixel's channels."""
     knee = tone[0]
     white = tone[1]
-    if knee < white and sample > knee:
-        at_knee = int((wp.int64(knee) * wp.int64(gain)) >> wp.int64(GAIN_BITS)) + bias
-        if at_knee < white:
-            v = at_knee + int(wp.int64(sample - knee) * wp.int64(white - at_knee) / wp.int64(white - knee))
+    if knee >= white:
+        return int((wp.int64(sample) * wp.int64(gain)) >> wp.int64(GAIN_BITS)) + bias + offset
+    v = knee_line(sample, gain, bias, knee, white)
+    peak = extent[1]
+    if tone[2] != 0 and peak > knee:
+        near = wp.clamp(extent[0] - (2 * knee - white), 0, white - knee)  # of white - knee: 0 a knee's width below
+        if near > 0:
+            shared = bias + int(wp.int64(wp.min(knee_line(peak, gain, bias, knee, white), white) - bias)
+                                * wp.int64(sample) / wp.int64(peak))
+            v = v + int(wp.int64(shared - v) * wp.int64(near) / wp.int64(white - knee))
     return v + offset
 
 
 @wp.func
-def with_offset(sample: int, gain: int, bias: int, offset: int, tone: wp.vec2i, relative: int) -> int:
+def with_offset(sample: int, gain: int, bias: int, offset: int, tone: wp.vec3i, relative: int,
+                extent: wp.vec2i) -> int:
     """:func:`adjusted` with a side's low-frequency offset: added in 1/2**20 grey levels, or with
     ``relative``, a relative change of the gain in 1/2**20 (the gain times 1 + offset / 2**20, before
     the knee: the offset is a smooth gain, and white stays white)."""
     if relative != 0:
-        return adjusted(sample, gain + int((wp.int64(gain) * wp.int64(offset)) >> wp.int64(20)), bias, 0, tone)
-    return adjusted(sample, gain, bias, offset, tone)
+        return adjusted(sample, gain + int((wp.int64(gain) * wp.int64(offset)) >> wp.int64(20)), bias, 0, tone,
+                        extent)
+    return adjusted(sample, gain, bias, offset, tone, extent)
 
 
 @wp.func
@@ -498,12 +518,14 @@ def frame_runs_kernel(row0: int, runs: wp.array(dtype=RowRuns), seam: wp.array(d
 
 
 @wp.kernel
-def gain_table_kernel(gain: wp.vec4i, bias: wp.vec4i, tone: wp.vec2i, table: wp.array(dtype=wp.uint8)):
+def gain_table_kernel(gain: wp.vec4i, bias: wp.vec4i, tone: wp.vec3i, table: wp.array(dtype=wp.uint8)):
     """table[c * 256 + v]: grey level v of channel c through the gain, bias and knee, with no offset:
-    what the frame kernel makes of an unwarped target element in a copy run."""
+    what the frame kernel makes of an unwarped target element in a copy run (where, with ``tone[2]``,
+    its pixel is not near white: each channel its own knee)."""
     t = wp.tid()
     c = t / 256
-    table[t] = grey_level(adjusted((t - c * 256) << (2 * FRAC_BITS), gain[c], bias[c], 0, tone))
+    v = (t - c * 256) << (2 * FRAC_BITS)
+    table[t] = grey_level(adjusted(v, gain[c], bias[c], 0, wp.vec3i(tone[0], tone[1], 0), wp.vec2i(v, v)))
 
 
 @wp.func
@@ -589,30 +611,57 @@ def pixel_rule(x: int, y: int, q: int, plan: Plan, seam: SeamState, layout: Layo
 
 
 @wp.func(inline=True)
-def rule_channel(r: PixelRule, c: int, planes: Planes, seam: SeamState, border: Border, gains: Gains,
-                 fill: wp.vec4i) -> wp.uint8:
-    """Channel c of a pixel by the full rule: ``fill[c]`` where no side covers it, else per side ``gain *
-    sample + bias`` with ``lf * lf[line, c]`` plus each border's weighted offset (``side_offset``) added or
-    as a relative change of the gain (``gains.relative``, ``with_offset``), mixed by ``a``."""
+def rule_samples(r: PixelRule, c: int, planes: Planes) -> wp.vec2i:
+    """Channel c of a pixel by the full rule, sampled: (source, target) in 1/2**20 grey levels, 0 for a
+    side the pixel does not show."""
+    steps = planes.steps
+    vs = int(0)
+    vt = int(0)
+    if r.kind == KIND_FILL:
+        return wp.vec2i(vs, vt)
+    if r.a >= 1.0:
+        vs = sample_fixed(planes.src, r.p + c, r.fx, r.fy, steps[0], steps[1])
+    elif r.a <= 0.0:
+        vt = sample_fixed(planes.tgt, r.p + c, r.fx, r.fy, steps[2], steps[3])
+    else:
+        vs = sample_fixed(planes.src, r.p + c, r.fx, r.fy, steps[0], steps[1])
+        vt = sample_fixed(planes.tgt, r.p_t + c, r.fx_t, r.fy_t, steps[2], steps[3])
+    return wp.vec2i(vs, vt)
+
+
+@wp.func
+def extent_of(v: wp.vec4i, channels: int) -> wp.vec2i:
+    """(smallest, largest) of a pixel's samples in its first ``channels`` entries."""
+    e = wp.vec2i(v[0], v[0])
+    for c in range(1, channels):
+        e = wp.vec2i(wp.min(e[0], v[c]), wp.max(e[1], v[c]))
+    return e
+
+
+@wp.func(inline=True)
+def rule_channel(r: PixelRule, c: int, vs: int, vt: int, extent_src: wp.vec2i, extent_tgt: wp.vec2i,
+                 seam: SeamState, border: Border, gains: Gains, fill: wp.vec4i) -> wp.uint8:
+    """Channel c of a pixel by the full rule from its samples ``vs``, ``vt`` (``rule_samples``; ``extent_*``:
+    each side's (smallest, largest) over the channels, for the knee): ``fill[c]`` where no side covers it, else per
+    side ``gain * sample + bias`` with ``lf * lf[line, c]`` plus each border's weighted offset
+    (``side_offset``) added or as a relative change of the gain (``gains.relative``, ``with_offset``),
+    mixed by ``a``."""
     if r.kind == KIND_FILL:
         return wp.uint8(fill[c])
-    steps = planes.steps
     if r.a >= 1.0:
         off = side_offset(r.lf, seam.lf_src, r.lo + c, r.bw, border.src, r.bo + c, border.second)
-        v = with_offset(sample_fixed(planes.src, r.p + c, r.fx, r.fy, steps[0], steps[1]), gains.gain_src[c],
-                        gains.bias_src[c], off, gains.tone, gains.relative)
-        return grey_level(v)
+        return grey_level(with_offset(vs, gains.gain_src[c], gains.bias_src[c], off, gains.tone, gains.relative,
+                                      extent_src))
     if r.a <= 0.0:
         off = side_offset(r.lf, seam.lf_tgt, r.lo + c, r.bw, border.tgt, r.bo + c, border.second)
-        v = with_offset(sample_fixed(planes.tgt, r.p + c, r.fx, r.fy, steps[2], steps[3]), gains.gain_tgt[c],
-                        gains.bias_tgt[c], off, gains.tone, gains.relative)
-        return grey_level(v)
-    vs = with_offset(sample_fixed(planes.src, r.p + c, r.fx, r.fy, steps[0], steps[1]), gains.gain_src[c],
-                     gains.bias_src[c], side_offset(r.lf, seam.lf_src, r.lo + c, r.bw, border.src, r.bo + c, border.second),
-                     gains.tone, gains.relative)
-    vt = with_offset(sample_fixed(planes.tgt, r.p_t + c, r.fx_t, r.fy_t, steps[2], steps[3]), gains.gain_tgt[c],
-                     gains.bias_tgt[c], side_offset(r.lf, seam.lf_tgt, r.lo + c, r.bw, border.tgt, r.bo + c, border.second),
-                     gains.tone, gains.relative)
+        return grey_level(with_offset(vt, gains.gain_tgt[c], gains.bias_tgt[c], off, gains.tone, gains.relative,
+                                      extent_tgt))
+    vs = with_offset(vs, gains.gain_src[c], gains.bias_src[c],
+                     side_offset(r.lf, seam.lf_src, r.lo + c, r.bw, border.src, r.bo + c, border.second),
+                     gains.tone, gains.relative, extent_src)
+    vt = with_offset(vt, gains.gain_tgt[c], gains.bias_tgt[c],
+                     side_offset(r.lf, seam.lf_tgt, r.lo + c, r.bw, border.tgt, r.bo + c, border.second),
+                     gains.tone, gains.relative, extent_tgt)
     return grey_level(int(r.a * float(vs) + (1.0 - r.a) * float(vt)))
 
 
@@ -675,8 +724,18 @@ def _composite_frame_kernel(channels: int):
                 for x in range(first_column(j, begin, col_step), end, col_step):
                     o = (y * width + x) * wp.static(channels)
                     p = run[2] + x * wp.static(channels)
+                    e = wp.vec2i(255, 0)
                     for c in range(wp.static(channels)):
-                        out[o + c] = gains.table[c * 256 + int(planes.tgt[p + c])]
+                        e = wp.vec2i(wp.min(e[0], int(planes.tgt[p + c])), wp.max(e[1], int(planes.tgt[p + c])))
+                    e = wp.vec2i(e[0] << (2 * FRAC_BITS), e[1] << (2 * FRAC_BITS))
+                    if gains.tone[2] != 0 and e[1] > gains.tone[0] and e[0] > 2 * gains.tone[0] - gains.tone[1]:
+                        for c in range(wp.static(channels)):  # near white: not the table's rule
+                            v = adjusted(int(planes.tgt[p + c]) << (2 * FRAC_BITS), gains.gain_tgt[c],
+                                         gains.bias_tgt[c], 0, gains.tone, e)
+                            out[o + c] = grey_level(v)
+                    else:
+                        for c in range(wp.static(channels)):
+                            out[o + c] = gains.table[c * 256 + int(planes.tgt[p + c])]
                 continue
             if how == RUN_SAMPLE:
                 for x in range(first_column(j, begin, col_step), end, col_step):
@@ -685,17 +744,28 @@ def _composite_frame_kernel(channels: int):
                     p = word_offset(word)
                     fx = word_fx(word)
                     fy = word_fy(word)
+                    s = wp.vec4i()
                     for c in range(wp.static(channels)):
-                        v = adjusted(sample_fixed(planes.src, p + c, fx, fy, planes.steps[0], planes.steps[1]),
-                                     gains.gain_src[c], gains.bias_src[c], 0, gains.tone)
+                        s[c] = sample_fixed(planes.src, p + c, fx, fy, planes.steps[0], planes.steps[1])
+                    e = extent_of(s, wp.static(channels))
+                    for c in range(wp.static(channels)):
+                        v = adjusted(s[c], gains.gain_src[c], gains.bias_src[c], 0, gains.tone, e)
                         out[q * wp.static(channels) + c] = grey_level(v)
                 continue
             for x in range(first_column(j, begin, col_step), end, col_step):
                 q = y * width + x
                 o = q * wp.static(channels)
                 r = pixel_rule(x, y, q, plan, seam, layout, border, bw_row, wp.static(channels))
+                vs = wp.vec4i()
+                vt = wp.vec4i()
                 for c in range(wp.static(channels)):
-                    out[o + c] = rule_channel(r, c, planes, seam, border, gains, plan.fill)
+                    st = rule_samples(r, c, planes)
+                    vs[c] = st[0]
+                    vt[c] = st[1]
+                e_src = extent_of(vs, wp.static(channels))
+                e_tgt = extent_of(vt, wp.static(channels))
+                for c in range(wp.static(channels)):
+                    out[o + c] = rule_channel(r, c, vs[c], vt[c], e_src, e_tgt, seam, border, gains, plan.fill)
 
     return composite_frame
 
@@ -723,8 +793,16 @@ def _composite_pixel_kernel(channels: int):
         o = q * wp.static(channels)
         bw_row = border_weights(y, border.lines, border.on, layout.lf_px)
         r = pixel_rule(x, y, q, plan, seam, layout, border, bw_row, wp.static(channels))
+        vs = wp.vec4i()
+        vt = wp.vec4i()
         for c in range(wp.static(channels)):
-            out[o + c] = rule_channel(r, c, planes, seam, border, gains, plan.fill)
+            st = rule_samples(r, c, planes)
+            vs[c] = st[0]
+            vt[c] = st[1]
+        e_src = extent_of(vs, wp.static(channels))
+        e_tgt = extent_of(vt, wp.static(channels))
+        for c in range(wp.static(channels)):
+            out[o + c] = rule_channel(r, c, vs[c], vt[c], e_src, e_tgt, seam, border, gains, plan.fill)
 
     return composite_pixels
 
@@ -798,10 +876,10 @@ def band_difference_kernel(
             word = plan.words[q]
             if int(word & wp.int64(3)) == KIND_BAND:
                 word_t = plan.words_tgt[q]
-                vs = adjusted(sample_fixed(planes.src, word_offset(word), word_fx(word), word_fy(word), steps[0],
-                                           steps[1]), gains.gain_src[0], gains.bias_src[0], 0, gains.tone)
-                vt = adjusted(sample_fixed(planes.tgt, word_offset(word_t), word_fx(word_t), word_fy(word_t), steps[2],
-                                           steps[3]), gains.gain_tgt[0], gains.bias_tgt[0], 0, gains.tone)
+                ss = sample_fixed(planes.src, word_offset(word), word_fx(word), word_fy(word), steps[0], steps[1])
+                st = sample_fixed(planes.tgt, word_offset(word_t), word_fx(word_t), word_fy(word_t), steps[2], steps[3])
+                vs = adjusted(ss, gains.gain_src[0], gains.bias_src[0], 0, gains.tone, wp.vec2i(ss, ss))
+                vt = adjusted(st, gains.gain_tgt[0], gains.bias_tgt[0], 0, gains.tone, wp.vec2i(st, st))
                 value = float(vs - vt) / float(ONE20)
                 both_sum = float(vs + vt) / float(ONE20)
         last = diff[k, j]

@@ -114,7 +114,7 @@ def clipped_seam(positions: np.ndarray, layout: SeamLayout) -> np.ndarray:
     return np.clip(positions, static - reach, static + reach).astype(np.float32)
 
 
-def kernel_gains(gains: Sequence, channels: int, tone: wp.vec2i, table: wp.array, relative: bool = False) -> Gains:
+def kernel_gains(gains: Sequence, channels: int, tone: wp.vec3i, table: wp.array, relative: bool = False) -> Gains:
     """(gain_src, bias_src, gain_tgt, bias_tgt) grey levels of ``channels`` channels as the kernels take
     them (fixed point), with the highlight knee ``tone`` and the target's gain ``table`` to fill;
     ``relative``: the offsets change the gains relatively (:class:`FrameState`'s ``relative_offsets``)."""
@@ -151,7 +151,8 @@ class CompositePlan:
     uint8 255 where a side is sampled; ``seam`` the static seam (``layout.positions``) on the device;
     ``border`` the border blend as the kernels take it (``border_source``: its host values, or None);
     ``fill`` the value per channel where no side is sampled; ``tone`` the highlight knee in kernel units
-    (``knee``: (knee, white) grey levels, or None); ``reach_px`` how far from a frame's seam its offsets
+    (``knee``: (knee, white) grey levels, or None; its third: 1 where it follows each colour pixel's
+    largest channel, ``Config.gain_knee_peak``); ``reach_px`` how far from a frame's seam its offsets
     change a pixel (with the float32 margin); ``runs`` each row's runs (``RowRuns``, found by
     :func:`with_runs`) or None.
     """
@@ -168,7 +169,7 @@ class CompositePlan:
     border_source: BorderBlend | None
     fill: tuple[int, ...]
     knee: tuple[float, float] | None
-    tone: wp.vec2i
+    tone: wp.vec3i
     reach_px: float
     runs: wp.array | None = None
 
@@ -179,6 +180,11 @@ class CompositePlan:
     @property
     def lines(self) -> int:
         return len(self.layout.positions)
+
+    @property
+    def knee_peak(self) -> bool:
+        """Whether near white a pixel's channels share its largest one's knee (``tone``'s third)."""
+        return bool(self.tone[2])
 
 
 def _border_on_device(border: BorderBlend | None, positions: int, channels: int, device: str) -> Border:
@@ -278,10 +284,12 @@ def _planned(kernel, maps: list, canvas_shape: tuple[int, int], layout: SeamLayo
         kernel_border = _border_on_device(border, positions, channels, device)
     knee = None if white is None else (float(white) * cfg.gain_knee_ratio, float(white))
     knee_level, white_level = knee or (0.0, 0.0)
+    knee_peak = cfg.gain_knee_peak and channels >= 3  # a colour pixel's channels; a plane (a video's Y) is its own
     reach = (max(layout.lf_px, 0.0) if offsets else 0.0) + RUN_MARGIN_PX
     return CompositePlan(canvas_shape, (shape_src, shape_tgt), layout, device, words, words_tgt, coverage, seam,
                          kernel_border, border, tuple(values), knee,
-                         wp.vec2i(int(round(knee_level * LEVEL)), int(round(white_level * LEVEL))), reach)
+                         wp.vec3i(int(round(knee_level * LEVEL)), int(round(white_level * LEVEL)), int(knee_peak)),
+                         reach)
 
 
 def with_runs(plan: CompositePlan, cfg: Config) -> CompositePlan:

@@ -170,6 +170,7 @@ class Config:
     gain_dark_level: float = 5.0  # pixels at or below this in any channel left out (clipped)
     gain_bright_level: float = 250.0  # pixels at or above this left out (saturated)
     gain_knee_ratio: float = 0.9  # gains: above this x white a view's gain line runs straight to white (1: none)
+    gain_knee_peak: bool = True  # near white a pixel's channels share its largest's knee (False: each its own)
     gain_stride: int = 2  # every this-th overlap pixel in each direction is used
     gain_min_pixels: int = 500  # fewer agreeing pixels: no compensation
     video_gain_period_s: float = 0.2  # video: gains re-measured on the frames every this many seconds

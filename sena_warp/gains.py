@@ -17,10 +17,24 @@ A gain below 1 turns a view's saturated white grey, one above 1 clips its highli
 the two views' skies disagree however well their mid-tones are matched (rew_theater's sky). So a
 gain applies in full up to a knee (``Config.gain_knee_ratio`` x white) and above it the line runs
 straight on to white (``tone_curve``; the compositor's kernel applies the same rule).
+
+Each channel through its own knee (``Config.gain_knee_peak`` False), a gain below 1 gives the line
+above the knee a slope near 2: the small differences between the channels of a near-white pixel
+double, and a bluish-white sky turns blue (rew_theater's target: (248, 252, 255) -> (243, 249, 255),
+beside the source's (250, 252, 254)); and a pixel whose red alone clips keeps the gains' tint in its
+other channels, so a warm gain turns a clipped grey-brown orange. So (True) the channels near the
+pixel's largest one, its *peak*, share the peak's knee: ``bias + (line(peak) - bias) x value / peak``,
+one factor per channel that runs from its gain at the knee to 1 at white, which fades the gains'
+tint and makes no colour of its own (a clipped white stays the neutral it was). How near white a
+pixel is, its smallest channel says: from a knee's width below the knee (none) to the knee (all) its
+channels move from their own lines to the shared one. A blue sky whose blue alone nears white keeps
+each channel's own line, its red and green their gains, matched across the seam (railtracks: with
+every pixel sharing its peak's knee the sky's green stepped 11 levels there).
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 
 import cv2
@@ -39,7 +53,8 @@ class Gains:
 
     ``gain_src``, ``bias_src``, ``gain_tgt``, ``bias_tgt``: (C,) float64. ``pixels``: how many overlap
     pixels the estimate used (0: none, the gains are the identity); ``model``: ``Config.gain_model``;
-    ``knee_grey``: where the highlight knee starts (``tone_curve``; 255: none).
+    ``knee_grey``: where the highlight knee starts (``tone_curve``; 255: none); ``knee_peak``: the
+    knee follows each pixel's largest channel (``Config.gain_knee_peak``).
     """
 
     gain_src: np.ndarray
@@ -49,6 +64,7 @@ class Gains:
     pixels: int
     model: str
     knee_grey: float = 255.0
+    knee_peak: bool = False
 
     @staticmethod
     def identity(channels: int, model: str) -> "Gains":
@@ -116,41 +132,62 @@ def opencv_gains(views: CanvasViews) -> Gains:
 
 def view_gains(views: CanvasViews, cfg: Config) -> Gains:
     """The gains of ``cfg.gain_model``: "channels" (``overlap_gains``), "opencv" (``opencv_gains``) or
-    "none" (the paper: no compensation), with the knee of ``cfg.gain_knee_ratio``."""
+    "none" (the paper: no compensation), with the knee of ``cfg.gain_knee_ratio`` and ``cfg.gain_knee_peak``."""
     knee = WHITE * cfg.gain_knee_ratio
     if cfg.gain_model == "channels":
-        return replace(overlap_gains(views.src, views.tgt, views.both, cfg), knee_grey=knee)
+        gains = overlap_gains(views.src, views.tgt, views.both, cfg)
+        return replace(gains, knee_grey=knee, knee_peak=cfg.gain_knee_peak)
     if cfg.gain_model == "opencv":
-        return replace(opencv_gains(views), knee_grey=knee)
+        return replace(opencv_gains(views), knee_grey=knee, knee_peak=cfg.gain_knee_peak)
     if cfg.gain_model == "none":
         return Gains.identity(views.src.shape[2], "none")
     raise InputError(f"unknown gain model {cfg.gain_model!r}; choose channels, opencv or none")
 
 
-def tone_curve(values: np.ndarray, gain: np.ndarray, bias: np.ndarray, knee: float, white: float = WHITE) -> np.ndarray:
+def tone_curve(values: np.ndarray, gain: np.ndarray, bias: np.ndarray, knee: float, white: float = WHITE,
+               shared: bool = False) -> np.ndarray:
     """``gain * values + bias`` per channel (last axis) up to ``knee``; above it the line from the knee's
     value runs straight on to (white, white), so white stays white whatever the gain (float32).
-    No knee where ``knee >= white`` or the knee's value is already white (a gain that large clips)."""
+    No knee where ``knee >= white`` or the knee's value is already white (a gain that large clips).
+    ``shared``: the last axis is one pixel's channels, which share its largest channel's knee as the
+    pixel nears white (the module docstring's rule); else each channel has its own."""
     values = np.asarray(values, np.float32)
     gain, bias = np.asarray(gain, np.float32), np.asarray(bias, np.float32)
     out = values * gain + bias
     at_knee = knee * gain + bias
     if knee >= white:
         return out
-    above = (values > knee) & (at_knee < white)
-    return np.where(above, at_knee + (values - knee) * (white - at_knee) / (white - knee), out)
+
+    def line(v):  # the gain's line bent at the knee, at v > knee
+        return np.where(at_knee < white, at_knee + (v - knee) * (white - at_knee) / (white - knee), v * gain + bias)
+
+    own = np.where(values > knee, line(values), out)
+    if not shared:
+        return own
+    peak, floor = values.max(axis=-1, keepdims=True), values.min(axis=-1, keepdims=True)
+    by_peak = bias + (np.minimum(line(peak), white) - bias) * values / np.maximum(peak, knee)
+    near = np.clip((floor - (2 * knee - white)) / (white - knee), 0, 1)  # 1 from the knee on, 0 a knee's width below
+    return np.where(peak > knee, own + near * (by_peak - own), own)
 
 
-def compensated(img: np.ndarray, gain: np.ndarray, bias: np.ndarray, knee: float) -> np.ndarray:
-    """:func:`tone_curve` per channel of a uint8 (H, W, C) image (C <= 4), rounded and clipped to uint8:
-    the curve is evaluated at the 256 levels once and looked up (``cv2.LUT``)."""
+def compensated(img: np.ndarray, gain: np.ndarray, bias: np.ndarray, knee: float, by_peak: bool) -> np.ndarray:
+    """:func:`tone_curve` of a uint8 (H, W, C) image (C <= 4), rounded and clipped to uint8: the curve
+    is evaluated at the 256 levels once and looked up (``cv2.LUT``); ``by_peak``: a pixel's channels
+    share its knee (``tone_curve``'s ``shared``), worked out again at the pixels near white."""
     levels = np.repeat(np.arange(256, dtype=np.float32)[:, None], img.shape[2], axis=1)
     table = np.clip(tone_curve(levels, gain, bias, knee) + 0.5, 0, 255).astype(np.uint8)
-    return cv2.LUT(img, table.reshape(256, 1, img.shape[2])).reshape(img.shape)
+    out = cv2.LUT(img, table.reshape(256, 1, img.shape[2])).reshape(img.shape)
+    if by_peak and img.shape[2] >= 3 and knee < WHITE:
+        planes = cv2.split(img)  # OpenCV's per-pixel max and min: numpy's over the last axis took 40 ms a view
+        near = (functools.reduce(cv2.max, planes) > knee) & (functools.reduce(cv2.min, planes) > 2 * knee - WHITE)
+        out[near] = np.clip(tone_curve(img[near], gain, bias, knee, shared=True) + 0.5, 0, 255).astype(np.uint8)
+    return out
 
 
 def compensated_views(views: CanvasViews, gains: Gains) -> CanvasViews:
     """The views as they enter the panorama: each with its side's gains (and their knee)."""
-    return CanvasViews(compensated(views.src, gains.gain_src, gains.bias_src, gains.knee_grey),
-                       compensated(views.tgt, gains.gain_tgt, gains.bias_tgt, gains.knee_grey), views.valid_src,
-                       views.valid_tgt)
+    def each(img, gain, bias):
+        return compensated(img, gain, bias, gains.knee_grey, gains.knee_peak)
+
+    return CanvasViews(each(views.src, gains.gain_src, gains.bias_src), each(views.tgt, gains.gain_tgt, gains.bias_tgt),
+                       views.valid_src, views.valid_tgt)

@@ -76,12 +76,13 @@ def reference(plan, state: FrameState, img_src, img_tgt, map_src, map_tgt, cfg: 
             weight = np.clip(1 - np.abs(line - border.lines[k]) / plan.layout.lf_px, 0, None)[..., None]
             along_src, along_tgt = (b[k][None, :, :] if rows else b[k][:, None, :] for b in (border.src, border.tgt))
             total_src, total_tgt = total_src + weight * along_src, total_tgt + weight * along_tgt
+    shared = plan.knee_peak
     if state.relative_offsets:  # a relative change of the gain, before the knee
-        src = tone_curve(v_src, gain_src * (1 + total_src), bias_src, knee, white)
-        tgt = tone_curve(v_tgt, gain_tgt * (1 + total_tgt), bias_tgt, knee, white)
+        src = tone_curve(v_src, gain_src * (1 + total_src), bias_src, knee, white, shared)
+        tgt = tone_curve(v_tgt, gain_tgt * (1 + total_tgt), bias_tgt, knee, white, shared)
     else:
-        src = tone_curve(v_src, gain_src, bias_src, knee, white) + total_src
-        tgt = tone_curve(v_tgt, gain_tgt, bias_tgt, knee, white) + total_tgt
+        src = tone_curve(v_src, gain_src, bias_src, knee, white, shared) + total_src
+        tgt = tone_curve(v_tgt, gain_tgt, bias_tgt, knee, white, shared) + total_tgt
     a = np.where(ok_src, np.where(ok_tgt, alpha, 1.0), 0.0)[..., None]
     covered = ok_src | ok_tgt
     return np.where(covered[..., None], np.clip(a * src + (1 - a) * tgt, 0, 255), 0.0), covered

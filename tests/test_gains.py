@@ -53,8 +53,9 @@ def test_overlap_gains_undo_an_exposure_difference_on_a_real_image():
     views = views_with_exposure(img, factor)
     def mean_step(g) -> np.ndarray:
         """Per channel |mean source - mean target| after the gains (grey levels)."""
-        return np.abs(compensated(views.src, g.gain_src, g.bias_src, g.knee_grey).astype(float).mean(axis=(0, 1))
-                      - compensated(views.tgt, g.gain_tgt, g.bias_tgt, g.knee_grey).mean(axis=(0, 1)))
+        src = compensated(views.src, g.gain_src, g.bias_src, g.knee_grey, g.knee_peak).astype(float)
+        tgt = compensated(views.tgt, g.gain_tgt, g.bias_tgt, g.knee_grey, g.knee_peak)
+        return np.abs(src.mean(axis=(0, 1)) - tgt.mean(axis=(0, 1)))
 
     gains = overlap_gains(views.src, views.tgt, views.both, CFG)
     before = np.abs(views.src.astype(float).mean(axis=(0, 1)) - views.tgt.mean(axis=(0, 1)))
@@ -94,8 +95,57 @@ def test_with_the_knee_a_saturated_view_stays_as_white_as_the_other_one():
     assert gains.gain_tgt.max() < 1 and clipped.sum() > 500
 
     def gap(knee: float) -> float:
-        src = compensated(views.src, gains.gain_src, gains.bias_src, knee).astype(float)
-        tgt = compensated(views.tgt, gains.gain_tgt, gains.bias_tgt, knee).astype(float)
+        src = compensated(views.src, gains.gain_src, gains.bias_src, knee, gains.knee_peak).astype(float)
+        tgt = compensated(views.tgt, gains.gain_tgt, gains.bias_tgt, knee, gains.knee_peak).astype(float)
         return float(np.mean(src[clipped] - tgt[clipped]))
 
     assert gap(255.0) > 8 and abs(gap(CFG.gain_knee_ratio * 255)) < 0.5 * gap(255.0)
+
+
+def test_the_knee_by_peak_makes_no_colour_where_each_channel_s_own_knee_does():
+    """Gains far from 1 and unequal per channel (B 0.8, G 1.0, R 1.25: a view made much warmer). A light grey-brown
+    ramp (RGB in the ratio 1 : 0.95 : 0.9, its top past the knee, its red clipped at the end): with a pixel's
+    channels sharing its largest one's knee as it nears white every channel's factor (output / input) lies
+    between its gain and 1, and where the red clips the pixel comes out as it went in; each channel through its
+    own knee leaves blue its gain of 0.8 there while red stays 255, and the clipped grey-brown comes out orange.
+    Clipped white stays white either way; a bluish near-white (rew_theater's target sky, RGB 248 252 255, gains
+    0.88-0.91) keeps its own spread by the peak and nearly doubles it channel by channel (7 -> 12 levels). A
+    blue sky whose red and green are mid-tones (railtracks's) is not near white: it keeps each channel's own
+    knee, its red and green their gains, the exposure matched across the seam."""
+    gain, bias, knee = np.array([0.8, 1.0, 1.25]), np.zeros(3), CFG.gain_knee_ratio * 255
+    level = np.linspace(150, 255, 106, dtype=np.float32)[:, None]
+    ramp = level * np.array([0.9, 0.95, 1.0], np.float32)  # BGR
+    by_peak = tone_curve(ramp, gain, bias, knee, shared=True)
+    factor = by_peak / ramp
+    assert np.all(factor >= np.minimum(gain, 1) - 1e-5) and np.all(factor <= np.maximum(gain, 1) + 1e-5)
+    hue_in = np.log(ramp[-1, 0] / ramp[-1, 2])  # blue against red
+    assert np.log(by_peak[-1, 0] / by_peak[-1, 2]) == pytest.approx(hue_in, abs=0.01)
+    own = np.minimum(tone_curve(ramp, gain, bias, knee), 255)
+    assert np.log(own[-1, 0] / own[-1, 2]) < hue_in - 0.15  # each channel's own knee: the top turns orange
+    white = np.full((1, 3), 255, np.float32)
+    for shared in (True, False):
+        np.testing.assert_allclose(np.minimum(tone_curve(white, gain, bias, knee, shared=shared), 255), 255)
+    sky = np.array([[255, 252, 248]], np.uint8)[None]  # BGR
+    theater = np.array([0.8837, 0.8966, 0.9078])
+
+    def spread(by: bool) -> int:
+        out = compensated(sky, theater, np.zeros(3), knee, by).astype(int)
+        return int(out.max() - out.min())
+
+    assert spread(True) <= 7 and spread(False) >= 11
+    blue_sky = np.array([[245.0, 200.0, 138.0]], np.float32)  # BGR
+    for g in (np.full(3, 0.97), np.full(3, 1.03)):
+        np.testing.assert_allclose(tone_curve(blue_sky, g, bias, knee, shared=True),
+                                   tone_curve(blue_sky, g, bias, knee), atol=1e-4)
+
+
+def test_compensated_by_peak_is_the_tone_curve_of_each_pixel():
+    """The image path's views (a table for pixels not near white, the rest worked out again) give the
+    tone curve with each pixel's channels sharing its knee, rounded."""
+    rng = np.random.default_rng(3)
+    img = rng.integers(180, 256, size=(40, 50, 3), dtype=np.uint8)
+    gain, bias, knee = np.array([0.85, 1.05, 1.2]), np.array([1.0, 0.0, -2.0]), CFG.gain_knee_ratio * 255
+    values = img.reshape(-1, 3).astype(np.float32)
+    expected = tone_curve(values, gain, bias, knee, shared=True)
+    out = compensated(img, gain, bias, knee, True).reshape(-1, 3).astype(np.float32)
+    assert np.abs(out - np.clip(expected, 0, 255)).max() <= 0.5 + 1e-3

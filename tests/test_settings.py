@@ -131,3 +131,12 @@ def test_seam_blend_gain_reaches_the_compositor(udisd_pair, composited, gain):
     applied = np.abs(state.offsets[0]).max()
     assert applied == pytest.approx(np.abs(pano.maps.seam.offsets.relative()[0] if gain else pano.maps.seam.offsets.src).max(),
                                     rel=1e-3, abs=1e-5)
+
+
+@pytest.mark.parametrize("peak", [True, False])
+def test_gain_knee_peak_reaches_the_views_and_the_compositor(udisd_pair, composited, peak):
+    """``gain_knee_peak``: the views the seam is cut on and the panorama's plan both take the knee as
+    set (a pixel's channels sharing it, or each its own), the kernels through the plan's tone."""
+    pano = stitch.stitch_images(*udisd_pair, Config(device="cpu", gain_knee_peak=peak))
+    assert pano.maps.seam.gains.knee_peak is peak
+    assert composited[-1][0].knee_peak is peak and composited[-1][0].tone[2] == int(peak)

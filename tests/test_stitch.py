@@ -17,7 +17,7 @@ def beyond_seam_px(maps) -> int:
 def target_as_shown(maps, img_tgt):
     """The target with its gains: what the panorama shows of it away from the seam."""
     gains = maps.seam.gains
-    return compensated(img_tgt, gains.gain_tgt, gains.bias_tgt, gains.knee_grey)
+    return compensated(img_tgt, gains.gain_tgt, gains.bias_tgt, gains.knee_grey, gains.knee_peak)
 
 
 @pytest.fixture(scope="module")

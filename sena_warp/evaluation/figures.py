@@ -75,8 +75,8 @@ def seam_figures(img_a: np.ndarray, img_b: np.ndarray, pano: Panorama, cfg: Conf
     img_src, img_tgt = (image_to_working(img, maps.rig) for img in maps.rig.pick(img_a, img_b))
     warp, seam = maps.warp, maps.seam
     gains = seam.gains
-    img_src = compensated(img_src, gains.gain_src, gains.bias_src, gains.knee_grey)
-    img_tgt = compensated(img_tgt, gains.gain_tgt, gains.bias_tgt, gains.knee_grey)
+    img_src = compensated(img_src, gains.gain_src, gains.bias_src, gains.knee_grey, gains.knee_peak)
+    img_tgt = compensated(img_tgt, gains.gain_tgt, gains.bias_tgt, gains.knee_grey, gains.knee_peak)
     placed_tgt, valid_tgt = remap_image(img_tgt, seam.maps.map_tgt_canvas, cfg)
     seam_src, valid_seam_src = remap_image(img_src, seam.maps.map_src_canvas, cfg)
     seam_mad = transition_mad(seam_src, placed_tgt, valid_seam_src & valid_tgt, seam.maps.seam_x_canvas,
