@@ -665,6 +665,25 @@ def rule_channel(r: PixelRule, c: int, vs: int, vt: int, extent_src: wp.vec2i, e
     return grey_level(int(r.a * float(vs) + (1.0 - r.a) * float(vt)))
 
 
+
+@wp.func(inline=True)  # per pixel: inlined, its struct and array arguments are not copied per call
+def by_rule(r: PixelRule, o: int, channels: int, planes: Planes, seam: SeamState, border: Border, gains: Gains,
+            fill: wp.vec4i, out: wp.array(dtype=wp.uint8)):
+    """A pixel's ``channels`` channels by the full rule (``pixel_rule``'s terms ``r``) into ``out[o:o + channels]``:
+    each side sampled (``rule_samples``), its (smallest, largest) for the knee, then ``rule_channel``."""
+    vs = wp.vec4i()
+    vt = wp.vec4i()
+    for c in range(4):  # unrolled over the most channels (MAX_CHANNELS), the used ones kept: per pixel
+        if c < channels:
+            st = rule_samples(r, c, planes)
+            vs[c] = st[0]
+            vt[c] = st[1]
+    e_src = extent_of(vs, channels)
+    e_tgt = extent_of(vt, channels)
+    for c in range(4):
+        if c < channels:
+            out[o + c] = rule_channel(r, c, vs[c], vt[c], e_src, e_tgt, seam, border, gains, fill)
+
 def _composite_frame_kernel(channels: int):
     """The row-run frame kernel for images of ``channels`` (1 to 4) channels, its channel loops unrolled.
 
@@ -754,18 +773,8 @@ def _composite_frame_kernel(channels: int):
                 continue
             for x in range(first_column(j, begin, col_step), end, col_step):
                 q = y * width + x
-                o = q * wp.static(channels)
                 r = pixel_rule(x, y, q, plan, seam, layout, border, bw_row, wp.static(channels))
-                vs = wp.vec4i()
-                vt = wp.vec4i()
-                for c in range(wp.static(channels)):
-                    st = rule_samples(r, c, planes)
-                    vs[c] = st[0]
-                    vt[c] = st[1]
-                e_src = extent_of(vs, wp.static(channels))
-                e_tgt = extent_of(vt, wp.static(channels))
-                for c in range(wp.static(channels)):
-                    out[o + c] = rule_channel(r, c, vs[c], vt[c], e_src, e_tgt, seam, border, gains, plan.fill)
+                by_rule(r, q * wp.static(channels), wp.static(channels), planes, seam, border, gains, plan.fill, out)
 
     return composite_frame
 
@@ -790,19 +799,9 @@ def _composite_pixel_kernel(channels: int):
         i, x = wp.tid()
         y = row0 + i
         q = y * plan.size[0] + x
-        o = q * wp.static(channels)
         bw_row = border_weights(y, border.lines, border.on, layout.lf_px)
         r = pixel_rule(x, y, q, plan, seam, layout, border, bw_row, wp.static(channels))
-        vs = wp.vec4i()
-        vt = wp.vec4i()
-        for c in range(wp.static(channels)):
-            st = rule_samples(r, c, planes)
-            vs[c] = st[0]
-            vt[c] = st[1]
-        e_src = extent_of(vs, wp.static(channels))
-        e_tgt = extent_of(vt, wp.static(channels))
-        for c in range(wp.static(channels)):
-            out[o + c] = rule_channel(r, c, vs[c], vt[c], e_src, e_tgt, seam, border, gains, plan.fill)
+        by_rule(r, q * wp.static(channels), wp.static(channels), planes, seam, border, gains, plan.fill, out)
 
     return composite_pixels
 
