@@ -7,6 +7,8 @@ half their difference. Two kernels: each view's background model (a running mean
 deviation per cell, which flags the cells where that view is off it), and the object band's masks on
 the seam's finer band. Both run over
 ``runtime.launch_row_loops`` (thread i does line ``row0 + i``, cells j, j + col_step, ... < width).
+The masks' loop is a ``while`` loop: Warp's CPU code for a ``range()`` with a run-time step steps a
+general iterator (0.23 -> 0.20 ms a frame for this copy on the 1080p bench's band).
 """
 
 from __future__ import annotations
@@ -118,7 +120,8 @@ def coarse_masks_kernel(
     i, j0 = wp.tid()
     k = row0 + i
     kc = wp.min((lines[k] + coarse.step / 2) / coarse.step, moving_coarse.shape[0] - 1)
-    for j in range(j0, width, col_step):
+    j = j0
+    while j < width:  # not range(): see the module docstring
         pos = fine.x0[k] + j * fine.cell
         jc = (pos - coarse.x0[kc]) / coarse.cell
         if pos >= coarse.x0[kc] and jc < moving_coarse.shape[1]:
@@ -127,3 +130,4 @@ def coarse_masks_kernel(
         else:
             moving[k, j] = wp.uint8(0)
             kept_off[k, j] = wp.uint8(0)
+        j = j + col_step
