@@ -342,11 +342,13 @@ def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarra
             hi = np.where(at_last, np.maximum(np.minimum(right, last_both[k]) - first_cell[k], 0), hi)
         np.add.at(edges, (k, lo), 1)
         np.add.at(edges, (k, hi), -1)
-    inside = np.cumsum(edges[:, :cells], axis=1) > 0
+    inside = np.cumsum(edges[:, :cells], axis=1, dtype=edges.dtype) > 0
     np.copyto(out, inside, casting="unsafe")
     opens = inside.copy()
     opens[:, 1:] &= ~inside[:, :-1]
-    for k in np.flatnonzero(opens.sum(axis=1) > most):  # rare: a crowd on one line
+    # Rare: a crowd on one line (looked for only where all the lines together open more than ``most``).
+    crowded = np.flatnonzero(opens.sum(axis=1) > most) if np.count_nonzero(opens) > most else ()
+    for k in crowded:
         runs = np.flatnonzero(np.diff(np.concatenate([[0], out[k], [0]]).astype(np.int8)))
         out[k] = 0
         for lo, hi in merge_strips(list(zip(runs[::2], runs[1::2])), most):
