@@ -9,7 +9,7 @@ Without ``--left``/``--right`` it makes (or reuses) ``sena-warp bench``'s 1080p 
 a slow pan over a real pair, so every line of the band changes every frame (the worst case: no line
 is still, the free path is solved every frame). The first N frame pairs are decoded into memory, a
 :class:`~sena_warp.video.stitch.SenaFrameCompositor` is made as ``sena-warp video`` makes it (static
-rig, one estimate pair), and each frame is composited in order; the per-frame seam's calls (the
+rig, one estimate pair, OpenCV on ``video_opencv_threads``), and each frame is composited in order; the per-frame seam's calls (the
 band's and the object band's differences over the overlap and their download, ``DeviceFrame.band``,
 then ``FrameSeam.next``: what is in front and its route, still lines, paths, seam blend offsets, where
 the next frame's band goes) are timed in wall and process CPU time (no drift checks: nothing else of the process runs
@@ -29,6 +29,7 @@ from collections import defaultdict
 from itertools import islice
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from sena_warp import seam_path
@@ -97,6 +98,8 @@ def main() -> int:
     compositor = SenaFrameCompositor.from_videos(
         args.left, args.right, 0.0, cfg.replace(video_rig="static", video_estimate_pairs=1, video_drift_check_s=0.0),
         "auto")
+    if cfg.video_opencv_threads > 0:  # as ``sena-warp video`` sets them from the first estimate on
+        cv2.setNumThreads(cfg.video_opencv_threads)
     seam = compositor.frame_seam  # the compositor's own FrameSeam, timed where the loop calls it
     solve, band = seam.next, device_frame.DeviceFrame.band
     wall, cpu = [0.0], [0.0]

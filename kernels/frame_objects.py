@@ -7,6 +7,9 @@ half their difference. Two kernels: each view's background model (a running mean
 deviation per cell, which flags the cells where that view is off it), and the object band's masks on
 the seam's finer band. Both run over
 ``runtime.launch_row_loops`` (thread i does line ``row0 + i``, cells j, j + col_step, ... < width).
+The masks' loop is a ``while`` loop: Warp's CPU code for a ``range()`` with a run-time step steps a
+general iterator (0.23 -> 0.20 ms a frame for this copy on the 1080p bench's band), and it follows its
+coarse cell without an integer division per cell (0.20 -> 0.16 ms).
 """
 
 from __future__ import annotations
@@ -118,12 +121,28 @@ def coarse_masks_kernel(
     i, j0 = wp.tid()
     k = row0 + i
     kc = wp.min((lines[k] + coarse.step / 2) / coarse.step, moving_coarse.shape[0] - 1)
-    for j in range(j0, width, col_step):
-        pos = fine.x0[k] + j * fine.cell
-        jc = (pos - coarse.x0[kc]) / coarse.cell
-        if pos >= coarse.x0[kc] and jc < moving_coarse.shape[1]:
+    start = coarse.x0[kc]
+    step = col_step * fine.cell
+    j = j0
+    pos = fine.x0[k] + j * fine.cell
+    # The coarse cell jc of pos (where pos >= start) kept as pos - start = jc coarse cells + rest, 0 <= rest
+    # < a coarse cell: one division a line, not one a cell (module docstring).
+    jc = int(0)
+    rest = pos - start
+    if rest >= 0:
+        jc = rest / coarse.cell
+        rest = rest - jc * coarse.cell
+    while j < width:  # not range(): see the module docstring
+        if pos >= start and jc < moving_coarse.shape[1]:
             moving[k, j] = moving_coarse[kc, jc]
             kept_off[k, j] = kept_coarse[kc, jc]
         else:
             moving[k, j] = wp.uint8(0)
             kept_off[k, j] = wp.uint8(0)
+        j = j + col_step
+        if j < width:
+            pos = pos + step
+            rest = rest + step
+            while rest >= coarse.cell:
+                rest = rest - coarse.cell
+                jc = jc + 1

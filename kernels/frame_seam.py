@@ -9,6 +9,10 @@ expressions: what each cell costs the seam's paths, and the difference next to t
 seam blend's). Both run one thread per line (``runtime.launch_rows`` with width 1): they reduce along
 it. A third, on one thread, moves the band's centre no faster than a path can follow (a chain of
 clamps, each on the last: a loop, 10x cheaper compiled than in Python).
+
+The cost kernel walks its line in a ``while`` loop: Warp's CPU code for a ``range()`` with run-time
+bounds steps a general iterator (its step's sign unknown), which cost a third of that kernel's time
+(0.27 -> 0.19 ms a frame on the 1080p bench's band of 400 x 99 cells).
 """
 
 from __future__ import annotations
@@ -98,7 +102,8 @@ def band_cost_kernel(
     outside = wp.max(wp.max(x0 - seam, seam - (x0 + cell * (width - 1))), 0)
     reach = wp.max(costs.speed, float(outside))
     lowest = float(1.0e30)
-    for j in range(width):
+    j = int(0)
+    while j < width:  # not range(): see the module docstring
         d = diff[k, j]
         c = wp.max(wp.abs(d) - costs.noise, 0.0)
         c = c + costs.motion_cost * float(moving[k, j])
@@ -120,6 +125,7 @@ def band_cost_kernel(
             if held or float(wp.abs(pos - seam)) > reach:
                 glide = total + costs.block_cost
             out.glide[k, j - first] = glide
+        j = j + 1
     out.line_min[k] = lowest
 
 

@@ -6,6 +6,10 @@ costing ``step_cost``; it minimises the sum of ``cost`` along it plus those step
 ``sena_warp/seam_path.py``). Segments are row ranges solved independently; a segment may start and
 end at a fixed canvas column (an anchor) or anywhere. Segments that share an end row must fix it
 to the same column.
+
+The inner loops are ``while`` loops: Warp's CPU code for a ``range()`` with run-time bounds steps a
+general iterator (its step's sign unknown), which here cost as much as the work itself (a 400 x 99
+band: 0.45 ms a solve with ``range()``, 0.23 ms with these loops, the same path).
 """
 
 from __future__ import annotations
@@ -55,16 +59,21 @@ def seam_dp_kernel(
     for r in range(r0 + 1, r1 + 1):
         nxt = 1 - cur
         shift = band_x0[r] - band_x0[r - 1]
-        for j in range(width):
+        j = int(0)
+        while j < width:  # while loops, not range(): see the module docstring
             best = float(INF)
             best_d = int(0)
             # steps d from -max_step up, within the last row's cells (jp = j + shift - d in [0, width))
-            for d in range(wp.max(-max_step, j + shift - width + 1), wp.min(max_step, j + shift) + 1):
+            d = wp.max(-max_step, j + shift - width + 1)
+            last_d = wp.min(max_step, j + shift)
+            while d <= last_d:
                 v = acc[s, cur, j + shift - d] + step_cost * float(wp.abs(d))
                 best_d = wp.where(v < best, d, best_d)  # without a branch: which step wins is data
                 best = wp.where(v < best, v, best)
+                d = d + 1
             acc[s, nxt, j] = best + cost[r, j]
             back[r, j] = wp.int8(best_d)
+            j = j + 1
         cur = nxt
     j = int(0)
     if seg_end_x[s] >= 0:

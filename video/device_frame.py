@@ -141,10 +141,12 @@ BAND_FIELDS = ("diff", "total", "delta")  # what ``composite.band_difference`` f
 @dataclass(frozen=True)
 class BandCellsOn:
     """One band of a :class:`BandBlock`: its (K, width) ``shape``, its cells as the kernel takes them
-    (``cells``), and its difference, sum and change on the host (``frame``)."""
+    (``cells``), its difference, sum and change on the device as the kernel fills them (``out``) and on
+    the host (``frame``)."""
 
     shape: tuple[int, int]
     cells: BandCells
+    out: tuple[wp.array, wp.array, wp.array]
     frame: BandFrame
 
 
@@ -162,18 +164,17 @@ class BandBlock:
             cells = BandCells()
             cells.lines, cells.cell, cells.x0 = transfer.to_device(lines, int, device, "plan"), cell, x0
             cells.origin = wp.vec2i(0, 0)
+            out = tuple(self._block.device[f"{name}_{field}"].reshape(shape) for field in BAND_FIELDS)
             frame = BandFrame.of(*(self._block.host[f"{name}_{field}"] for field in BAND_FIELDS))
-            self._bands[name] = BandCellsOn(shape, cells, frame)
+            self._bands[name] = BandCellsOn(shape, cells, out, frame)
 
     def difference(self, frame: FrameArrays, plan: CompositePlan, gains_luma: Gains, origin: tuple[int, int]
                    ) -> dict[str, BandFrame]:
         """``composite.band_difference`` of the pair loaded in ``frame`` on each band's cells, read on a
         ``plan`` whose pixel (0, 0) shows canvas pixel ``origin`` (x, y), on the host (one small download)."""
-        device = self._block.device
-        for name, band in self._bands.items():
+        for band in self._bands.values():
             band.cells.origin = wp.vec2i(*origin)
-            band_difference(frame, plan, band.cells, gains_luma, band.shape[1],
-                            tuple(device[f"{name}_{field}"].reshape(band.shape) for field in BAND_FIELDS))
+            band_difference(frame, plan, band.cells, gains_luma, band.shape[1], band.out)
         self._block.download()
         return {name: band.frame for name, band in self._bands.items()}
 

@@ -66,6 +66,7 @@ FOREGROUND_MOST = 0.8  # a view off its background on more of the band: the came
 # close to both cameras covers two thirds of it)
 MOST_STRIPS = 8  # strips kept off per line at most
 SETTLE_S = 0.25  # nothing is in front while the models have learnt from less than this much video
+NO_EXTENT = np.iinfo(np.int64).max // 4  # a line's extent where a copy has none (start past any end)
 OBJECT_BOXES = 2  # an object covers this x this of an object's boxes at least (smaller things only cost motion)
 
 
@@ -183,10 +184,17 @@ class ViewBackground:
             self._band = diff, total, host_array(diff, float), host_array(total, float)
         runtime.launch_row_loops(view_background_kernel, diff.shape[0], diff.shape[1], [
             *self._band[2:], wp.vec4(*explained), self._models], DEVICE, runtime.BAND_THREADS)
-        self._crowded = bool(both.any()) and max(float(view[both].mean()) for view in off) > FOREGROUND_MOST
+        self._crowded = most_off(off, both) > FOREGROUND_MOST
         if self.frames < self._settle:
             off.fill(0)
         return off
+
+
+def most_off(views, both: np.ndarray) -> float:
+    """The larger share of the cells in ``both`` (K, cells) bool that either of ``views`` (two (K, cells)
+    uint8 0/1 masks) flags: 0 without such cells."""
+    count = np.count_nonzero(both)
+    return max(np.count_nonzero(view & both) for view in views) / count if count else 0.0
 
 
 def whole_band_fit(background: np.ndarray, total: np.ndarray, both: np.ndarray, noise: float) -> tuple[float, float]:
@@ -199,8 +207,18 @@ def whole_band_fit(background: np.ndarray, total: np.ndarray, both: np.ndarray, 
     y = total[both].astype(np.float64)
     gain, offset = _gain_offset(x, y)
     residual = np.abs(y - gain * x - offset)
-    kept = residual <= max(noise, 2.0 * float(np.median(residual))) if residual.size else residual > 0
+    kept = residual <= max(noise, 2.0 * array_median(residual)) if residual.size else residual > 0
     return _gain_offset(x[kept], y[kept])
+
+
+def array_median(values: np.ndarray) -> float:
+    """``np.median`` of the 1-D ``values`` (not empty, no NaN), from a partial sort of its one or two
+    middle values: the same number at a fifth of its cost on the band's few hundred cells."""
+    half = values.size // 2
+    if values.size % 2:
+        return float(np.partition(values, half)[half])
+    middle = np.partition(values, (half - 1, half))
+    return (float(middle[half - 1]) + float(middle[half])) / 2.0
 
 
 def _gain_offset(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -324,11 +342,13 @@ def keep_off_cells(pairs: list[tuple[Blob | None, Blob | None]], both: np.ndarra
             hi = np.where(at_last, np.maximum(np.minimum(right, last_both[k]) - first_cell[k], 0), hi)
         np.add.at(edges, (k, lo), 1)
         np.add.at(edges, (k, hi), -1)
-    inside = np.cumsum(edges[:, :cells], axis=1) > 0
+    inside = np.cumsum(edges[:, :cells], axis=1, dtype=edges.dtype) > 0
     np.copyto(out, inside, casting="unsafe")
     opens = inside.copy()
     opens[:, 1:] &= ~inside[:, :-1]
-    for k in np.flatnonzero(opens.sum(axis=1) > most):  # rare: a crowd on one line
+    # Rare: a crowd on one line (looked for only where all the lines together open more than ``most``).
+    crowded = np.flatnonzero(opens.sum(axis=1) > most) if np.count_nonzero(opens) > most else ()
+    for k in crowded:
         runs = np.flatnonzero(np.diff(np.concatenate([[0], out[k], [0]]).astype(np.int8)))
         out[k] = 0
         for lo, hi in merge_strips(list(zip(runs[::2], runs[1::2])), most):
@@ -342,9 +362,8 @@ def copy_extents(copies: list[Blob | None], first_cell: np.ndarray, lines: int, 
     origin (band line k begins at ``first_cell[k]``), of each of ``copies`` on each of the band's
     ``lines`` lines, each line taking its neighbours' within ``reach`` lines too; an empty extent
     (start > end) where none, and everywhere for a copy that is None."""
-    big = np.iinfo(np.int64).max // 4
-    start = np.full((len(copies), lines + 2 * reach), big, np.int64)  # ``reach`` lines of padding each side
-    end = np.full((len(copies), lines + 2 * reach), -big, np.int64)
+    start = np.full((len(copies), lines + 2 * reach), NO_EXTENT, np.int64)  # ``reach`` lines of padding each side
+    end = np.full((len(copies), lines + 2 * reach), -NO_EXTENT, np.int64)
     present = [(row, blob) for row, blob in enumerate(copies) if blob is not None]
     if present:  # every copy's lines at once
         rows = np.concatenate([np.full(len(blob.starts), row) for row, blob in present])
@@ -465,7 +484,7 @@ class ObjectBand:
         solids = [solid(view, box) for view in off]
         np.copyto(host["moving"], cv2.dilate(solids[0] | solids[1], kernel))
         both = band.diff < 0.5 * NOT_BOTH
-        crowded = max(float(s[both].mean()) if both.any() else 0.0 for s in solids) > FOREGROUND_MOST
+        crowded = most_off(solids, both) > FOREGROUND_MOST
         # Most of a view off its background: the camera or the light changed, not an object in front.
         least = (OBJECT_BOXES * box) ** 2  # a person's size, not a head turning or a screen's flicker
         self.pairs = [] if crowded else pair_copies(blobs(solids[0], least), blobs(solids[1], least), grid.width)

@@ -140,8 +140,10 @@ class BandPlace:
         """The band about ``centre`` (K,) px on the solved lines, or about ``home`` without one."""
         x0 = BandPlace.first_cells(home[grid.lines] if centre is None else centre, grid)
         cells = x0[:, None] + grid.cell * np.arange(grid.width, dtype=np.int32)[None, :]
+        away = np.subtract(cells, home[grid.lines, None], dtype=np.float64)  # in place: a frame's band moves often
+        np.abs(away, out=away)
         home_term = np.empty(grid.shape, np.float32)
-        np.copyto(home_term, cfg.video_seam_home_cost * np.abs(cells - home[grid.lines, None]), casting="unsafe")
+        np.multiply(away, cfg.video_seam_home_cost, out=home_term, casting="unsafe")
         return BandPlace(home, x0, cells, home_term, host_array(x0, int), host_array(home_term, float))
 
     @staticmethod
@@ -443,7 +445,8 @@ class FrameSeam:
             delta = delta.copy()
             taken = np.arange(width)[None, :] + self._shift[shifted, None]
             inside = (taken >= 0) & (taken < width)
-            last = np.take_along_axis(self.work.host["last_diff"][shifted], np.clip(taken, 0, width - 1), axis=1)
+            at = np.clip(taken, 0, width - 1) + (shifted * width)[:, None]  # in the flat last difference
+            last = np.take(self.work.host["last_diff"], at)
             now = band.diff[shifted]
             both = inside & (now < 0.5 * NOT_BOTH) & (last < 0.5 * NOT_BOTH)
             delta[shifted] = np.where(both, np.abs(now - last), 0.0)
