@@ -28,6 +28,10 @@ reach changes), and ``frame_runs_kernel`` fits them to each frame's seam. The ta
 at whole pixels: each pixel is its target element through the frame's gains, which
 ``gain_table_kernel`` tabulates per frame, so the frame kernel copies it through the table. The
 source's run is sampled and gained without working out each pixel's seam, blend and offsets.
+
+The per-pixel loops over a thread's columns are ``while`` loops: Warp's CPU code for a ``range()``
+with run-time bounds steps a general iterator (its step's sign unknown), a cost of its own per pixel
+(``kernels/seam_path.py`` measured it first).
 """
 
 from __future__ import annotations
@@ -224,11 +228,13 @@ def composite_plan_kernel(
     """
     i, j = wp.tid()
     y = row0 + i
-    for x in range(j, width, col_step):
+    x = j
+    while x < width:  # while loops, not range(): see the module docstring
         q = y * width + x
         covered = plan_pixel(q, line_and_position(x, y, layout.lines_are_rows), map_src[y, x], map_tgt[y, x], seam,
                              layout, shape_src, shape_tgt, plan, plan_tgt)
         coverage[y, x] = wp.uint8(covered)
+        x = x + col_step
 
 
 @wp.struct
@@ -300,12 +306,14 @@ def window_plan_kernel(
     new one every frame)."""
     i, j = wp.tid()
     y = row0 + i
-    for x in range(j, width, col_step):
+    x = j
+    while x < width:
         q = y * width + x
         p_tgt = wp.vec2(float(x), float(y)) - window.origin_tgt
         covered = plan_pixel(q, line_and_position(x, y, layout.lines_are_rows), window_sample(map_src, x, y, window),
                              p_tgt, seam, layout, shape_src, shape_tgt, plan, plan_tgt)
         coverage[y, x] = wp.uint8(covered)
+        x = x + col_step
 
 
 @wp.func
@@ -739,8 +747,9 @@ def _composite_frame_kernel(channels: int):
             elif part == 4:
                 begin = later[1]
                 end = width
+            x = first_column(j, begin, col_step)
             if how == RUN_COPY:
-                for x in range(first_column(j, begin, col_step), end, col_step):
+                while x < end:  # while loops, not range(): see the module docstring
                     o = (y * width + x) * wp.static(channels)
                     p = run[2] + x * wp.static(channels)
                     e = wp.vec2i(255, 0)
@@ -755,9 +764,10 @@ def _composite_frame_kernel(channels: int):
                     else:
                         for c in range(wp.static(channels)):
                             out[o + c] = gains.table[c * 256 + int(planes.tgt[p + c])]
+                    x = x + col_step
                 continue
             if how == RUN_SAMPLE:
-                for x in range(first_column(j, begin, col_step), end, col_step):
+                while x < end:
                     q = y * width + x
                     word = plan.words[q]
                     p = word_offset(word)
@@ -770,11 +780,13 @@ def _composite_frame_kernel(channels: int):
                     for c in range(wp.static(channels)):
                         v = adjusted(s[c], gains.gain_src[c], gains.bias_src[c], 0, gains.tone, e)
                         out[q * wp.static(channels) + c] = grey_level(v)
+                    x = x + col_step
                 continue
-            for x in range(first_column(j, begin, col_step), end, col_step):
+            while x < end:
                 q = y * width + x
                 r = pixel_rule(x, y, q, plan, seam, layout, border, bw_row, wp.static(channels))
                 by_rule(r, q * wp.static(channels), wp.static(channels), planes, seam, border, gains, plan.fill, out)
+                x = x + col_step
 
     return composite_frame
 
