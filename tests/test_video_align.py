@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from sena_warp.config import Config
-from sena_warp.video.align import (Alignment, CorrectionFit, FrameAlignment, LagBoundedFilter, OverlapGrid,
-                                   TargetPoints, copies_apart, reduction, residual_flow, small_plane, small_to_full)
+from sena_warp.video.align import (Alignment, CorrectionFit, FrameAlignment, LagBoundedFilter, OverlapGrid, Seam,
+                                   TargetPoints, copies_apart, corners_in, reduction, residual_flow, small_plane,
+                                   small_to_full)
 
 CFG = Config(device="cpu")
 SRC_COLS = (0, 300)  # the source view: these picture columns; the target view ...
@@ -139,3 +140,29 @@ def test_copies_of_a_point_the_warp_leaves_off():
     alignment = Alignment(np.zeros((2, 2, 2)), pts, targets, np.ones(3), np.zeros(3), 0)
     tgt_copies, src_copies = copies_apart(alignment, map_src, 2.0)
     assert np.allclose(tgt_copies, pts[1:]) and np.allclose(src_copies, targets[1:], atol=1e-3)
+
+
+@pytest.mark.parametrize("box", [(40, 300, 100, 160), (0, 512, 0, 50), (500, 512, 200, 480), (0, 512, 0, 480)])
+def test_corners_in_a_mask_are_the_whole_planes_search_in_it(picture, box):
+    """The search on the mask's bounding box finds exactly what OpenCV's search of the whole plane finds
+    (boxes inside the plane, along its left edge, its last rows, all of it)."""
+    y0, y1, x0, x1 = box
+    mask = np.zeros_like(picture)
+    mask[y0:y1, x0:x1] = 255
+    cv2.circle(mask, ((x0 + x1) // 2, (y0 + y1) // 2), 12, 0, -1)  # an existing point's keep-off disc
+    whole = cv2.goodFeaturesToTrack(picture, 120, 0.01, 6, mask=mask).reshape(-1, 2)
+    found = corners_in(picture, mask, 120, 6)
+    assert len(found) > 5 and np.array_equal(found, whole)
+    assert corners_in(picture, np.zeros_like(picture), 120, 6).shape == (0, 2)
+
+
+@pytest.mark.parametrize("lines_are_rows", [True, False])
+@pytest.mark.parametrize("factor", [1, 2])
+def test_the_seams_mask_marks_the_pixels_within_reach_of_it(lines_are_rows, factor):
+    rng = np.random.default_rng(5)
+    seam = Seam(rng.uniform(0, 400, 300).astype(np.float32), lines_are_rows)
+    offset = np.array([-20.0, 35.0])
+    mask = seam.mask_small((150, 200), offset, factor, 24.0)
+    rows, cols = np.mgrid[0:150, 0:200]
+    pts = small_to_full(np.stack([cols.ravel(), rows.ravel()], axis=1), factor) + offset
+    assert np.array_equal(mask.ravel() == 255, seam.distance(pts) <= 24.0) and 0 < (mask == 255).mean() < 0.5

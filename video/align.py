@@ -52,6 +52,7 @@ FLOW_LEVELS = 2  # ... and of the residual flow (the warp is off by a few px at 
 RETURN_PX = 0.5  # a flow counts where its backward run returns within this (small px)
 CORNER_QUALITY = 0.01  # corners: at least this x the strongest one's response
 BORDER_PX = 8  # corners keep this far inside the overlap (small px: their window must lie in both views)
+CROP_MARGIN_PX = 4  # a corner search reads this far past its mask (its gradients and their 3 x 3 sums: 2 px)
 OVERLAP_FRAMES = 10  # where the views overlap is found anew every this many frames (it moves slowly)
 SEED_FRAMES = 5  # corners are topped up at most every this many frames (a search costs as much as a track)
 
@@ -203,8 +204,24 @@ class TargetPoints:
         free = mask.copy()
         for x, y in np.rint(existing).astype(int):
             cv2.circle(free, (int(x), int(y)), gap, 0, -1)
-        found = cv2.goodFeaturesToTrack(tgt_small, count, CORNER_QUALITY, gap, mask=free)
-        return np.zeros((0, 2), np.float32) if found is None else found.reshape(-1, 2).astype(np.float32)
+        return corners_in(tgt_small, free, count, gap)
+
+
+def corners_in(plane: np.ndarray, mask: np.ndarray, count: int, gap: int) -> np.ndarray:
+    """Up to ``count`` Shi-Tomasi corners (N, 2) float32 of ``plane`` (h, w) uint8 within ``mask`` (255),
+    ``gap`` px apart: OpenCV's search on the mask's bounding box and :data:`CROP_MARGIN_PX` around it
+    only (the corner response of a pixel reads its 3 x 3 neighbours' gradients; the corners are the whole
+    plane's, found in a third of the time where the mask is the strip by the seam)."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if not rows.size or count < 1:
+        return np.zeros((0, 2), np.float32)
+    y0, y1 = max(0, rows[0] - CROP_MARGIN_PX), min(plane.shape[0], rows[-1] + 1 + CROP_MARGIN_PX)
+    x0, x1 = max(0, cols[0] - CROP_MARGIN_PX), min(plane.shape[1], cols[-1] + 1 + CROP_MARGIN_PX)
+    found = cv2.goodFeaturesToTrack(np.ascontiguousarray(plane[y0:y1, x0:x1]), count, CORNER_QUALITY, gap,
+                                    mask=np.ascontiguousarray(mask[y0:y1, x0:x1]))
+    if found is None:
+        return np.zeros((0, 2), np.float32)
+    return (found.reshape(-1, 2) + np.float32([x0, y0])).astype(np.float32)
 
 
 def spacing(mask: np.ndarray, count: int) -> int:
@@ -371,8 +388,12 @@ class Seam:
         rows, cols = shape_small
         xs = small_to_full(np.arange(cols), factor) + offset_tgt[0]
         ys = small_to_full(np.arange(rows), factor) + offset_tgt[1]
-        grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-        return np.where(self.distance(grid) <= half_px, 255, 0).astype(np.uint8).reshape(rows, cols)
+        lines, along = (ys, xs) if self.lines_are_rows else (xs, ys)
+        index = np.rint(lines).astype(np.int64)
+        on = (index >= 0) & (index < len(self.positions))
+        near = np.zeros((len(lines), len(along)), bool)
+        near[on] = np.abs(along[None, :] - self.positions[index[on]][:, None].astype(np.float64)) <= half_px
+        return np.where(near if self.lines_are_rows else near.T, 255, 0).astype(np.uint8)
 
 
 class FrameAlignment:

@@ -35,8 +35,9 @@ import numpy as np
 from ..config import Config
 
 CHECK_S = 0.2  # views are compared this often (seconds of video) ...
-MOVING_CHECK_S = 0.4  # ... and this often once the rig moves: what is watched for then (both views still for
-# video_rig_still_s) takes seconds to show, and a check costs as much as a hand-held frame's alignment
+MOVING_CHECK_S = 0.8  # ... and this often once the rig moves: what is watched for then (both views still for
+# video_rig_still_s) takes seconds to show, a check costs as much as a hand-held frame's alignment, and one
+# check still covers MIN_COVERED of a window
 WINDOW_S = 1.0  # drifts add up the checks over this much video
 THUMB_WIDTH_PX = 320  # views are compared at this width at most
 CORNERS = 200  # corners tracked per check ...
