@@ -166,3 +166,10 @@ def test_the_seams_mask_marks_the_pixels_within_reach_of_it(lines_are_rows, fact
     rows, cols = np.mgrid[0:150, 0:200]
     pts = small_to_full(np.stack([cols.ravel(), rows.ravel()], axis=1), factor) + offset
     assert np.array_equal(mask.ravel() == 255, seam.distance(pts) <= 24.0) and 0 < (mask == 255).mean() < 0.5
+
+
+def test_a_frame_without_points_has_no_copies():
+    """A frame whose tracks all failed (a person filling both views) has no points: no copies, no error."""
+    alignment = Alignment(np.zeros((2, 2, 2)), np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros(0), 0)
+    tgt_copies, src_copies = copies_apart(alignment, IDENTITY.copy(), 2.0)
+    assert tgt_copies.shape == (0, 2) and src_copies.shape == (0, 2)

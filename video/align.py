@@ -81,6 +81,8 @@ def sample_map(map_canvas: np.ndarray, pts_canvas: np.ndarray) -> np.ndarray:
     """The map (Hc, Wc, 2) at canvas points (N, 2) or on a grid (H, W, 2) of them (bilinear; NaN outside
     the canvas or where the map is NaN), float64 of the points' shape."""
     pts = np.asarray(pts_canvas, np.float32)
+    if not pts.size:  # no points (a frame whose tracks all failed): OpenCV takes no empty grid
+        return np.zeros(pts.shape)
     grid = pts.reshape(-1, 1, 2) if pts.ndim < 3 else pts
     sampled = cv2.remap(map_canvas, np.ascontiguousarray(grid[..., 0]), np.ascontiguousarray(grid[..., 1]),
                         cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=(np.nan, np.nan))
