@@ -191,6 +191,7 @@ class Config:
     video_estimate_spacing: int = 5  # frame pairs between two of those tries
     video_screen_max_side: int = 640  # those tries are ranked by XFeat at this long side at most; the best is estimated at xfeat_max_side
     video_still_background: bool = False  # first estimate: leave out the matches on what moves in front of a still background (video/still_matches.py)
+    video_align_in_front: bool = False  # auto: a fixed rig whose first estimate aligned something moving in front of a still background is aligned every frame, its canvas held (off: the room beside it sways with it, docs/evaluation.md)
     video_recur_px: float = 2.0  # first estimate: a match recurs where the pairs beside it have one within this (screening px) at both ends
     video_moving_recur: float = 0.05  # ... a model whose inliers recur at most this share is something that moves, left out
     video_still_recur: float = 0.2  # ... where a model whose inliers recur this share at least (the still background) follows it

@@ -9,7 +9,8 @@ import pytest
 
 from sena_warp.config import Config
 from sena_warp.features import Matches
-from sena_warp.video.estimate import best_first_estimate, first_pairs
+from sena_warp.video.estimate import Attempt, best_first_estimate, first_pairs, moving_in_front, pair_models
+from sena_warp.video.reader import YuvFrame
 from sena_warp.video.still_matches import moving_models, recurring, without_models
 
 CFG = Config(device="cpu", video_still_background=True)
@@ -75,6 +76,7 @@ def test_the_bundled_office_leaves_nothing_out(bundled_dir):
     _, _, attempts = best_first_estimate(first_pairs(clips / "office_cam1.mp4", clips / "office_cam2.mp4", 0.0, cfg),
                                          cfg, "auto")
     assert [a.moving_left_out for a in attempts] == [0, 0, 0]
+    assert not moving_in_front(attempts, attempts[0].pair, cfg)
 
 
 @pytest.mark.shared
@@ -94,3 +96,32 @@ def test_the_cafe_is_aligned_on_the_room_not_on_the_person_in_front(shared_dir, 
     else:
         assert shift[0] > 100.0, shift
         assert all(a.moving_left_out == 0 for a in attempts)
+    # Aligned on the person, the maps are what moves in front of the room: aligned every frame (timeline.py).
+    assert moving_in_front(attempts, chosen, cfg) is not still_background
+
+
+def attempt(pair: int, leading_recur: float | None, background: bool) -> Attempt:
+    return Attempt(pair, 0.25 * pair, 100, None, 0, leading_recur, background)
+
+
+@pytest.mark.parametrize("leading, backgrounds, expected", [
+    ((0.0, 0.0), (True, False), True),  # the chosen pair's model is on what moves, another pair found the room
+    ((0.0, 0.4), (False, True), False),  # the chosen pair's model recurs: a still scene's
+    ((0.0, 0.0), (False, False), False),  # nothing recurs anywhere: a rig that moves
+    ((0.0, 0.1), (True, False), False),  # the chosen model recurs in between: it says nothing
+    ((0.0, None), (True, False), False),  # the chosen pair has no model
+])
+def test_the_estimate_is_on_something_in_front_when_its_model_moves_before_a_still_background(
+        leading, backgrounds, expected):
+    attempts = [attempt(k, recur, found) for k, (recur, found) in enumerate(zip(leading, backgrounds))]
+    assert moving_in_front(attempts, 1, CFG) is expected
+
+
+def test_the_models_of_each_pair_are_told_in_turn():
+    """``PairModels`` of crafted pairs: the person first (recurring nowhere), the still room after him."""
+    pairs = rig_pairs(moving_person=True, moving_rig=False)
+    frame = YuvFrame(0.0, 0, np.zeros((450, 600), np.uint8), np.zeros((225, 300), np.uint8),
+                     np.zeros((225, 300), np.uint8))  # the views' size: the matches are in its pixels
+    judged = pair_models([(100, k, frame, frame, m) for k, m in enumerate(pairs)], CFG)
+    assert all(j.leading_recur is not None and j.leading_recur < 0.05 and j.background and len(j.moving) == 1
+               for j in judged)

@@ -227,12 +227,31 @@ def test_office_static_rig_seam_never_moves(clips, tmp_path):
     assert spans["video"][0] == 48 and set(np.diff(spans["video"][1])) == {Fraction(1, 24)}
     stitch = report["stitch"]
     assert stitch["rig"]["source"] == "right"  # cam2 is the left view in this pair
+    assert stitch["rig"]["aligned_in_front"] is False  # its estimate is on the still room: maps made once
     assert stitch["reestimations"]["attempted"] == 0
     assert stitch["jitter"] == {"seam_jitter_px_mean": 0.0, "seam_jitter_px_max": 0.0,
                                 "map_change_p99_px_max": 0.0, "frames": 48}
     out_frames, in_1 = decoded_frames(out), decoded_frames(clips / "office_cam1.mp4")
     assert out_frames[0].y.shape[1] > 640 * 1.2
     assert target_region_diff(out_frames[20], in_1[20], report, seen.seams[20], FAST) < 3.0
+
+
+@pytest.mark.shared
+def test_a_fixed_rig_whose_estimate_is_on_a_person_in_front_can_be_aligned_every_frame(shared_dir, tmp_path):
+    """The cafe: two fixed webcams, a person close to both holds most of the first pairs' matches (the
+    room behind him recurs, he does not). With ``video_align_in_front`` the rig stays static, its canvas
+    held, and its maps are aligned to every frame; the seam glides. Off (the default), maps made once."""
+    clip = shared_dir / "videos" / "cafe_person_close"
+    cfg = CFG.replace(video_estimate_workers=0, video_end_s=1.5, video_align_in_front=True)
+    report = stitch_videos(clip / "left.avi", clip / "right.avi", tmp_path / "cafe.mp4", cfg,
+                           VideoOptions.from_config(cfg))
+    rig = report["stitch"]["rig"]
+    assert rig["aligned_in_front"] is True and [d["mode"] for d in rig["decisions"]] == ["static"]
+    assert rig["alignment"]["frames"] == report["frames_out"] == 30 and rig["steady"]["frames"] == 0
+    assert report["stitch"]["frame_seam"]["motion_px_max"] <= cfg.video_seam_speed_px
+    off = stitch_videos(clip / "left.avi", clip / "right.avi", tmp_path / "off.mp4",
+                        cfg.replace(video_align_in_front=False), VideoOptions.from_config(cfg))
+    assert off["stitch"]["rig"]["aligned_in_front"] is False and off["stitch"]["rig"]["alignment"] is None
 
 
 def test_moving_rig_aligns_every_frame_and_reports_the_jitter(clips, tmp_path):

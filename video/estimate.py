@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Iterator
+from itertools import chain
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from fractions import Fraction
@@ -26,7 +27,7 @@ from ..xfeat import working_size
 from .maps import PlaneMaps, map_change_px
 from .pairing import pair_by_time
 from .reader import FrameReader, YuvFrame, probe_video, span_of
-from .still_matches import moving_models, without_models
+from .still_matches import judged_models, models_in_turn, without_models
 from .working import prior_to_small, scaled_up, shrunk_pair, small_matches, working_scale
 
 MEDIAN_PERCENTILE = 50.0  # the rejection test compares the median map change
@@ -42,10 +43,23 @@ class Attempt:
     inliers: int | None
     error: str | None
     moving_left_out: int = 0  # matches on something that moved, left out (``still_matches.py``)
+    leading_recur: float | None = None  # the share of step 1's inliers found again in the other pairs (``PairModels``)
+    background: bool = False  # a still background found among its matches (``PairModels``)
 
     def as_dict(self) -> dict:
         return {"pair": self.pair, "time_s": round(self.time_s, 4), "inliers": self.inliers, "error": self.error,
-                "moving_left_out": self.moving_left_out}
+                "moving_left_out": self.moving_left_out,
+                "leading_recur": None if self.leading_recur is None else round(self.leading_recur, 3),
+                "background": self.background}
+
+
+def moving_in_front(attempts: list[Attempt], pair: int, cfg: Config) -> bool:
+    """Whether the estimate of ``pair`` aligned something that moves in front of a still background: its
+    step 1's inliers are not found again (at most ``video_moving_recur`` of them, as a moving model's),
+    while the first pairs show a still background (``still_matches.py``); a rig that moves has none."""
+    chosen = next((a for a in attempts if a.pair == pair), None)
+    return (chosen is not None and chosen.leading_recur is not None and chosen.leading_recur <= cfg.video_moving_recur
+            and any(a.background for a in attempts))
 
 
 def spaced_span(cfg: Config) -> int:
@@ -145,19 +159,47 @@ def screening_px(frame_l: YuvFrame, frame_r: YuvFrame, cfg: Config) -> float:
     return max(1.0, max(max(shape) for shape in shapes) / side)
 
 
-def without_moving(screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]], cfg: Config, reference: str
-                   ) -> tuple[list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]], dict[int, list[np.ndarray]],
+@dataclass(frozen=True)
+class PairModels:
+    """What moves among a first pair's matches (``still_matches.py``): ``moving`` the models that move and
+    lead a still background (empty where none do, or none follows), whether that ``background`` was
+    found, and ``leading_recur``, the share of step 1's model's inliers found again in the other pairs
+    (None: no model)."""
+
+    moving: list[np.ndarray]
+    background: bool
+    leading_recur: float | None
+
+
+def pair_models(screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]], cfg: Config
+                ) -> list[PairModels]:
+    """Per screened pair (inliers, index, left, right, matches): its :class:`PairModels`, against the
+    other pairs' matches."""
+    all_matches = [s[4] for s in screened if s[4] is not None]
+    found = []
+    for _, _, frame_l, frame_r, matches in screened:
+        if matches is None:
+            found.append(PairModels([], False, None))
+            continue
+        tol_px = cfg.video_recur_px * screening_px(frame_l, frame_r, cfg)
+        turns = models_in_turn(matches, [m for m in all_matches if m is not matches], tol_px, cfg)
+        leading = next(turns, None)
+        moving, background = judged_models(chain([leading], turns) if leading is not None else [], cfg)
+        found.append(PairModels(moving, background, None if leading is None else leading[1]))
+    return found
+
+
+def without_moving(screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]], judged: list[PairModels],
+                   cfg: Config, reference: str) -> tuple[list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]], dict[int, list[np.ndarray]],
                               set[int]]:
     """The screened pairs (inliers, index, left, right, matches) with the matches on what moves left out
     where a still background follows them (``still_matches.py``), their inliers counted again; per pair
     index the moving models left out (a -> b affines, input pixels); and the pairs whose background was
     found (first or after what moves)."""
-    all_matches = [s[4] for s in screened if s[4] is not None]
     kept, moving, background = [], {}, set()
-    for inliers, index, frame_l, frame_r, matches in screened:
+    for (inliers, index, frame_l, frame_r, matches), models_of in zip(screened, judged):
         px = screening_px(frame_l, frame_r, cfg)
-        models, found = ([], False) if matches is None else moving_models(
-            matches, [m for m in all_matches if m is not matches], cfg.video_recur_px * px, cfg)
+        models, found = models_of.moving, models_of.background
         if models:
             still = without_models(matches, models, cfg.ransac_reproj_px * px)
             try:
@@ -199,10 +241,13 @@ def best_first_estimate(first: Iterable[tuple[int, YuvFrame, YuvFrame]], cfg: Co
                 screened.append((FAILED_SCREENING, index, frame_l, frame_r, None))
             continue
         screened.append((inliers, index, frame_l, frame_r, matches))
-    still, moving, background = without_moving(screened, cfg, reference) if cfg.video_still_background else (
+    judged = pair_models(screened, cfg)
+    still, moving, background = without_moving(screened, judged, cfg, reference) if cfg.video_still_background else (
         screened, {}, set())
-    attempts += [Attempt(index, float(frame_l.time_s), inliers, None, len(before[4]) - len(matches))
-                 for before, (inliers, index, frame_l, _, matches) in zip(screened, still) if matches is not None]
+    attempts += [Attempt(index, float(frame_l.time_s), inliers, None, len(before[4]) - len(matches),
+                         models_of.leading_recur, models_of.background)
+                 for before, (inliers, index, frame_l, _, matches), models_of in zip(screened, still, judged)
+                 if matches is not None]
     attempts.sort(key=attrgetter("pair"))
     # Most inliers first; among equals the earliest pair. Where something moved in front of a still
     # background, the pairs whose inliers are that background come first.

@@ -23,6 +23,8 @@ at all (the detector's own noise), hence the two shares far apart.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
+
 import numpy as np
 
 from ..config import Config
@@ -52,29 +54,42 @@ def _near(pts: np.ndarray, pts_other: np.ndarray, tol_px: float) -> np.ndarray:
     return np.einsum("nmk,nmk->nm", delta, delta) <= tol_px * tol_px
 
 
-def moving_models(matches: Matches, others: list[Matches], tol_px: float, cfg: Config
-                  ) -> tuple[list[np.ndarray], bool]:
-    """The (2, 3) a -> b affines of the models (module docstring, 2) in ``matches`` that move and lead
-    the background, fitted in turn on what the earlier ones left out (at most ``video_moving_models``),
-    and whether the background was found after them (or first, with no moving model before it); no
-    models where it was not."""
+def models_in_turn(matches: Matches, others: list[Matches], tol_px: float, cfg: Config
+                   ) -> Iterator[tuple[np.ndarray, float]]:
+    """Step 1's model of ``matches``, then the model of what it left out, and so on (at most
+    ``video_moving_models`` + 1, fitted as they are asked for): each model's (2, 3) a -> b affine and
+    the share of its inliers that recur in the ``others`` (:func:`recurring`)."""
     again = recurring(matches, others, tol_px)
     left = np.ones(len(matches), bool)
-    moving: list[np.ndarray] = []
     for _ in range(cfg.video_moving_models + 1):
         try:
             model = fit_global_affine(matches.pts_a[left], matches.pts_b[left], cfg)
         except MatchError:
-            break
+            return
         inliers = np.flatnonzero(left)[model.inliers]
-        share = float(again[inliers].mean())
+        yield model.affine_src_to_tgt, float(again[inliers].mean())
+        left[inliers] = False
+
+
+def judged_models(turns: Iterable[tuple[np.ndarray, float]], cfg: Config) -> tuple[list[np.ndarray], bool]:
+    """Of a pair's :func:`models_in_turn`: the affines of the models that move and lead the background,
+    and whether the background was found after them (or first, with no moving model before it); no
+    models where it was not."""
+    moving: list[np.ndarray] = []
+    for affine, share in turns:
         if share >= cfg.video_still_recur:
             return moving, True
         if share > cfg.video_moving_recur:
             break
-        moving.append(model.affine_src_to_tgt)
-        left[inliers] = False
+        moving.append(affine)
     return [], False
+
+
+def moving_models(matches: Matches, others: list[Matches], tol_px: float, cfg: Config
+                  ) -> tuple[list[np.ndarray], bool]:
+    """The (2, 3) a -> b affines of the models (module docstring, 2) in ``matches`` that move and lead
+    the background, and whether the background was found (:func:`judged_models`)."""
+    return judged_models(models_in_turn(matches, others, tol_px, cfg), cfg)
 
 
 def without_models(matches: Matches, models: list[np.ndarray], max_px: float) -> Matches:

@@ -45,6 +45,7 @@ from ..config import CHOICES, Config, require_config
 from ..crop import largest_inner_rectangle
 from ..errors import InputError, VideoError
 from ..outputs import OutputPlan
+from ..progress import LOGGER
 from ..report import run_info
 from ..rig import Rig
 from ..stitch import StitchMaps
@@ -52,7 +53,7 @@ from sena_warp.kernels import transfer
 from sena_warp.kernels.runtime import prewarm, resolve_config
 from .debug import dump_first_estimate
 from .device_frame import DeviceFrame, FramePlan, Plans, frame_plan
-from .estimate import Attempt, best_first_estimate, paired_frames, spaced_pairs, spaced_span
+from .estimate import Attempt, best_first_estimate, moving_in_front, paired_frames, spaced_pairs, spaced_span
 from .exposure import ExposureTracker
 from .frame_seam import BandFrame, FrameSeam, band_half_width, cell_px
 from .loop import VideoOptions, run_still, run_video
@@ -259,19 +260,26 @@ class SenaFrameCompositor:
         self._steady = SteadyCanvas(shape, (shown[3], shown[2]), self._canvas.scale, cfg)
         # A rig that may be static: its seam may go round what is in front anywhere in the overlap.
         shapes_src_tgt = rig.pick(*frame_shapes)
+        # --rig auto on a first estimate that aligned something moving in front of a still background: aligned
+        # every frame from the start (``timeline.MapsTimeline``), its band a moving rig's.
+        in_front = (cfg.video_rig == "auto" and cfg.video_align_in_front and not cfg.video_still_background
+                    and moving_in_front(first_attempts, first_pair, cfg))
         maps = maps_on_canvas(first, self._canvas.stitched_shape, offset_tgt, self._canvas.band_px, shape,
-                              shapes_src_tgt, cfg.video_rig != "moving", cfg)
+                              shapes_src_tgt, cfg.video_rig != "moving" and not in_front, cfg)
         self._first_info = {"tried": [a.as_dict() for a in first_attempts], "chosen_pair": first_pair,
                             "inliers": maps.inliers, "seconds": round(sum(first.seconds.values()), 4)}
         first_s = next(a.time_s for a in first_attempts if a.pair == first_pair)
         mode = "moving" if cfg.video_rig == "moving" else "static"  # --rig auto starts static and decides
         self._timeline = MapsTimeline(maps, mode, first_s, self._canvas, self._reestimates(maps, fps, frame_shapes),
                                       RigMotion(cfg) if cfg.video_rig == "auto" else None,
-                                      watch_frames(fps, pair_mib(frame_shapes), cfg), cfg)
+                                      watch_frames(fps, pair_mib(frame_shapes), cfg), cfg, in_front)
+        if self._timeline.in_front:
+            LOGGER.info("rig: aligned every frame (the first estimate's matches lead with something that moves "
+                        "in front of a still background)")
         self._plans = Plans((shown[3], shown[2]), offset_tgt, cfg)  # of the canvas's maps, or of a window on them
         cell = max(1, round(cell_px(frame_shapes, cfg) * float(self._canvas.scale.min())))
         self._seam = FrameSeam(maps.seam_luma.positions, self._canvas.band_px, cell, maps.overlap_luma,
-                               mode == "static", fps, cfg)
+                               not self._timeline.aligned, fps, cfg)
         self._exposure: ExposureTracker | None = None  # made on the first frame pair (it needs the planes' shapes)
         self._device: DeviceFrame | None = None  # likewise
         self._last: tuple[FramePlan, FrameState, FrameState] | None = None  # the last frame's plan and states
@@ -386,7 +394,7 @@ class SenaFrameCompositor:
             self._steady.follow(y_tgt)
         else:
             self._steady.hold()
-        self._seam.set_jumps(self._timeline.mode == "static")
+        self._seam.set_jumps(not self._timeline.aligned)
         changed = after is not before
         log.seam_jitter_px.append(seam_change_px(before, after) if changed else 0.0)
         log.map_change_px.append(map_change_px(before, after, y_src.shape, JITTER_PERCENTILE, stride=JITTER_STRIDE)
@@ -518,7 +526,8 @@ class SenaFrameCompositor:
             "rig": {"mode": cfg.video_rig, "source": "left" if canvas.rig.source == "a" else "right",
                     "vertical": canvas.rig.vertical,
                     "reestimate_s": cfg.video_reestimate_s if reestimates is not None else None,
-                    "decisions": self._timeline.decisions, "alignment": self._timeline.alignment_log(),
+                    "decisions": self._timeline.decisions, "aligned_in_front": self._timeline.in_front,
+                    "alignment": self._timeline.alignment_log(),
                     "steady": self._steady.report()},
             "first_estimate": self._first_info,
             "canvas": {"width": self.output_size[0], "height": self.output_size[1],

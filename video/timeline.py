@@ -7,7 +7,11 @@ frame t and earlier ones only, by the plan of the moment (``mode``):
   ``video_drift_check_s`` the views are compared with the first estimate's, and a move larger than
   ``video_drift_px`` is blended in (the source side at most ``video_drift_speed_px`` a frame,
   :class:`Blend`);
-- a moving rig's source map is aligned to every frame (``moving.py``, ``align.py``): the key
+- a moving rig's source map is aligned to every frame (``moving.py``, ``align.py``), and so is a
+  fixed rig's whose first estimate aligned something moving in front of a still background (a person
+  close to both cameras holds most matches: the seam runs through him, and only an alignment made on
+  each frame keeps him whole there; ``video_align_in_front``, off: the room beside him then moves with
+  him, docs/evaluation.md): the key
   estimate's plus a correction measured on the frame. When the alignment falls behind, a full
   re-estimate is made, at most every ``video_reestimate_s`` (:class:`Reestimates`), on a worker thread
   with a CUDA stream of its own (on the loop's thread with ``video_estimate_workers`` 0:
@@ -238,31 +242,45 @@ class LastFrame:
 class MapsTimeline:
     """The maps of each frame in turn (module docstring): ``maps`` those of the frame last advanced to;
     ``mode`` ("static" / "moving") the plan they follow; ``drift`` (a static rig's, or None),
-    ``reestimates`` (a rig that may move, or None) and ``moving`` (a moving rig's alignment, made on
-    its first frame) say how they move; ``watch``: ``--rig auto``'s, or None. ``first_s``: the time of
-    the first estimate's pair (a static rig's drift is measured from there)."""
+    ``reestimates`` (a rig that may move, or None) and ``moving`` (the alignment of a moving rig, or of
+    a rig aligned ``in_front``, made on its first frame) say how they move; ``watch``: ``--rig auto``'s,
+    or None. ``first_s``: the time of the first estimate's pair (a static rig's drift is measured from
+    there). ``in_front``: the first estimate aligned something that moves in front of a still
+    background (``estimate.Attempt.moving_in_front``): its maps are aligned to every frame as a moving
+    rig's are, whatever the rig does (its seam at the seam of what moves, which holds the matches)."""
 
     def __init__(self, first: PlaneMaps, mode: str, first_s: float, canvas: Canvas,
-                 reestimates: Reestimates | None, watch: RigMotion | None, watch_frames: int, cfg: Config):
+                 reestimates: Reestimates | None, watch: RigMotion | None, watch_frames: int, cfg: Config,
+                 in_front: bool = False):
         self._cfg = cfg
         self._canvas = canvas
         self.maps = first
         self.mode = mode
-        self.drift = self._drift_check(first, first_s) if mode == "static" else None
         self.reestimates = reestimates
         self.moving: MovingRig | None = None
         self.watch = watch
         self._watch_frames = watch_frames if watch is not None else 0
         self._decisions: deque[RigDecision] = deque()  # the watch's decisions not yet applied, oldest first
         self.decisions: list[dict] = []  # each applied, with the time of the frame it took effect on
-        # The alignment works on the stitched canvas, the target pasted 1:1: not on an output scaled down.
-        self._aligns = bool(np.allclose(canvas.scale, 1.0))
         if mode == "moving" and not self._aligns:
             raise VideoError("--rig moving aligns every frame at the stitched size; drop --max-width "
                              f"(the stitched video is {canvas.stitched_shape[1]} px wide) or use --rig static")
+        self.in_front = in_front and self._aligns and reestimates is not None
+        self.drift = self._drift_check(first, first_s) if mode == "static" and not self.in_front else None
         self._alignments: list[dict] = []  # the alignment logs of the moving stretches that ended
         self._blend: Blend | None = None
         self.align_seconds = 0.0
+
+    @property
+    def _aligns(self) -> bool:
+        """Whether frames can be aligned: the alignment works on the stitched canvas, the target pasted 1:1,
+        not on an output scaled down."""
+        return bool(np.allclose(self._canvas.scale, 1.0))
+
+    @property
+    def aligned(self) -> bool:
+        """Whether the maps are aligned to every frame (a moving rig, or one aligned ``in_front``)."""
+        return self.mode == "moving" or self.in_front
 
     def _drift_check(self, base: PlaneMaps, from_s: float) -> DriftCheck | None:
         return DriftCheck(base, from_s, self._canvas.scale, self._cfg) if self._cfg.video_drift_check_s > 0 else None
@@ -275,7 +293,7 @@ class MapsTimeline:
 
     def _due(self, time_s: float) -> bool:
         """A re-estimate is due: a moving rig whose alignment asks for one, ``video_reestimate_s`` after the last."""
-        return (self.mode == "moving" and self.moving is not None and self.moving.wants_estimate()
+        return (self.aligned and self.moving is not None and self.moving.wants_estimate()
                 and self.reestimates.due(time_s))
 
     def look_ahead(self, frame_l: YuvFrame, frame_r: YuvFrame, prior_seam_tgt: Callable[[], np.ndarray]) -> None:
@@ -300,7 +318,7 @@ class MapsTimeline:
         time_s = float(frame_l.time_s)
         while self._decisions and (not self.decisions or self._decisions[0].time_s <= time_s + 1e-6):
             self._become(self._decisions.popleft(), time_s)
-        if self.mode == "moving":
+        if self.aligned:
             return self._align(frame_l, frame_r, y_src, y_tgt, prior_seam_tgt, last)
         if self._blend is not None:
             self._step()
@@ -310,7 +328,7 @@ class MapsTimeline:
 
     def _align(self, frame_l: YuvFrame, frame_r: YuvFrame, y_src: np.ndarray, y_tgt: np.ndarray,
                prior_seam_tgt: Callable[[], np.ndarray], last: LastFrame) -> PlaneMaps:
-        """A moving rig's maps of the pair: a re-estimate collected (an accepted one its new key) or
+        """The maps of the pair aligned to it: a re-estimate collected (an accepted one its new key) or
         started (without a look-ahead), then the key aligned to the pair."""
         time_s = float(frame_l.time_s)
         if self.moving is None:
@@ -342,7 +360,7 @@ class MapsTimeline:
             return
         self.mode = decision.mode
         self._blend = None  # a drift's blend stops where it is
-        if self.mode == "moving":
+        if self.mode == "moving" or self.in_front:  # aligned on: what is in front still moves
             self.drift = None
             self.reestimates.restart(time_s)
             return
@@ -352,9 +370,9 @@ class MapsTimeline:
         self.drift = self._drift_check(self.maps, time_s)
 
     def copies(self, lines_are_rows: bool) -> tuple[np.ndarray, np.ndarray] | None:
-        """A moving rig's frame: the two copies of each point its warp leaves apart (``MovingRig.copies``);
-        None on a static rig."""
-        return self.moving.copies(lines_are_rows) if self.mode == "moving" and self.moving is not None else None
+        """An aligned frame: the two copies of each point its warp leaves apart (``MovingRig.copies``);
+        None where the maps are not aligned to the frames."""
+        return self.moving.copies(lines_are_rows) if self.moving is not None else None
 
     def alignment_log(self) -> dict | None:
         """The moving stretches' alignment (``MovingRig.log``), all of them together; None if none."""
