@@ -871,8 +871,10 @@ def band_difference_kernel(
     canvas_width = plan.size[0]
     canvas_height = plan.size[1]
     steps = planes.steps
-    for j in range(j0, width, col_step):
-        pos = band.x0[k] + j * band.cell
+    x0 = band.x0[k]
+    j = j0
+    while j < width:  # while loops, not range(): see the module docstring
+        pos = x0 + j * band.cell
         x = pos
         y = line
         if layout.lines_are_rows == 0:
@@ -900,6 +902,7 @@ def band_difference_kernel(
         if holds_both(value) and holds_both(last):
             change = wp.abs(value - last)
         delta[k, j] = change
+        j = j + col_step
 
 
 @wp.kernel
