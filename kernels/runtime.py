@@ -3,8 +3,9 @@
 Every kernel of this package takes ``row0: int`` as its first argument and is launched with
 ``dim=(rows, width)``; the pixel row it handles is ``row0 + i``. Warp's CPU backend runs one launch
 on one thread, so on CPU ``launch_rows`` cuts the image into horizontal bands and launches each band
-from a small persistent thread pool (a launch releases the GIL while it runs). On CUDA one launch
-covers the whole image.
+from a small persistent thread pool (a launch releases the GIL while it runs); a launch of one band
+is recorded once per kernel and grid and replayed (:func:`_launch_on_host`: the per-frame seam's small
+kernels paid more to ``wp.launch`` than to their work). On CUDA one launch covers the whole image.
 
 The device is chosen once per run: the job (``stitch_images``, ``stitch_videos``, ``sena-warp eval``)
 calls :func:`resolve_config` and hands the result to every stage, which allocates on ``cfg.device``
@@ -30,6 +31,7 @@ from pathlib import Path
 
 import warp as wp
 import warp._src.build  # init_kernel_cache: where Warp keeps compiled kernels
+from warp._src.codegen import StructInstance  # a struct's value, held by reference in a recorded launch
 
 from sena_warp.config import Config
 from sena_warp.errors import InputError
@@ -237,6 +239,35 @@ def _in_kernel_cache(module, device: str) -> bool:
     return os.path.isdir(os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(_block_dim(module, device))))
 
 
+REPLAYS_KEPT = 64  # one-band CPU launches a thread keeps recorded (one per kernel and grid: a video's are a few)
+_replays = threading.local()  # per thread: (kernel, dim) -> (its recorded wp.Launch, the inputs that launch holds)
+
+
+def _launch_on_host(kernel, dim: tuple[int, int], inputs: list) -> None:
+    """One launch of ``kernel`` over ``dim`` on the CPU, on the calling thread: recorded the first time on
+    that grid (``record_cmd``) and replayed after, setting only the inputs that are not the objects it
+    holds. Arrays and structs are held by reference (a struct changed in place is read as it is at the
+    launch); other values are set every time. A replay costs the host about 6 us, ``wp.launch`` about 40:
+    the per-frame seam makes about ten such launches a frame. Recorded per thread, so that threads
+    launching one kernel never set each other's inputs."""
+    kept = getattr(_replays, "kept", None)
+    if kept is None:
+        kept = _replays.kept = {}
+    held = kept.get((kernel, dim))
+    if held is None:
+        if len(kept) >= REPLAYS_KEPT:  # the oldest goes (an image batch's grids change with each image)
+            kept.pop(next(iter(kept)))
+        held = kept[(kernel, dim)] = (wp.launch(kernel, dim=dim, inputs=inputs, device="cpu", record_cmd=True),
+                                      list(inputs))
+    else:
+        launch, last = held
+        for index, value in enumerate(inputs):
+            if value is not last[index] or not isinstance(value, (wp.array, StructInstance)):
+                launch.set_param_at_index(index, value)
+                last[index] = value
+    held[0].launch()
+
+
 def row_bands(height: int, bands: int) -> list[tuple[int, int]]:
     """Split rows [0, height) into at most ``bands`` contiguous (row0, rows) pieces of near-equal size."""
     bands = max(1, min(bands, height))
@@ -261,7 +292,7 @@ def launch_rows(kernel, height: int, width: int, inputs: list, device: str, thre
         return
     bands = row_bands(height, cpu_threads(threads))
     if len(bands) == 1:
-        wp.launch(kernel, dim=(height, width), inputs=[0, *inputs], device=device)
+        _launch_on_host(kernel, (height, width), [0, *inputs])
         return
     futures = [
         _pool(len(bands)).submit(wp.launch, kernel, (rows, width), [row0, *inputs], device=device)
@@ -288,7 +319,7 @@ def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str,
         return
     bands = row_bands(height, cpu_threads(threads))
     if len(bands) == 1:
-        wp.launch(kernel, dim=(height, 1), inputs=[0, 1, width, *inputs], device=device)
+        _launch_on_host(kernel, (height, 1), [0, 1, width, *inputs])
         return
     futures = [
         _pool(len(bands)).submit(wp.launch, kernel, (rows, 1), [row0, 1, width, *inputs], device=device)
