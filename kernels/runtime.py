@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import atexit
 import importlib
+import math
 import os
 import pkgutil
 import shutil
@@ -246,10 +247,11 @@ _replays = threading.local()  # per thread: (kernel, dim) -> (its recorded wp.La
 def _launch_on_host(kernel, dim: tuple[int, int], inputs: list) -> None:
     """One launch of ``kernel`` over ``dim`` on the CPU, on the calling thread: recorded the first time on
     that grid (``record_cmd``) and replayed after, setting only the inputs that are not the objects it
-    holds. Arrays and structs are held by reference (a struct changed in place is read as it is at the
-    launch); other values are set every time. A replay costs the host about 6 us, ``wp.launch`` about 40:
-    the per-frame seam makes about ten such launches a frame. Recorded per thread, so that threads
-    launching one kernel never set each other's inputs."""
+    holds (:func:`_held_as_is`). Arrays and structs are held by reference (a struct changed in place is
+    read as it is at the launch); ints and floats by value; other values are set every time. A replay
+    costs the host about 6 us and each input set about 5, ``wp.launch`` about 40: the per-frame seam
+    makes about ten such launches a frame. Recorded per thread, so that threads launching one kernel
+    never set each other's inputs."""
     kept = getattr(_replays, "kept", None)
     if kept is None:
         kept = _replays.kept = {}
@@ -262,10 +264,20 @@ def _launch_on_host(kernel, dim: tuple[int, int], inputs: list) -> None:
     else:
         launch, last = held
         for index, value in enumerate(inputs):
-            if value is not last[index] or not isinstance(value, (wp.array, StructInstance)):
+            if not _held_as_is(value, last[index]):
                 launch.set_param_at_index(index, value)
                 last[index] = value
     held[0].launch()
+
+
+def _held_as_is(value, held) -> bool:
+    """Whether a recorded launch that holds input ``held`` may keep it for ``value``: the same array or
+    struct (held by reference), an equal int, a float of the same bits (0.0 is not -0.0)."""
+    if isinstance(value, (wp.array, StructInstance)):
+        return value is held
+    if type(value) is not type(held) or type(value) not in (int, float):
+        return False
+    return value == held and math.copysign(1.0, value) == math.copysign(1.0, held)
 
 
 def row_bands(height: int, bands: int) -> list[tuple[int, int]]:
