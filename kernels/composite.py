@@ -850,9 +850,9 @@ BandWord = wp.types.vector(length=2, dtype=wp.int64)  # a band cell's plan words
 
 @wp.struct
 class BandWords:
-    """A plan's words on a band's cells, copied where the band may lie (``band_words_kernel``): band line
-    k's cell m is at position ``first[k] + m cell`` along the line; (0, 0), a fill pixel's, where the plan
-    does not hold both taps."""
+    """A plan's words on a band's cells and further each side (``band_words_kernel``): band line k's cell
+    m is at position ``first[k] + m cell`` along the line; (0, 0), a fill pixel's, where the plan does not
+    hold both taps."""
 
     first: wp.array(dtype=int)
     words: wp.array2d(dtype=BandWord)
@@ -866,22 +866,26 @@ def band_words_kernel(
     plan: Plan,
     layout: Layout,
     band: BandCells,
-    words: wp.array2d(dtype=BandWord),
+    reach: int,
+    out: BandWords,
 ):
-    """Per band line k = row0 + i and cell j < width: the plan's source and target words there where the
-    plan holds both taps (a band pixel), else (0, 0). Made once while the plan and the band's reach hold,
-    so that each frame's ``band_difference_kernel`` reads a small array, not the canvas's plan (whose
-    words the last frame's compositing left out of the caches). Thread (i, j) does cells j, j + col_step,
-    ... of its line (``runtime.launch_row_loops``)."""
+    """Per band line k = row0 + i: the plan's words on its cells and ``reach`` cells further each side
+    (``width`` cells from ``out.first[k]`` = ``band.x0[k] - reach band.cell``), the source's and the
+    target's where the plan holds both taps (a band pixel), else (0, 0). Made once while the plan holds
+    and the band stays within them, so that each frame's ``band_difference_kernel`` reads a small array,
+    not the canvas's plan (whose words the last frame's compositing left out of the caches). Thread (i,
+    j) does cells j, j + col_step, ... of its line (``runtime.launch_row_loops``)."""
     i, j0 = wp.tid()
     k = row0 + i
     line = band.lines[k]
     canvas_width = plan.size[0]
     canvas_height = plan.size[1]
-    x0 = band.x0[k]
+    first = band.x0[k] - reach * band.cell
+    if j0 == 0:
+        out.first[k] = first
     j = j0
     while j < width:  # while loops, not range(): see the module docstring
-        pos = x0 + j * band.cell
+        pos = first + j * band.cell
         x = pos
         y = line
         if layout.lines_are_rows == 0:
@@ -895,7 +899,7 @@ def band_words_kernel(
             word = plan.words[q]
             if int(word & wp.int64(3)) == KIND_BAND:
                 cell_words = BandWord(word, plan.words_tgt[q])
-        words[k, j] = cell_words
+        out.words[k, j] = cell_words
         j = j + col_step
 
 

@@ -389,12 +389,13 @@ def composite(frame: FrameArrays, plan: CompositePlan, seam: SeamState, gains: G
                              cfg.cpu_threads)
 
 
-def band_words(frame: FrameArrays, plan: CompositePlan, band: BandCells, width: int, out: wp.array) -> None:
-    """The plan's words on the band's cells (``band``: K lines of ``width`` cells) into ``out`` (K, width)
-    ``BandWord`` on the plan's device: (source's, target's) where the plan holds both taps, (0, 0)
-    elsewhere (``band_words_kernel``); ``frame``: the plan's frame arrays."""
-    inputs = [kernel_plan(plan, frame.no_runs), plan.layout.kernel(), band, out]
-    runtime.launch_row_loops(band_words_kernel, band.lines.shape[0], width, inputs, plan.device,
+def band_words(frame: FrameArrays, plan: CompositePlan, band: BandCells, reach: int, out: BandWords) -> None:
+    """The plan's words on the band's cells (``band``) and ``reach`` cells further each side into ``out``
+    (its ``first`` (K,) and ``words`` (K, width) on the plan's device, each line's width band cells plus
+    2 x ``reach``): (source's, target's) where the plan holds both taps, (0, 0) elsewhere
+    (``band_words_kernel``); ``frame``: the plan's frame arrays."""
+    inputs = [kernel_plan(plan, frame.no_runs), plan.layout.kernel(), band, reach, out]
+    runtime.launch_row_loops(band_words_kernel, band.lines.shape[0], out.words.shape[1], inputs, plan.device,
                              runtime.BAND_THREADS)
 
 

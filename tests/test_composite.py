@@ -383,11 +383,11 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     band = BandCells()
     band.lines, band.x0, band.cell = (wp.array(lines, dtype=int, device=cfg.device),
                                       wp.array(band_x0, dtype=int, device=cfg.device), cell)
-    reach = BandCells()  # the plan's words copied two cells further each side than the band reads
-    reach.lines, reach.x0, reach.cell = band.lines, wp.array(band_x0 - 2 * cell, dtype=int, device=cfg.device), cell
-    words = BandWords()
-    words.first, words.words = reach.x0, wp.empty((len(lines), count + 4), dtype=BandWord, device=cfg.device)
-    band_words(frame, plan, reach, count + 4, words.words)
+    words = BandWords()  # the plan's words copied two cells further each side than the band reads
+    words.first = wp.empty(len(lines), dtype=int, device=cfg.device)
+    words.words = wp.empty((len(lines), count + 4), dtype=BandWord, device=cfg.device)
+    band_words(frame, plan, band, 2, words)
+    np.testing.assert_array_equal(words.first.numpy(), band_x0 - 2 * cell)
     out = (wp.array(last, dtype=float, device=cfg.device), *(wp.zeros(cells, dtype=float, device=cfg.device)
                                                              for _ in range(2)))
     band_difference(frame, plan, words, band, gains, count, out)

@@ -139,47 +139,46 @@ BAND_FIELDS = ("diff", "total", "delta")  # what ``composite.band_difference`` f
 
 
 class BandWordsCopy:
-    """A band's plan words (``composite.band_words``) on its cells and ``reach`` cells further each side
-    of them, made again only when the plan or its origin changes or the band's cells leave what it
-    holds: on a static plan once in a while, so that each frame's difference reads a small array
-    (``band_difference_kernel``). Band lines ``lines`` (K,) on the device, cells ``cell`` px, ``width``
-    of them."""
+    """A band's plan words (``composite.band_words``) on its cells and further each side of them, made
+    again only when the plan or its origin changes or the band's cells leave them: on a static plan
+    once in a while, so that each frame's difference reads a small array (``band_difference_kernel``).
+    ``cells``: the band's cells as the kernel takes them (their first cells on the device, as the band's
+    difference reads them), ``width`` of them a line."""
 
-    def __init__(self, lines: wp.array, cell: int, width: int, device: str):
-        self._device = device
-        self._cells = BandCells()
-        self._cells.lines, self._cells.cell = lines, cell
+    def __init__(self, cells: BandCells, width: int, device: str):
+        self._cells = cells
         self._width = width
+        self._device = device
         self._kernel = BandWords()
+        self._kernel.first = wp.empty(cells.lines.shape[0], dtype=int, device=device)
         self._made: tuple[CompositePlan, tuple[int, int], np.ndarray] | None = None  # plan, origin, first cells
-        self._checked: np.ndarray | None = None  # the last band's first cells found inside the copy
+        self._held: np.ndarray | None = None  # the last band's first cells found within the copy
 
     def words(self, frame: FrameArrays, plan: CompositePlan, origin: tuple[int, int], x0: np.ndarray,
               reach: int) -> BandWords:
-        """The copy for a band whose first cells are ``x0`` (K,) px (host) on ``plan`` read at ``origin``
-        (``BandCells.origin``), made again where it does not hold them (then ``reach`` cells each side
-        further)."""
+        """The copy for the band whose first cells are ``x0`` (K,) px (the host's copy of the cells'), on
+        ``plan`` read at ``origin`` (``BandCells.origin``), made again (then ``reach`` cells further each
+        side) where it does not hold them."""
         made = self._made
         if made is None or made[0] is not plan or made[1] != origin or not self._holds(x0):
-            first = (np.asarray(x0, np.int64) - reach * self._cells.cell).astype(np.int32)
             count = self._width + 2 * reach
-            if self._made is None or self._kernel.words.shape[1] != count:
-                self._kernel.words = wp.empty((len(first), count), dtype=BandWord, device=self._device)
-            self._kernel.first = transfer.to_device(first, int, self._device, "plan")
-            self._cells.x0, self._cells.origin = self._kernel.first, wp.vec2i(*origin)
-            band_words(frame, plan, self._cells, count, self._kernel.words)
-            self._made, self._checked = (plan, origin, first), x0
+            if made is None or self._kernel.words.shape[1] != count:
+                self._kernel.words = wp.empty((len(x0), count), dtype=BandWord, device=self._device)
+            self._cells.origin = wp.vec2i(*origin)
+            band_words(frame, plan, self._cells, reach, self._kernel)
+            self._made = plan, origin, np.asarray(x0, np.int64) - reach * self._cells.cell
+            self._held = x0
         return self._kernel
 
     def _holds(self, x0: np.ndarray) -> bool:
-        """Whether every line's ``width`` cells from ``x0`` (K,) px lie on the copy's cells."""
-        if x0 is self._checked:
+        """Whether every line's cells from ``x0`` (K,) px lie on the copy's."""
+        if x0 is self._held:
             return True
-        first, cell = self._made[2], self._cells.cell
-        offset = np.asarray(x0, np.int64) - first
+        cell = self._cells.cell
+        offset = np.asarray(x0, np.int64) - self._made[2]
         held = bool(np.all((offset >= 0) & (offset % cell == 0)
                            & (offset <= cell * (self._kernel.words.shape[1] - self._width))))
-        self._checked = x0 if held else None
+        self._held = x0 if held else None
         return held
 
 
@@ -212,14 +211,13 @@ class BandBlock:
             cells.origin = wp.vec2i(0, 0)
             out = tuple(self._block.device[f"{name}_{field}"].reshape(shape) for field in BAND_FIELDS)
             frame = BandFrame.of(*(self._block.host[f"{name}_{field}"] for field in BAND_FIELDS))
-            self._bands[name] = BandCellsOn(shape, cells, BandWordsCopy(cells.lines, cell, shape[1], device), out,
-                                            frame)
+            self._bands[name] = BandCellsOn(shape, cells, BandWordsCopy(cells, shape[1], device), out, frame)
 
     def difference(self, frame: FrameArrays, plan: CompositePlan, gains_luma: Gains, origin: tuple[int, int],
                    places: dict[str, tuple[np.ndarray, int]]) -> dict[str, BandFrame]:
         """``composite.band_difference`` of the pair loaded in ``frame`` on each band's cells, read on a
         ``plan`` whose pixel (0, 0) shows canvas pixel ``origin`` (x, y), on the host (one small download);
-        ``places``: per band the host copy of its first cells (K,) px and how many cells each side further
+        ``places``: per band the host's copy of its first cells (K,) px and how many cells each side further
         its plan words are copied (:class:`BandWordsCopy`)."""
         for name, band in self._bands.items():
             words = band.copy.words(frame, plan, origin, *places[name])
