@@ -27,6 +27,7 @@ import shutil
 import tempfile
 import threading
 import time
+import weakref
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
@@ -241,17 +242,17 @@ def _in_kernel_cache(module, device: str) -> bool:
 
 
 REPLAYS_KEPT = 64  # one-band CPU launches a thread keeps recorded (one per kernel and grid: a video's are a few)
-_replays = threading.local()  # per thread: (kernel, dim) -> (its recorded wp.Launch, the inputs that launch holds)
+_replays = threading.local()  # per thread: (kernel, dim) -> (its recorded wp.Launch, the inputs it was last given)
 
 
 def _launch_on_host(kernel, dim: tuple[int, int], inputs: list) -> None:
     """One launch of ``kernel`` over ``dim`` on the CPU, on the calling thread: recorded the first time on
-    that grid (``record_cmd``) and replayed after, setting only the inputs that are not the objects it
-    holds (:func:`_held_as_is`). Arrays and structs are held by reference (a struct changed in place is
-    read as it is at the launch); ints and floats by value; other values are set every time. A replay
-    costs the host about 6 us and each input set about 5, ``wp.launch`` about 40: the per-frame seam
-    makes about ten such launches a frame. Recorded per thread, so that threads launching one kernel
-    never set each other's inputs."""
+    that grid (``record_cmd``) and replayed after, setting only the inputs that are not as it holds them
+    (:func:`_as_given`, :func:`_held_as_is`): arrays and structs by reference (a struct changed in place
+    is read as it is at the launch), known by weak references so that a recording keeps no input alive;
+    ints and floats by value; other values are set every time. A replay costs the host about 6 us and
+    each input set about 5, ``wp.launch`` about 40: the per-frame seam makes about ten such launches a
+    frame. Recorded per thread, so that threads launching one kernel never set each other's inputs."""
     kept = getattr(_replays, "kept", None)
     if kept is None:
         kept = _replays.kept = {}
@@ -259,22 +260,29 @@ def _launch_on_host(kernel, dim: tuple[int, int], inputs: list) -> None:
     if held is None:
         if len(kept) >= REPLAYS_KEPT:  # the oldest goes (an image batch's grids change with each image)
             kept.pop(next(iter(kept)))
-        held = kept[(kernel, dim)] = (wp.launch(kernel, dim=dim, inputs=inputs, device="cpu", record_cmd=True),
-                                      list(inputs))
+        launch = wp.launch(kernel, dim=dim, inputs=inputs, device="cpu", record_cmd=True)
+        launch.fwd_args = None  # the inputs themselves, kept for Warp's CPU graph capture, which no launch here uses
+        held = kept[(kernel, dim)] = (launch, [_as_given(value) for value in inputs])
     else:
         launch, last = held
         for index, value in enumerate(inputs):
             if not _held_as_is(value, last[index]):
                 launch.set_param_at_index(index, value)
-                last[index] = value
+                last[index] = _as_given(value)
     held[0].launch()
 
 
+def _as_given(value):
+    """How a recorded launch remembers an input: an array or a struct by a weak reference, else itself."""
+    return weakref.ref(value) if isinstance(value, (wp.array, StructInstance)) else value
+
+
 def _held_as_is(value, held) -> bool:
-    """Whether a recorded launch that holds input ``held`` may keep it for ``value``: the same array or
-    struct (held by reference), an equal int, a float of the same bits (0.0 is not -0.0)."""
+    """Whether a recorded launch that was given ``held`` (:func:`_as_given`) may keep it for ``value``: the
+    same array or struct, still alive (held by reference), an equal int, a float of the same bits (0.0 is
+    not -0.0)."""
     if isinstance(value, (wp.array, StructInstance)):
-        return value is held
+        return isinstance(held, weakref.ref) and held() is value
     if type(value) is not type(held) or type(value) not in (int, float):
         return False
     return value == held and math.copysign(1.0, value) == math.copysign(1.0, held)

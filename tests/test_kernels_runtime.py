@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import subprocess
 import sys
+import weakref
 
 import numpy as np
 import pytest
@@ -72,6 +74,10 @@ def test_a_replayed_launch_reads_its_inputs_as_they_are_at_each_launch():
         for a, b in zip(replayed, fresh):
             np.testing.assert_array_equal(a.numpy(), b.numpy())
         assert replayed[0].numpy().any()
+    gone = weakref.ref(replayed[0])  # a recording keeps no input alive
+    del replayed
+    gc.collect()
+    assert gone() is None
 
 
 # Run in a fresh process, where nothing is loaded yet, with an empty kernel cache (a first run): prewarm,
