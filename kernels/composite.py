@@ -845,14 +845,71 @@ class BandCells:
     origin: wp.vec2i
 
 
+BandWord = wp.types.vector(length=2, dtype=wp.int64)  # a band cell's plan words: (the source's, the target's)
+
+
+@wp.struct
+class BandWords:
+    """A plan's words on a band's cells and further each side (``band_words_kernel``): band line k's cell
+    m is at position ``first[k] + m cell`` along the line; (0, 0), a fill pixel's, where the plan does not
+    hold both taps."""
+
+    first: wp.array(dtype=int)
+    words: wp.array2d(dtype=BandWord)
+
+
+@wp.kernel
+def band_words_kernel(
+    row0: int,
+    col_step: int,
+    width: int,
+    plan: Plan,
+    layout: Layout,
+    band: BandCells,
+    reach: int,
+    out: BandWords,
+):
+    """Per band line k = row0 + i: the plan's words on its cells and ``reach`` cells further each side
+    (``width`` cells from ``out.first[k]`` = ``band.x0[k] - reach band.cell``), the source's and the
+    target's where the plan holds both taps (a band pixel), else (0, 0). Made once while the plan holds
+    and the band stays within them, so that each frame's ``band_difference_kernel`` reads a small array,
+    not the canvas's plan (whose words the last frame's compositing left out of the caches). Thread (i,
+    j) does cells j, j + col_step, ... of its line (``runtime.launch_row_loops``)."""
+    i, j0 = wp.tid()
+    k = row0 + i
+    line = band.lines[k]
+    canvas_width = plan.size[0]
+    canvas_height = plan.size[1]
+    first = band.x0[k] - reach * band.cell
+    if j0 == 0:
+        out.first[k] = first
+    j = j0
+    while j < width:  # while loops, not range(): see the module docstring
+        pos = first + j * band.cell
+        x = pos
+        y = line
+        if layout.lines_are_rows == 0:
+            x = line
+            y = pos
+        x = x - band.origin[0]
+        y = y - band.origin[1]
+        cell_words = BandWord(wp.int64(0), wp.int64(0))
+        if x >= 0 and y >= 0 and x < canvas_width and y < canvas_height:
+            q = y * canvas_width + x
+            word = plan.words[q]
+            if int(word & wp.int64(3)) == KIND_BAND:
+                cell_words = BandWord(word, plan.words_tgt[q])
+        out.words[k, j] = cell_words
+        j = j + col_step
+
+
 @wp.kernel
 def band_difference_kernel(
     row0: int,
     col_step: int,
     width: int,
     planes: Planes,
-    plan: Plan,
-    layout: Layout,
+    words: BandWords,
     band: BandCells,
     gains: Gains,
     diff: wp.array2d(dtype=float),
@@ -861,32 +918,26 @@ def band_difference_kernel(
 ):
     """Per band line k = row0 + i and cell j < width: channel 0 of the source minus the target there
     into ``diff`` and their sum into ``total``, both with their gains and knee (grey levels), or
-    ``NOT_BOTH`` and 0 where the plan does not hold both taps (outside the overlap or the band);
+    ``NOT_BOTH`` and 0 where the plan does not hold both taps (outside the overlap or the band: its
+    ``words`` there, ``band_words_kernel``'s, are a fill pixel's, as are those of cells beyond them);
     ``delta``: how much ``diff`` changed from the value it held (the last frame's), 0 where either lacks
     a view. The per-frame seam reads them. Thread (i, j) does cells j, j + col_step, ... of its line
     (``runtime.launch_row_loops``)."""
     i, j0 = wp.tid()
     k = row0 + i
-    line = band.lines[k]
-    canvas_width = plan.size[0]
-    canvas_height = plan.size[1]
     steps = planes.steps
-    for j in range(j0, width, col_step):
-        pos = band.x0[k] + j * band.cell
-        x = pos
-        y = line
-        if layout.lines_are_rows == 0:
-            x = line
-            y = pos
-        x = x - band.origin[0]
-        y = y - band.origin[1]
+    copied = words.words.shape[1]
+    m0 = (band.x0[k] - words.first[k]) / band.cell  # cell j's in the copy: m0 + j
+    j = j0
+    while j < width:  # while loops, not range(): see the module docstring
         value = float(NOT_BOTH)
         both_sum = float(0.0)
-        if x >= 0 and y >= 0 and x < canvas_width and y < canvas_height:
-            q = y * canvas_width + x
-            word = plan.words[q]
+        m = m0 + j
+        if m >= 0 and m < copied:
+            cell_words = words.words[k, m]
+            word = cell_words[0]
             if int(word & wp.int64(3)) == KIND_BAND:
-                word_t = plan.words_tgt[q]
+                word_t = cell_words[1]
                 ss = sample_fixed(planes.src, word_offset(word), word_fx(word), word_fy(word), steps[0], steps[1])
                 st = sample_fixed(planes.tgt, word_offset(word_t), word_fx(word_t), word_fy(word_t), steps[2], steps[3])
                 vs = adjusted(ss, gains.gain_src[0], gains.bias_src[0], 0, gains.tone, wp.vec2i(ss, ss))
@@ -900,6 +951,7 @@ def band_difference_kernel(
         if holds_both(value) and holds_both(last):
             change = wp.abs(value - last)
         delta[k, j] = change
+        j = j + col_step
 
 
 @wp.kernel

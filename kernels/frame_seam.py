@@ -10,9 +10,9 @@ seam blend's). Both run one thread per line (``runtime.launch_rows`` with width 
 it. A third, on one thread, moves the band's centre no faster than a path can follow (a chain of
 clamps, each on the last: a loop, 10x cheaper compiled than in Python).
 
-The cost kernel walks its line in a ``while`` loop: Warp's CPU code for a ``range()`` with run-time
-bounds steps a general iterator (its step's sign unknown), which cost a third of that kernel's time
-(0.27 -> 0.19 ms a frame on the 1080p bench's band of 400 x 99 cells).
+The kernels' loops are ``while`` loops: Warp's CPU code for a ``range()`` with run-time bounds steps a
+general iterator (its step's sign unknown), which cost a third of the cost kernel's time (0.27 -> 0.19
+ms a frame on the 1080p bench's band of 400 x 99 cells).
 """
 
 from __future__ import annotations
@@ -149,13 +149,28 @@ def strip_mean_kernel(
     at = (path[k] - band_x0[k]) / cell
     total = float(0.0)
     found = int(0)
-    for j in range(wp.max(at - reach, 0), wp.min(at + reach, width - 1) + 1):
+    j = wp.max(at - reach, 0)
+    last_j = wp.min(at + reach, width - 1)
+    while j <= last_j:  # not range(): see the module docstring
         d = diff[k, j]
         if holds_both(d):
             total = total + d
             found = found + 1
+        j = j + 1
     mean[k] = total / float(wp.max(found, 1))
     count[k] = found
+
+
+@wp.func
+def clamped(v: wp.float64, next_to: wp.float64, most: wp.float64) -> wp.float64:
+    """``v`` clamped to within ``most`` of ``next_to``, as Python's ``min(max(v, next_to - most), next_to + most)``."""
+    lo = next_to - most
+    hi = next_to + most
+    if lo > v:
+        v = lo
+    if hi < v:
+        v = hi
+    return v
 
 
 @wp.kernel
@@ -165,22 +180,11 @@ def gentle_kernel(row0: int, positions: wp.array(dtype=wp.float64), most: wp.flo
     ``min(max(x, lo), hi)``. One thread (``runtime.launch_rows`` of 1 x 1): the clamps run in order."""
     _i, _j = wp.tid()
     count = positions.shape[0]
-    for k in range(1, count):
-        v = positions[k]
-        lo = positions[k - 1] - most
-        hi = positions[k - 1] + most
-        if lo > v:
-            v = lo
-        if hi < v:
-            v = hi
-        positions[k] = v
-    for n in range(count - 1):
-        k = count - 2 - n
-        v = positions[k]
-        lo = positions[k + 1] - most
-        hi = positions[k + 1] + most
-        if lo > v:
-            v = lo
-        if hi < v:
-            v = hi
-        positions[k] = v
+    k = int(1)
+    while k < count:  # while loops, not range(): see the module docstring
+        positions[k] = clamped(positions[k], positions[k - 1], most)
+        k = k + 1
+    k = count - 2
+    while k >= 0:
+        positions[k] = clamped(positions[k], positions[k + 1], most)
+        k = k - 1

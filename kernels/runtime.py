@@ -3,8 +3,9 @@
 Every kernel of this package takes ``row0: int`` as its first argument and is launched with
 ``dim=(rows, width)``; the pixel row it handles is ``row0 + i``. Warp's CPU backend runs one launch
 on one thread, so on CPU ``launch_rows`` cuts the image into horizontal bands and launches each band
-from a small persistent thread pool (a launch releases the GIL while it runs). On CUDA one launch
-covers the whole image.
+from a small persistent thread pool (a launch releases the GIL while it runs); a launch of one band
+is recorded once per kernel and grid and replayed (:func:`_launch_on_host`: the per-frame seam's small
+kernels paid more to ``wp.launch`` than to their work). On CUDA one launch covers the whole image.
 
 The device is chosen once per run: the job (``stitch_images``, ``stitch_videos``, ``sena-warp eval``)
 calls :func:`resolve_config` and hands the result to every stage, which allocates on ``cfg.device``
@@ -19,17 +20,20 @@ from __future__ import annotations
 
 import atexit
 import importlib
+import math
 import os
 import pkgutil
 import shutil
 import tempfile
 import threading
 import time
+import weakref
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import warp as wp
 import warp._src.build  # init_kernel_cache: where Warp keeps compiled kernels
+from warp._src.codegen import StructInstance  # a struct's value, held by reference in a recorded launch
 
 from sena_warp.config import Config
 from sena_warp.errors import InputError
@@ -237,6 +241,53 @@ def _in_kernel_cache(module, device: str) -> bool:
     return os.path.isdir(os.path.join(wp.config.kernel_cache_dir, module.get_module_identifier(_block_dim(module, device))))
 
 
+REPLAYS_KEPT = 64  # one-band CPU launches a thread keeps recorded (one per kernel and grid: a video's are a few)
+_replays = threading.local()  # per thread: (kernel, dim) -> (its recorded wp.Launch, the inputs it was last given)
+
+
+def _launch_on_host(kernel, dim: tuple[int, int], inputs: list) -> None:
+    """One launch of ``kernel`` over ``dim`` on the CPU, on the calling thread: recorded the first time on
+    that grid (``record_cmd``) and replayed after, setting only the inputs that are not as it holds them
+    (:func:`_as_given`, :func:`_held_as_is`): arrays and structs by reference (a struct changed in place
+    is read as it is at the launch), known by weak references so that a recording keeps no input alive;
+    ints and floats by value; other values are set every time. A replay costs the host about 6 us and
+    each input set about 5, ``wp.launch`` about 40: the per-frame seam makes about ten such launches a
+    frame. Recorded per thread, so that threads launching one kernel never set each other's inputs."""
+    kept = getattr(_replays, "kept", None)
+    if kept is None:
+        kept = _replays.kept = {}
+    held = kept.get((kernel, dim))
+    if held is None:
+        if len(kept) >= REPLAYS_KEPT:  # the oldest goes (an image batch's grids change with each image)
+            kept.pop(next(iter(kept)))
+        launch = wp.launch(kernel, dim=dim, inputs=inputs, device="cpu", record_cmd=True)
+        launch.fwd_args = None  # the inputs themselves, kept for Warp's CPU graph capture, which no launch here uses
+        held = kept[(kernel, dim)] = (launch, [_as_given(value) for value in inputs])
+    else:
+        launch, last = held
+        for index, value in enumerate(inputs):
+            if not _held_as_is(value, last[index]):
+                launch.set_param_at_index(index, value)
+                last[index] = _as_given(value)
+    held[0].launch()
+
+
+def _as_given(value):
+    """How a recorded launch remembers an input: an array or a struct by a weak reference, else itself."""
+    return weakref.ref(value) if isinstance(value, (wp.array, StructInstance)) else value
+
+
+def _held_as_is(value, held) -> bool:
+    """Whether a recorded launch that was given ``held`` (:func:`_as_given`) may keep it for ``value``: the
+    same array or struct, still alive (held by reference), an equal int, a float of the same bits (0.0 is
+    not -0.0)."""
+    if isinstance(value, (wp.array, StructInstance)):
+        return isinstance(held, weakref.ref) and held() is value
+    if type(value) is not type(held) or type(value) not in (int, float):
+        return False
+    return value == held and math.copysign(1.0, value) == math.copysign(1.0, held)
+
+
 def row_bands(height: int, bands: int) -> list[tuple[int, int]]:
     """Split rows [0, height) into at most ``bands`` contiguous (row0, rows) pieces of near-equal size."""
     bands = max(1, min(bands, height))
@@ -261,7 +312,7 @@ def launch_rows(kernel, height: int, width: int, inputs: list, device: str, thre
         return
     bands = row_bands(height, cpu_threads(threads))
     if len(bands) == 1:
-        wp.launch(kernel, dim=(height, width), inputs=[0, *inputs], device=device)
+        _launch_on_host(kernel, (height, width), [0, *inputs])
         return
     futures = [
         _pool(len(bands)).submit(wp.launch, kernel, (rows, width), [row0, *inputs], device=device)
@@ -288,7 +339,7 @@ def launch_row_loops(kernel, height: int, width: int, inputs: list, device: str,
         return
     bands = row_bands(height, cpu_threads(threads))
     if len(bands) == 1:
-        wp.launch(kernel, dim=(height, 1), inputs=[0, 1, width, *inputs], device=device)
+        _launch_on_host(kernel, (height, 1), [0, 1, width, *inputs])
         return
     futures = [
         _pool(len(bands)).submit(wp.launch, kernel, (rows, 1), [row0, 1, width, *inputs], device=device)

@@ -22,8 +22,8 @@ import warp as wp
 from sena_warp.config import Config
 from sena_warp.kernels import runtime, transfer
 from sena_warp.kernels.composite import (COMPOSITE_FRAME_KERNELS, COMPOSITE_PIXEL_KERNELS, MAX_CHANNELS, BandCells,
-                                        Border, Gains, Layout, Plan, Planes, RowRuns, SeamState,
-                                        band_difference_kernel, composite_plan_kernel, frame_runs_kernel,
+                                        BandWords, Border, Gains, Layout, Plan, Planes, RowRuns, SeamState,
+                                        band_difference_kernel, band_words_kernel, composite_plan_kernel, frame_runs_kernel,
                                         gain_table_kernel, row_runs_kernel, seam_weights_kernel,
                                         Window, window_plan_kernel)
 from sena_warp.warp_map import as_channels
@@ -389,14 +389,25 @@ def composite(frame: FrameArrays, plan: CompositePlan, seam: SeamState, gains: G
                              cfg.cpu_threads)
 
 
-def band_difference(frame: FrameArrays, plan: CompositePlan, band: BandCells, gains: Gains, width: int,
-                    out: tuple[wp.array, wp.array, wp.array]) -> None:
+def band_words(frame: FrameArrays, plan: CompositePlan, band: BandCells, reach: int, out: BandWords) -> None:
+    """The plan's words on the band's cells (``band``) and ``reach`` cells further each side into ``out``
+    (its ``first`` (K,) and ``words`` (K, width) on the plan's device, each line's width band cells plus
+    2 x ``reach``): (source's, target's) where the plan holds both taps, (0, 0) elsewhere
+    (``band_words_kernel``); ``frame``: the plan's frame arrays."""
+    inputs = [kernel_plan(plan, frame.no_runs), plan.layout.kernel(), band, reach, out]
+    runtime.launch_row_loops(band_words_kernel, band.lines.shape[0], out.words.shape[1], inputs, plan.device,
+                             runtime.BAND_THREADS)
+
+
+def band_difference(frame: FrameArrays, plan: CompositePlan, words: BandWords, band: BandCells, gains: Gains,
+                    width: int, out: tuple[wp.array, wp.array, wp.array]) -> None:
     """Channel 0 of the pair loaded in ``frame``, source minus target and source plus target with their
-    gains (grey levels), on the band's cells (``band``: K lines of ``width`` cells): into ``out`` =
-    (diff, total, delta), each (K, width) float on the plan's device; ``NOT_BOTH`` and 0 where a cell
-    does not hold both views; delta = |diff - the value diff held| (the last frame's), 0 where either
-    lacks a view (``band_difference_kernel``)."""
-    inputs = [frame.planes, kernel_plan(plan, frame.no_runs), plan.layout.kernel(), band, gains, *out]
+    gains (grey levels), on the band's cells (``band``: K lines of ``width`` cells, their words of
+    ``plan`` in ``words``, :func:`band_words` on cells reaching as far): into ``out`` = (diff, total,
+    delta), each (K, width) float on the plan's device; ``NOT_BOTH`` and 0 where a cell does not hold
+    both views; delta = |diff - the value diff held| (the last frame's), 0 where either lacks a view
+    (``band_difference_kernel``)."""
+    inputs = [frame.planes, words, band, gains, *out]
     runtime.launch_row_loops(band_difference_kernel, band.lines.shape[0], width, inputs, plan.device,
                              runtime.BAND_THREADS)
 

@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 import warp as wp
 
-from sena_warp.composite import (LEVEL, BorderBlend, FrameArrays, FrameState, SeamLayout, band_difference, clipped_seam,
-                                 composite_image, composite_plan, coverage, kernel_gains, applied_gains, row_runs,
-                                 seam_weights, with_runs)
+from sena_warp.composite import (LEVEL, BorderBlend, FrameArrays, FrameState, SeamLayout, band_difference, band_words,
+                                 clipped_seam, composite_image, composite_plan, coverage, kernel_gains, applied_gains,
+                                 row_runs, seam_weights, with_runs)
 from sena_warp.config import Config
 from sena_warp.gains import tone_curve
 from sena_warp.kernels import transfer
-from sena_warp.kernels.composite import ALPHA_TAIL_SIGMAS, NOT_BOTH, BandCells
+from sena_warp.kernels.composite import ALPHA_TAIL_SIGMAS, NOT_BOTH, BandCells, BandWord, BandWords
 from sena_warp.kernels.seam import source_alpha
 from test_kernels_maps import DEVICES
 from test_kernels_remap import remap_reference, scene  # noqa: F401  (scene is a fixture)
@@ -383,9 +383,14 @@ def test_band_difference_is_source_minus_target_where_both_are_kept(scene, warp_
     band = BandCells()
     band.lines, band.x0, band.cell = (wp.array(lines, dtype=int, device=cfg.device),
                                       wp.array(band_x0, dtype=int, device=cfg.device), cell)
+    words = BandWords()  # the plan's words copied two cells further each side than the band reads
+    words.first = wp.empty(len(lines), dtype=int, device=cfg.device)
+    words.words = wp.empty((len(lines), count + 4), dtype=BandWord, device=cfg.device)
+    band_words(frame, plan, band, 2, words)
+    np.testing.assert_array_equal(words.first.numpy(), band_x0 - 2 * cell)
     out = (wp.array(last, dtype=float, device=cfg.device), *(wp.zeros(cells, dtype=float, device=cfg.device)
                                                              for _ in range(2)))
-    band_difference(frame, plan, band, gains, count, out)
+    band_difference(frame, plan, words, band, gains, count, out)
     diff, total, delta = (array.numpy() for array in out)
     v_src, ok_src = remap_reference(plane_src[:, :, None], map_src)
     v_tgt, ok_tgt = remap_reference(plane_tgt[:, :, None], map_tgt)

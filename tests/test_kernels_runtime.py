@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import subprocess
 import sys
+import weakref
 
 import numpy as np
 import pytest
@@ -14,6 +16,7 @@ import warp as wp
 from conftest import REPO
 from sena_warp.errors import InputError
 from sena_warp.kernels import runtime
+from sena_warp.kernels.frame_objects import CellGrid, coarse_masks_kernel
 from test_kernels_maps import HAS_CUDA, scene_geometry, smooth_field, source_map_reference
 from test_kernels_remap import run_remap
 
@@ -50,6 +53,31 @@ def test_threaded_launch_equals_single_launch(udisd_pair, warp_device):
         np.testing.assert_array_equal(out, out_one)
         np.testing.assert_array_equal(valid, valid_one)
     assert valid_one.any()
+
+
+def test_a_replayed_launch_reads_its_inputs_as_they_are_at_each_launch():
+    """One-band CPU launches are recorded and replayed: new arrays, new values and a struct changed in
+    place all reach the kernel (``coarse_masks_kernel``, against a launch packed afresh)."""
+    lines = wp.array(np.arange(4, dtype=np.int32), dtype=int, device="cpu")
+    coarse = CellGrid()
+    coarse.x0, coarse.cell, coarse.step = wp.array(np.zeros(4, np.int32), dtype=int, device="cpu"), 4, 1
+    rng = np.random.default_rng(3)
+    masks = [wp.array(rng.integers(0, 2, (4, 3)).astype(np.uint8), dtype=wp.uint8, device="cpu") for _ in range(2)]
+    fine = CellGrid()
+    fine.cell, fine.step = 2, 1
+    for x0, width in (([0, 2, 4, 0], 6), ([2, 0, 0, 6], 5), ([4, 4, 2, 2], 5)):
+        fine.x0 = wp.array(np.array(x0, np.int32), dtype=int, device="cpu")  # the same struct, changed in place
+        replayed, fresh = ([wp.zeros((4, 6), dtype=wp.uint8, device="cpu") for _ in range(2)] for _ in range(2))
+        runtime.launch_row_loops(coarse_masks_kernel, 4, width, [lines, fine, coarse, *masks, *replayed], "cpu", 1)
+        wp.launch(coarse_masks_kernel, dim=(4, 1), inputs=[0, 1, width, lines, fine, coarse, *masks, *fresh],
+                  device="cpu")
+        for a, b in zip(replayed, fresh):
+            np.testing.assert_array_equal(a.numpy(), b.numpy())
+        assert replayed[0].numpy().any()
+    gone = weakref.ref(replayed[0])  # a recording keeps no input alive
+    del replayed
+    gc.collect()
+    assert gone() is None
 
 
 # Run in a fresh process, where nothing is loaded yet, with an empty kernel cache (a first run): prewarm,

@@ -89,8 +89,8 @@ def test_threads_reach_every_launch_of_a_video_stitch(bundled_dir, tmp_path, mon
     # The per-frame seam's band kernels, the frame's runs and the report's map change (a moving rig's maps
     # change every frame) run on BAND_THREADS (a second thread costs more than it saves); every other
     # launch uses the threads set.
-    band = {"band_difference_kernel", "view_background_kernel", "coarse_masks_kernel", "band_cost_kernel",
-            "strip_mean_kernel", "frame_runs_kernel", "map_change_kernel"}
+    band = {"band_words_kernel", "band_difference_kernel", "view_background_kernel", "coarse_masks_kernel",
+            "band_cost_kernel", "strip_mean_kernel", "frame_runs_kernel", "map_change_kernel"}
     assert {(device, threads) for key, device, threads in seen if key not in band} == {("cpu", THREADS)}
     assert {(device, threads) for key, device, threads in seen if key in band} == {("cpu", runtime.BAND_THREADS)}
 

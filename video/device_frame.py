@@ -25,11 +25,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 import warp as wp
 
-from ..composite import (CompositePlan, FrameArrays, FrameState, band_difference, composite, composite_plan,
-                         fixed_point, kernel_gains, window_plan, with_runs)
+from ..composite import (CompositePlan, FrameArrays, FrameState, band_difference, band_words, composite,
+                         composite_plan, fixed_point, kernel_gains, window_plan, with_runs)
 from ..config import Config
 from sena_warp.kernels import transfer
-from sena_warp.kernels.composite import BandCells, Gains, SeamState
+from sena_warp.kernels.composite import BandCells, BandWord, BandWords, Gains, SeamState
 from .frame_objects import ObjectGrid
 from .frame_seam import BandFrame, BandGrid, BandPlace
 from .maps import BLACK_UV, BLACK_Y, WHITE_Y, PlaneMaps, windowed_layouts, windowed_plane_maps
@@ -138,14 +138,59 @@ class Plans:
 BAND_FIELDS = ("diff", "total", "delta")  # what ``composite.band_difference`` fills on a band's cells
 
 
+class BandWordsCopy:
+    """A band's plan words (``composite.band_words``) on its cells and further each side of them, made
+    again only when the plan or its origin changes or the band's cells leave them: on a static plan
+    once in a while, so that each frame's difference reads a small array (``band_difference_kernel``).
+    ``cells``: the band's cells as the kernel takes them (their first cells on the device, as the band's
+    difference reads them), ``width`` of them a line."""
+
+    def __init__(self, cells: BandCells, width: int, device: str):
+        self._cells = cells
+        self._width = width
+        self._device = device
+        self._kernel = BandWords()
+        self._kernel.first = wp.empty(cells.lines.shape[0], dtype=int, device=device)
+        self._made: tuple[CompositePlan, tuple[int, int], np.ndarray] | None = None  # plan, origin, first cells
+        self._held: np.ndarray | None = None  # the last band's first cells found within the copy
+
+    def words(self, frame: FrameArrays, plan: CompositePlan, origin: tuple[int, int], x0: np.ndarray,
+              reach: int) -> BandWords:
+        """The copy for the band whose first cells are ``x0`` (K,) px (the host's copy of the cells'), on
+        ``plan`` read at ``origin`` (``BandCells.origin``), made again (then ``reach`` cells further each
+        side) where it does not hold them."""
+        made = self._made
+        if made is None or made[0] is not plan or made[1] != origin or not self._holds(x0):
+            count = self._width + 2 * reach
+            if made is None or self._kernel.words.shape[1] != count:
+                self._kernel.words = wp.empty((len(x0), count), dtype=BandWord, device=self._device)
+            self._cells.origin = wp.vec2i(*origin)
+            band_words(frame, plan, self._cells, reach, self._kernel)
+            self._made = plan, origin, np.asarray(x0, np.int64) - reach * self._cells.cell
+            self._held = x0
+        return self._kernel
+
+    def _holds(self, x0: np.ndarray) -> bool:
+        """Whether every line's cells from ``x0`` (K,) px lie on the copy's."""
+        if x0 is self._held:
+            return True
+        cell = self._cells.cell
+        offset = np.asarray(x0, np.int64) - self._made[2]
+        held = bool(np.all((offset >= 0) & (offset % cell == 0)
+                           & (offset <= cell * (self._kernel.words.shape[1] - self._width))))
+        self._held = x0 if held else None
+        return held
+
+
 @dataclass(frozen=True)
 class BandCellsOn:
     """One band of a :class:`BandBlock`: its (K, width) ``shape``, its cells as the kernel takes them
-    (``cells``), its difference, sum and change on the device as the kernel fills them (``out``) and on
-    the host (``frame``)."""
+    (``cells``), its plan words (``copy``), its difference, sum and change on the device as the kernel
+    fills them (``out``) and on the host (``frame``)."""
 
     shape: tuple[int, int]
     cells: BandCells
+    copy: BandWordsCopy
     out: tuple[wp.array, wp.array, wp.array]
     frame: BandFrame
 
@@ -166,15 +211,17 @@ class BandBlock:
             cells.origin = wp.vec2i(0, 0)
             out = tuple(self._block.device[f"{name}_{field}"].reshape(shape) for field in BAND_FIELDS)
             frame = BandFrame.of(*(self._block.host[f"{name}_{field}"] for field in BAND_FIELDS))
-            self._bands[name] = BandCellsOn(shape, cells, out, frame)
+            self._bands[name] = BandCellsOn(shape, cells, BandWordsCopy(cells, shape[1], device), out, frame)
 
-    def difference(self, frame: FrameArrays, plan: CompositePlan, gains_luma: Gains, origin: tuple[int, int]
-                   ) -> dict[str, BandFrame]:
+    def difference(self, frame: FrameArrays, plan: CompositePlan, gains_luma: Gains, origin: tuple[int, int],
+                   places: dict[str, tuple[np.ndarray, int]]) -> dict[str, BandFrame]:
         """``composite.band_difference`` of the pair loaded in ``frame`` on each band's cells, read on a
-        ``plan`` whose pixel (0, 0) shows canvas pixel ``origin`` (x, y), on the host (one small download)."""
-        for band in self._bands.values():
-            band.cells.origin = wp.vec2i(*origin)
-            band_difference(frame, plan, band.cells, gains_luma, band.shape[1], band.out)
+        ``plan`` whose pixel (0, 0) shows canvas pixel ``origin`` (x, y), on the host (one small download);
+        ``places``: per band the host's copy of its first cells (K,) px and how many cells each side further
+        its plan words are copied (:class:`BandWordsCopy`)."""
+        for name, band in self._bands.items():
+            words = band.copy.words(frame, plan, origin, *places[name])
+            band_difference(frame, plan, words, band.cells, gains_luma, band.shape[1], band.out)
         self._block.download()
         return {name: band.frame for name, band in self._bands.items()}
 
@@ -262,7 +309,13 @@ class DeviceFrame:
                 bands["objects"] = (objects.lines, objects.cell, objects.shape,
                                     transfer.to_device(objects.x0, int, self._cfg.device, "plan"))
             self._bands = objects, BandBlock(bands, self._cfg.device)
-        frames = self._bands[1].difference(self.frame_arrays("luma", plan.luma), plan.luma, gains_luma, origin)
+        # The seam band's words reach a band's width further each side on a plan that holds (the band
+        # moves round objects), none on a window's, made again every frame.
+        reach = self._grid.width if plan.window is None else 0
+        places = {"seam": (place.x0, reach)}
+        if objects is not None:
+            places["objects"] = (objects.x0, 0)
+        frames = self._bands[1].difference(self.frame_arrays("luma", plan.luma), plan.luma, gains_luma, origin, places)
         return frames["seam"], frames.get("objects")
 
     def _seam_block(self, plan: FramePlan) -> transfer.Staged:
