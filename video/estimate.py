@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Iterator
-from itertools import chain
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from fractions import Fraction
+from itertools import chain
 from operator import attrgetter
 
 import numpy as np
@@ -190,12 +190,13 @@ def pair_models(screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches | Non
 
 
 def without_moving(screened: list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]], judged: list[PairModels],
-                   cfg: Config, reference: str) -> tuple[list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]], dict[int, list[np.ndarray]],
+                   cfg: Config, reference: str
+                   ) -> tuple[list[tuple[int, int, YuvFrame, YuvFrame, Matches | None]], dict[int, list[np.ndarray]],
                               set[int]]:
     """The screened pairs (inliers, index, left, right, matches) with the matches on what moves left out
-    where a still background follows them (``still_matches.py``), their inliers counted again; per pair
-    index the moving models left out (a -> b affines, input pixels); and the pairs whose background was
-    found (first or after what moves)."""
+    where a still background follows them (``judged``: their :func:`pair_models`), their inliers
+    counted again; per pair index the moving models left out (a -> b affines, input pixels); and the
+    pairs whose background was found (first or after what moves)."""
     kept, moving, background = [], {}, set()
     for (inliers, index, frame_l, frame_r, matches), models_of in zip(screened, judged):
         px = screening_px(frame_l, frame_r, cfg)

@@ -246,8 +246,8 @@ class MapsTimeline:
     a rig aligned ``in_front``, made on its first frame) say how they move; ``watch``: ``--rig auto``'s,
     or None. ``first_s``: the time of the first estimate's pair (a static rig's drift is measured from
     there). ``in_front``: the first estimate aligned something that moves in front of a still
-    background (``estimate.Attempt.moving_in_front``): its maps are aligned to every frame as a moving
-    rig's are, whatever the rig does (its seam at the seam of what moves, which holds the matches)."""
+    background (``estimate.moving_in_front``, ``video_align_in_front``): its maps are aligned to every
+    frame as a moving rig's are, whatever the rig does, its canvas held while the rig is static."""
 
     def __init__(self, first: PlaneMaps, mode: str, first_s: float, canvas: Canvas,
                  reestimates: Reestimates | None, watch: RigMotion | None, watch_frames: int, cfg: Config,
